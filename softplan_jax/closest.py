@@ -1,0 +1,517 @@
+"""Closest points between the arm and obstacles (paper §2.3).
+
+Curve method. For segment i with ``F_Ri(s)``, s in [0, 1], and an obstacle
+curve ``F_o(u)``, u in [u_min, u_max], minimise ``D_i(s, u)^2 = |F_Ri(s) - F_o(u)|^2``
+over the box. The paper's three cases are all solved:
+
+1. interior stationary points, ``dD^2/ds = dD^2/du = 0`` (paper eqs. 13–14):
+   2-D Newton from several starts;
+2. the four boundary problems (paper eqs. 15–18): ``u = u_min`` / ``u = u_max``
+   solving ``dD^2/ds = 0`` for s, and ``s = 0`` / ``s = 1`` solving
+   ``dD^2/du = 0`` for u: 1-D Newton from several starts each;
+3. the four endpoint pairs (s, u) in {0, 1} x {u_min, u_max}.
+
+The answer is the minimum over all candidates, then over segments.
+
+Starts. ``D^2`` is evaluated on an ``n_s x n_u`` grid of the box (ends
+included); the starts are the grid's local minima (2-D for case 1, along each
+edge for case 2), best first. Every start is a point of the box, so the answer
+is never worse than the best grid point, and a minimum is found as long as its
+basin holds a grid local minimum. Grid sizes and start counts were chosen by
+measurement against a dense-grid oracle (``benchmarks/closest.py``).
+
+Newton iteration. Each step solves the linearised stationarity equations
+``H dx = -g`` with the exact gradient ``g`` and Hessian ``H`` of ``D^2 / 2``
+(first and second derivatives of both curves); ``H`` is shifted by a multiple of
+the identity where it is not positive definite, so the step is a descent
+direction (a local maximum or saddle is never approached); the step is capped
+to a quarter of the box, then the best of the step lengths 1, 1/2, 1/4, 1/8 and
+0 is kept, and the point is clipped into the box. Iteration counts are fixed so
+that everything compiles once.
+
+Derivatives with respect to ``q``. The solve itself runs on
+``stop_gradient(q)``. ``distance`` is differentiated by the envelope theorem
+(``dD*/dq = dD/dq`` at the optimal ``(s*, u*)`` held fixed; valid for interior
+and boundary minima alike because the box does not depend on q).
+``s``/``u``/``arm_point``/``obstacle_point`` carry the implicit-function
+derivative ``d(s*, u*)/dq = -H_ff^{-1} d g_f/dq`` for the free coordinates f
+(those strictly inside the box), which is what a rollout differentiated end to
+end needs.
+
+N-point method (:func:`closest_point_to_points`): the arm sampled at 10 points
+per segment (paper Table 1) against the obstacle's points, brute force.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from .curves import ParametricCurve, PolynomialCurve
+from .kinematics import _backbone_points, _frames, arc_derivatives_local, arc_point_local
+from .numerics import safe_norm
+from .validation import check_configuration, check_points
+
+__all__ = [
+    "ClosestPoint",
+    "SolverOptions",
+    "closest_point",
+    "closest_point_to_points",
+    "point_distance",
+]
+
+
+class ClosestPoint(NamedTuple):
+    """The closest pair between the arm and one obstacle.
+
+    Attributes:
+      distance: () distance between the arm backbone and the obstacle centre
+        line (radii not subtracted).
+      segment: () int, 0-based index of the arm segment holding ``arm_point``.
+      s: () fraction along that segment.
+      u: () curve parameter of ``obstacle_point`` (N-point method: the index of
+        the nearest obstacle point).
+      arm_point: (3,) ``F_Ri(s)``.
+      obstacle_point: (3,) ``F_o(u)``.
+      converged: () bool, the winning Newton solve met its tolerance (always
+        True for endpoint pairs and for the N-point method).
+    """
+
+    distance: jax.Array
+    segment: jax.Array
+    s: jax.Array
+    u: jax.Array
+    arm_point: jax.Array
+    obstacle_point: jax.Array
+    converged: jax.Array
+
+
+class SolverOptions(NamedTuple):
+    """Static settings of the closest-point solver (hashable; jit-static).
+
+    Attributes:
+      grid_s: grid points along each segment (s), ends included.
+      grid_u: grid points along the curve (u), ends included.
+      starts: interior (case 1) Newton starts per segment–curve pair.
+      edge_starts: Newton starts per boundary problem (case 2).
+      iterations: Newton iterations per start.
+    """
+
+    grid_s: int = 8
+    grid_u: int = 16
+    starts: int = 3
+    edge_starts: int = 2
+    iterations: int = 10
+
+
+DEFAULT_OPTIONS = SolverOptions()
+
+
+# ----------------------------------------------------------------------------
+# One segment, one curve.
+
+
+class _Segment(NamedTuple):
+    """Segment i: its row of q and its base frame (R_{i-1}^0, P_{i-1}^0)."""
+
+    q_i: jax.Array
+    R: jax.Array
+    P: jax.Array
+
+    def point(self, s):
+        # F_Ri(s), paper §2.3.
+        return self.P + self.R @ arc_point_local(self.q_i, s)
+
+    def derivatives(self, s):
+        d1, d2 = arc_derivatives_local(self.q_i, s)
+        return self.R @ d1, self.R @ d2
+
+
+def _tolerance(dtype):
+    return jnp.sqrt(jnp.finfo(dtype).eps)
+
+
+def _psd_shift(a, b, c, dtype):
+    """Shift mu >= 0 making [[a, b], [b, c]] + mu I safely positive definite."""
+    half_tr = 0.5 * (a + c)
+    lam_min = half_tr - jnp.sqrt((0.5 * (a - c)) ** 2 + b * b)
+    scale = jnp.abs(a) + jnp.abs(c) + jnp.abs(b) + jnp.finfo(dtype).tiny
+    floor = 1e3 * jnp.finfo(dtype).eps * scale
+    return jnp.where(lam_min > floor, 0.0, floor - lam_min)
+
+
+def _newton_2d(seg: _Segment, curve, x0, iterations: int):
+    """Case 1: box-constrained Newton on D^2/2 from x0 = (s, u)."""
+    u_lo, u_hi = curve.u_range[0], curve.u_range[1]
+    lo = jnp.stack([jnp.zeros_like(u_lo), u_lo])
+    hi = jnp.stack([jnp.ones_like(u_hi), u_hi])
+    width = hi - lo
+    dtype = x0.dtype
+
+    def f(x):
+        r = seg.point(x[0]) - curve.point(x[1])
+        return 0.5 * jnp.dot(r, r)
+
+    def body(_, x):
+        s, u = x[0], x[1]
+        r = seg.point(s) - curve.point(u)
+        A1, A2 = seg.derivatives(s)
+        C1, C2 = curve.derivative(u), curve.second_derivative(u)
+        # Stationarity equations, paper eqs. (13)-(14), and their Jacobian.
+        g = jnp.stack([jnp.dot(r, A1), -jnp.dot(r, C1)])
+        a = jnp.dot(A1, A1) + jnp.dot(r, A2)
+        b = -jnp.dot(A1, C1)
+        c = jnp.dot(C1, C1) - jnp.dot(r, C2)
+        mu = _psd_shift(a, b, c, dtype)
+        a, c = a + mu, c + mu
+        det = a * c - b * b
+        step = -jnp.stack([c * g[0] - b * g[1], a * g[1] - b * g[0]]) / det
+        # Cap the step to a quarter of the box (keeps starts in their basins).
+        size = jnp.max(jnp.abs(step) / width)
+        step = step * jnp.minimum(1.0, 0.25 / jnp.maximum(size, jnp.finfo(dtype).tiny))
+        ts = jnp.array([1.0, 0.5, 0.25, 0.125, 0.0], dtype)
+        cands = jnp.clip(x[None, :] + ts[:, None] * step[None, :], lo, hi)
+        vals = jax.vmap(f)(cands)
+        return cands[jnp.argmin(vals)]
+
+    return jax.lax.fori_loop(0, iterations, body, jnp.clip(x0, lo, hi))
+
+
+def _newton_1d(residual, t0, lo, hi, iterations: int):
+    """Case 2: Newton on |r(t)|^2/2 over [lo, hi]; residual(t) -> (r, r', r'')."""
+    dtype = t0.dtype
+    width = hi - lo
+
+    def f(t):
+        r = residual(t)[0]
+        return 0.5 * jnp.dot(r, r)
+
+    def body(_, t):
+        r, r1, r2 = residual(t)
+        g = jnp.dot(r, r1)
+        h = jnp.dot(r1, r1) + jnp.dot(r, r2)
+        floor = 1e3 * jnp.finfo(dtype).eps * (jnp.abs(h) + jnp.dot(r1, r1)) + jnp.finfo(dtype).tiny
+        h = jnp.where(h > floor, h, floor + jnp.abs(h))
+        step = -g / h
+        step = jnp.clip(step, -0.25 * width, 0.25 * width)
+        ts = jnp.array([1.0, 0.5, 0.25, 0.125, 0.0], dtype)
+        cands = jnp.clip(t + ts * step, lo, hi)
+        return cands[jnp.argmin(jax.vmap(f)(cands))]
+
+    return jax.lax.fori_loop(0, iterations, body, jnp.clip(t0, lo, hi))
+
+
+def _local_minima_1d(vals, k: int):
+    """Indices of the k smallest local minima of a 1-D array (non-minima last)."""
+    inf = jnp.full((1,), jnp.inf, vals.dtype)
+    padded = jnp.concatenate([inf, vals, inf])
+    is_min = (vals <= padded[:-2]) & (vals <= padded[2:])
+    score = jnp.where(is_min, vals, jnp.inf)
+    return jax.lax.top_k(-score, k)[1]
+
+
+def _local_minima_2d(vals, k: int):
+    """Flat indices of the k smallest 8-neighbour local minima of a 2-D grid."""
+    padded = jnp.pad(vals, 1, constant_values=jnp.inf)
+    n0, n1 = vals.shape
+    is_min = jnp.ones(vals.shape, bool)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di == 0 and dj == 0:
+                continue
+            neighbour = padded[1 + di : 1 + di + n0, 1 + dj : 1 + dj + n1]
+            is_min &= vals <= neighbour
+    score = jnp.where(is_min, vals, jnp.inf).reshape(-1)
+    return jax.lax.top_k(-score, k)[1]
+
+
+def _solve_pair(seg: _Segment, curve, options: SolverOptions):
+    """All three cases for one segment and one curve (no derivatives w.r.t. q).
+
+    Returns (s, u, converged) of the best candidate.
+    """
+    dtype = seg.q_i.dtype
+    u_lo, u_hi = curve.u_range[0], curve.u_range[1]
+    s_grid = jnp.linspace(0.0, 1.0, options.grid_s, dtype=dtype)
+    u_grid = u_lo + (u_hi - u_lo) * jnp.linspace(0.0, 1.0, options.grid_u, dtype=dtype)
+    A = jax.vmap(seg.point)(s_grid)  # (n_s, 3)
+    C = jax.vmap(curve.point)(u_grid)  # (n_u, 3)
+    grid = jnp.sum((A[:, None, :] - C[None, :, :]) ** 2, axis=-1)  # (n_s, n_u)
+
+    # Case 1: interior stationary points, 2-D Newton from the grid's local minima.
+    flat = _local_minima_2d(grid, options.starts)
+    x0 = jnp.stack([s_grid[flat // options.grid_u], u_grid[flat % options.grid_u]], axis=-1)
+    x_int = jax.vmap(lambda x: _newton_2d(seg, curve, x, options.iterations))(x0)
+
+    # Case 2: the four boundary problems, 1-D Newton from each edge's local minima.
+    def on_u_edge(u_fixed):  # u = u_min or u_max: solve dD^2/ds = 0 for s (eqs. 15-16)
+        p = curve.point(u_fixed)
+
+        def residual(s):
+            d1, d2 = seg.derivatives(s)
+            return seg.point(s) - p, d1, d2
+
+        return residual
+
+    def on_s_edge(s_fixed):  # s = 0 or 1: solve dD^2/du = 0 for u (eqs. 17-18)
+        p = seg.point(s_fixed)
+
+        def residual(u):
+            return p - curve.point(u), -curve.derivative(u), -curve.second_derivative(u)
+
+        return residual
+
+    ke, it = options.edge_starts, options.iterations
+    zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
+    s_starts_lo = s_grid[_local_minima_1d(grid[:, 0], ke)]
+    s_starts_hi = s_grid[_local_minima_1d(grid[:, -1], ke)]
+    u_starts_0 = u_grid[_local_minima_1d(grid[0, :], ke)]
+    u_starts_1 = u_grid[_local_minima_1d(grid[-1, :], ke)]
+    solve_s = lambda res, t0: _newton_1d(res, t0, zero, one, it)  # noqa: E731
+    solve_u = lambda res, t0: _newton_1d(res, t0, u_lo, u_hi, it)  # noqa: E731
+    s_lo = jax.vmap(lambda t: solve_s(on_u_edge(u_lo), t))(s_starts_lo)
+    s_hi = jax.vmap(lambda t: solve_s(on_u_edge(u_hi), t))(s_starts_hi)
+    u_0 = jax.vmap(lambda t: solve_u(on_s_edge(zero), t))(u_starts_0)
+    u_1 = jax.vmap(lambda t: solve_u(on_s_edge(one), t))(u_starts_1)
+    x_edge = jnp.concatenate(
+        [
+            jnp.stack([s_lo, jnp.full_like(s_lo, u_lo)], -1),
+            jnp.stack([s_hi, jnp.full_like(s_hi, u_hi)], -1),
+            jnp.stack([jnp.full_like(u_0, 0.0), u_0], -1),
+            jnp.stack([jnp.full_like(u_1, 1.0), u_1], -1),
+        ]
+    )
+
+    # Case 3: the four endpoint pairs.
+    x_corner = jnp.stack(
+        [jnp.stack([zero, u_lo]), jnp.stack([zero, u_hi]), jnp.stack([one, u_lo]), jnp.stack([one, u_hi])]
+    )
+
+    cands = jnp.concatenate([x_int, x_edge, x_corner])
+    d2 = jax.vmap(lambda x: jnp.sum((seg.point(x[0]) - curve.point(x[1])) ** 2))(cands)
+    best = jnp.argmin(d2)
+    x = cands[best]
+    return x[0], x[1], d2[best], _converged(seg, curve, x)
+
+
+def _converged(seg: _Segment, curve, x):
+    """Projected-gradient test of the first-order conditions at x = (s, u)."""
+    s, u = x[0], x[1]
+    dtype = x.dtype
+    r = seg.point(s) - curve.point(u)
+    A1, _ = seg.derivatives(s)
+    C1 = curve.derivative(u)
+    gs, gu = jnp.dot(r, A1), -jnp.dot(r, C1)
+    # A bound-constrained coordinate is stationary if the gradient pushes outward.
+    gs = jnp.where((s <= 0.0) & (gs > 0), 0.0, jnp.where((s >= 1.0) & (gs < 0), 0.0, gs))
+    u_lo, u_hi = curve.u_range[0], curve.u_range[1]
+    gu = jnp.where((u <= u_lo) & (gu > 0), 0.0, jnp.where((u >= u_hi) & (gu < 0), 0.0, gu))
+    scale = 1.0 + safe_norm(seg.point(s)) + safe_norm(curve.point(u))
+    tol = _tolerance(dtype) * scale
+    return (jnp.abs(gs) <= tol * (safe_norm(A1) + 1.0)) & (jnp.abs(gu) <= tol * (safe_norm(C1) + 1.0))
+
+
+def _implicit(seg: _Segment, curve, s, u):
+    """(s, u) whose value is the solver's and whose derivative w.r.t. q is the
+    implicit-function derivative over the free coordinates."""
+    s, u = jax.lax.stop_gradient(s), jax.lax.stop_gradient(u)
+    r = seg.point(s) - curve.point(u)
+    A1, A2 = seg.derivatives(s)
+    C1, C2 = curve.derivative(u), curve.second_derivative(u)
+    g = jnp.stack([jnp.dot(r, A1), -jnp.dot(r, C1)])
+    a = jnp.dot(A1, A1) + jnp.dot(r, A2)
+    b = -jnp.dot(A1, C1)
+    c = jnp.dot(C1, C1) - jnp.dot(r, C2)
+    dtype = s.dtype
+    mu = _psd_shift(a, b, c, dtype)
+    a, c = a + mu, c + mu
+    free_s = (s > 0.0) & (s < 1.0)
+    free_u = (u > curve.u_range[0]) & (u < curve.u_range[1])
+    both = free_s & free_u
+    det = a * c - b * b
+    ds_both = (c * g[0] - b * g[1]) / det
+    du_both = (a * g[1] - b * g[0]) / det
+    ds = jnp.where(both, ds_both, jnp.where(free_s, g[0] / a, 0.0))
+    du = jnp.where(both, du_both, jnp.where(free_u, g[1] / c, 0.0))
+    # Value unchanged; derivative -H_ff^{-1} dg_f (g = 0 at the solution).
+    return s - (ds - jax.lax.stop_gradient(ds)), u - (du - jax.lax.stop_gradient(du))
+
+
+def _closest_point_curve(q, curve, options: SolverOptions) -> ClosestPoint:
+    """Unvalidated core of :func:`closest_point` for one curve."""
+    curve = curve.astype(q.dtype)
+    R_bases, P_bases, _, _ = _frames(q)
+    segs = _Segment(q, R_bases, P_bases)
+    segs_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
+    curve_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, curve)
+    s_all, u_all, d2_all, conv_all = jax.vmap(lambda sg: _solve_pair(sg, curve_nograd, options))(
+        segs_nograd
+    )
+    i = jnp.argmin(d2_all)
+    seg = jax.tree_util.tree_map(lambda x: x[i], segs)
+    s, u = _implicit(seg, curve, s_all[i], u_all[i])
+    arm_point = seg.point(s)
+    obstacle_point = curve.point(u)
+    # Envelope theorem: (s*, u*) held fixed for the distance.
+    distance = safe_norm(
+        seg.point(jax.lax.stop_gradient(s)) - curve.point(jax.lax.stop_gradient(u))
+    )
+    return ClosestPoint(distance, i, s, u, arm_point, obstacle_point, conv_all[i])
+
+
+@partial(jax.jit, static_argnames="options")
+def _closest_point_jit(q, curve, options):
+    if isinstance(curve, PolynomialCurve) and curve.coeffs.ndim == 3:
+        return jax.vmap(lambda c: _closest_point_curve(q, c, options))(curve)
+    return _closest_point_curve(q, curve, options)
+
+
+def closest_point(q, curve, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoint:
+    """Exact closest point between the arm and a curve obstacle (paper §2.3).
+
+    Args:
+      q: (n, 3) configuration.
+      curve: a :class:`PolynomialCurve` or :class:`ParametricCurve`. A stacked
+        PolynomialCurve (coeffs (m, 3, K)) gives batched results with leading
+        axis m (padding slots are solved too; mask them yourself).
+      options: :class:`SolverOptions` (static).
+
+    Returns:
+      :class:`ClosestPoint` (fields with a leading m axis for a stacked curve).
+      Differentiable in q: see the module docstring (envelope theorem for the
+      distance, implicit function theorem for s, u and the points).
+    """
+    q = check_configuration(q)
+    if not isinstance(curve, (PolynomialCurve, ParametricCurve)):
+        raise ValueError(
+            f"curve must be a PolynomialCurve or ParametricCurve, got {type(curve).__name__}; "
+            "use closest_point_to_points for point sets"
+        )
+    return _closest_point_jit(q, curve, options)
+
+
+# ----------------------------------------------------------------------------
+# N-point method and point distances.
+
+
+def _closest_point_to_points(q, points, mask=None, points_per_segment: int = 10) -> ClosestPoint:
+    """Unvalidated core of :func:`closest_point_to_points`; mask (N,) bool."""
+    n = q.shape[0]
+    k = points_per_segment
+    arm = _backbone_points(q, k)  # (n k, 3)
+    diff = arm[:, None, :] - points[None, :, :]
+    d2 = jnp.sum(diff * diff, axis=-1)
+    if mask is not None:
+        d2 = jnp.where(mask[None, :], d2, jnp.inf)
+    flat = jnp.argmin(d2)
+    a, p = flat // points.shape[0], flat % points.shape[0]
+    segment = a // k
+    s = ((a % k) + 1).astype(q.dtype) / k
+    del n
+    return ClosestPoint(
+        distance=safe_norm(arm[a] - points[p]),
+        segment=segment,
+        s=s,
+        u=p,
+        arm_point=arm[a],
+        obstacle_point=points[p],
+        converged=jnp.asarray(True),
+    )
+
+
+_closest_point_to_points_jit = jax.jit(_closest_point_to_points, static_argnums=3)
+
+
+def closest_point_to_points(q, points, points_per_segment: int = 10) -> ClosestPoint:
+    """The N-point method: nearest pair between arm samples and obstacle points.
+
+    The arm is sampled at ``points_per_segment`` points per segment, s = j/k,
+    j = 1..k (paper Table 1: 10), and compared by brute force with every
+    obstacle point (the analogue of MATLAB's ``dsearchn`` in paper §3).
+
+    Args:
+      q: (n, 3) configuration.
+      points: (N, 3) obstacle points, N >= 1.
+
+    Returns:
+      :class:`ClosestPoint`; ``u`` is the index of the nearest obstacle point
+      and ``s`` the fraction of the nearest arm sample.
+    """
+    q = check_configuration(q)
+    points = check_points(points).astype(q.dtype)
+    if int(points_per_segment) < 1:
+        raise ValueError(f"points_per_segment must be >= 1, got {points_per_segment}")
+    return _closest_point_to_points_jit(q, points, None, int(points_per_segment))
+
+
+def _point_closest(q, p, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoint:
+    """Exact closest point of the arm backbone to one point p (3,): the
+    boundary problem of paper eqs. (15)-(16) with a fixed obstacle point,
+    1-D Newton per segment from the local minima of an s-grid, plus both ends.
+    Returns a ClosestPoint with u = 0."""
+    R_bases, P_bases, _, _ = _frames(q)
+    segs = _Segment(q, R_bases, P_bases)
+    segs_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
+    p_ng = jax.lax.stop_gradient(p)
+    dtype = q.dtype
+    s_grid = jnp.linspace(0.0, 1.0, options.grid_s, dtype=dtype)
+    zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
+
+    def per_segment(seg):
+        def residual(s):
+            d1, d2 = seg.derivatives(s)
+            return seg.point(s) - p_ng, d1, d2
+
+        vals = jnp.sum((jax.vmap(seg.point)(s_grid) - p_ng) ** 2, axis=-1)
+        starts = s_grid[_local_minima_1d(vals, options.edge_starts)]
+        s_c = jax.vmap(lambda t: _newton_1d(residual, t, zero, one, options.iterations))(starts)
+        s_c = jnp.concatenate([s_c, jnp.stack([zero, one])])
+        d2 = jnp.sum((jax.vmap(seg.point)(s_c) - p_ng) ** 2, axis=-1)
+        best = jnp.argmin(d2)
+        return s_c[best], d2[best]
+
+    s_all, d2_all = jax.vmap(per_segment)(segs_ng)
+    i = jnp.argmin(d2_all)
+    seg = jax.tree_util.tree_map(lambda x: x[i], segs)
+    s = jax.lax.stop_gradient(s_all[i])
+    # Implicit derivative of s* over a free s (see _implicit), envelope theorem for the distance.
+    r = seg.point(s) - p
+    A1, A2 = seg.derivatives(s)
+    h = jnp.dot(A1, A1) + jnp.dot(r, A2)
+    h = jnp.where(h > 0, h, jnp.abs(h) + jnp.finfo(dtype).eps)
+    ds = jnp.where((s > 0) & (s < 1), jnp.dot(r, A1) / h, 0.0)
+    s_diff = s - (ds - jax.lax.stop_gradient(ds))
+    arm_point = seg.point(s_diff)
+    distance = safe_norm(seg.point(s) - p)
+    return ClosestPoint(distance, i, s_diff, jnp.zeros((), dtype), arm_point, p, jnp.asarray(True))
+
+
+def _point_set_closest(q, points, mask, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoint:
+    """Exact closest point between the arm backbone and a masked point set (N, 3)."""
+    cps = jax.vmap(lambda p: _point_closest(q, p, options))(points)
+    k = jnp.argmin(jnp.where(mask, cps.distance, jnp.inf))
+    cp = jax.tree_util.tree_map(lambda x: x[k], cps)
+    return cp._replace(u=k.astype(q.dtype))
+
+
+def point_distance(q, points, options: SolverOptions = DEFAULT_OPTIONS):
+    """Exact distance from each obstacle point to the arm backbone.
+
+    Args:
+      q: (n, 3) configuration.
+      points: (N, 3).
+
+    Returns:
+      (N,) distances (the true clearance of a point obstacle before radii).
+    """
+    q = check_configuration(q)
+    points = check_points(points).astype(q.dtype)
+    return _point_distances(q, points, options)
+
+
+@partial(jax.jit, static_argnames="options")
+def _point_distances(q, points, options=DEFAULT_OPTIONS):
+    return jax.vmap(lambda p: _point_closest(q, p, options).distance)(points)

@@ -1,0 +1,298 @@
+"""Curve-like obstacles ``F_o(u) = [f_x(u), f_y(u), f_z(u)]``, u in [u_min, u_max]
+(paper eq. 10).
+
+* :class:`PolynomialCurve` — coefficients ``(3, K)``, lowest degree first. Many
+  of them stack into one padded batch (``(m, 3, K)`` plus a mask) so that scenes
+  with different obstacle counts and degrees share one compiled shape.
+* :class:`ParametricCurve` — any JAX-traceable ``fn(u) -> (3,)``; derivatives by
+  ``jax.jacfwd``.
+* :func:`line_segment` — a straight segment from ``a`` to ``b`` as a degree-1
+  polynomial curve with u in [0, 1].
+* :func:`fit_polynomial_curve` — least-squares fit to an ordered point cloud
+  (paper §2.3: "derived from a set of points ... using regression").
+
+Both curve classes are pytrees whose array leaves are ``coeffs``/``u_range``/
+``radius``; they give ``point``, ``derivative`` and ``second_derivative`` of a
+scalar ``u``. ``radius`` is the obstacle's thickness, used for clearance only.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .validation import (
+    as_float_array,
+    check_finite,
+    check_points,
+    check_radius,
+    check_u_range,
+    is_concrete,
+)
+
+__all__ = [
+    "PolynomialCurve",
+    "ParametricCurve",
+    "line_segment",
+    "stack_curves",
+    "curve_points",
+    "fit_polynomial_curve",
+]
+
+
+def _polyval(coeffs, u):
+    """sum_k coeffs[..., k] u**k by Horner's rule; coeffs (..., K)."""
+    acc = coeffs[..., -1]
+    for k in range(coeffs.shape[-1] - 2, -1, -1):
+        acc = acc * u + coeffs[..., k]
+    return acc
+
+
+def _polyder(coeffs):
+    """Coefficients of the u-derivative, same length K (last column zero)."""
+    K = coeffs.shape[-1]
+    if K == 1:
+        return jnp.zeros_like(coeffs)
+    k = jnp.arange(1, K, dtype=coeffs.dtype)
+    d = coeffs[..., 1:] * k
+    return jnp.concatenate([d, jnp.zeros_like(coeffs[..., :1])], axis=-1)
+
+
+@jax.tree_util.register_pytree_node_class
+class PolynomialCurve:
+    """``F_o(u) = sum_k coeffs[:, k] u**k`` for u in ``u_range`` (paper eq. 10).
+
+    Args:
+      coeffs: (3, K) — row 0 is X(u), row 1 Y(u), row 2 Z(u); column k
+        multiplies ``u**k``. A stacked batch has shape (m, 3, K) (see
+        :func:`stack_curves`).
+      u_range: (u_min, u_max), u_min < u_max.
+      radius: obstacle radius (>= 0) used for clearance; default 0.
+    """
+
+    def __init__(self, coeffs, u_range, radius=0.0):
+        coeffs = as_float_array(coeffs, "coeffs")
+        if coeffs.ndim < 2 or coeffs.shape[-2] != 3 or coeffs.shape[-1] < 1:
+            raise ValueError(
+                "coeffs must have shape (3, K) (rows X, Y, Z; column k multiplies u**k, "
+                f"K >= 1); got shape {coeffs.shape}"
+            )
+        check_finite(coeffs, "coeffs")
+        u_range = check_u_range(u_range)
+        if u_range.shape[:-1] != coeffs.shape[:-2]:
+            raise ValueError(
+                f"u_range batch shape {u_range.shape[:-1]} does not match coeffs batch "
+                f"shape {coeffs.shape[:-2]}"
+            )
+        radius = check_radius(radius)
+        dtype = jnp.result_type(coeffs.dtype, u_range.dtype)
+        self.coeffs = coeffs.astype(dtype)
+        self.u_range = u_range.astype(dtype)
+        self.radius = jnp.broadcast_to(radius, coeffs.shape[:-2]).astype(dtype)
+
+    # pytree protocol: unflattening bypasses validation (leaves may be tracers
+    # or placeholders inside jax transformations).
+    def tree_flatten(self):
+        return (self.coeffs, self.u_range, self.radius), None
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        obj = object.__new__(cls)
+        obj.coeffs, obj.u_range, obj.radius = children
+        return obj
+
+    @property
+    def degree(self) -> int:
+        """Polynomial degree of the padded coefficient array (K - 1)."""
+        return self.coeffs.shape[-1] - 1
+
+    def point(self, u):
+        """F_o(u), (3,)."""
+        return _polyval(self.coeffs, u)
+
+    def derivative(self, u):
+        """dF_o/du, (3,)."""
+        return _polyval(_polyder(self.coeffs), u)
+
+    def second_derivative(self, u):
+        """d^2F_o/du^2, (3,)."""
+        return _polyval(_polyder(_polyder(self.coeffs)), u)
+
+    def astype(self, dtype):
+        return PolynomialCurve.tree_unflatten(
+            None, [jnp.asarray(x, dtype) for x in self.tree_flatten()[0]]
+        )
+
+    def __repr__(self):
+        return f"PolynomialCurve(coeffs={self.coeffs!r}, u_range={self.u_range!r}, radius={self.radius!r})"
+
+
+@jax.tree_util.register_pytree_node_class
+class ParametricCurve:
+    """Any JAX-traceable curve ``fn(u) -> (3,)`` on ``u_range``.
+
+    Derivatives in u come from ``jax.jacfwd``. The function is static (part of
+    the pytree structure): two ParametricCurves with different functions
+    compile separately.
+
+    Example: a helix ``ParametricCurve(lambda u: jnp.stack([jnp.cos(u),
+    jnp.sin(u), 0.2 * u]), (0.0, 6.0))``.
+    """
+
+    def __init__(self, fn: Callable, u_range, radius=0.0):
+        if not callable(fn):
+            raise ValueError(f"fn must be a callable u -> (3,), got {type(fn).__name__}")
+        u_range = check_u_range(u_range)
+        if u_range.shape != (2,):
+            raise ValueError(f"u_range of a ParametricCurve must have shape (2,); got {u_range.shape}")
+        radius = check_radius(radius)
+        if jnp.ndim(radius) != 0:
+            raise ValueError(f"radius of a ParametricCurve must be a scalar; got shape {jnp.shape(radius)}")
+        try:
+            out = jax.eval_shape(fn, jax.ShapeDtypeStruct((), u_range.dtype))
+        except Exception as err:  # noqa: BLE001 - any failure to trace is a bad fn
+            raise ValueError(f"fn could not be traced with a scalar u: {type(err).__name__}: {err}") from None
+        if not hasattr(out, "shape") or tuple(out.shape) != (3,):
+            shape = getattr(out, "shape", type(out).__name__)
+            raise ValueError(f"fn(u) must return 3 values [X, Y, Z] (shape (3,)); got {shape}")
+        if not jnp.issubdtype(out.dtype, jnp.floating):
+            raise ValueError(f"fn(u) must return floating values; got dtype {out.dtype}")
+        if is_concrete(u_range):
+            mid = fn(0.5 * (u_range[0] + u_range[1]))
+            check_finite(mid, "fn(u) at the middle of u_range")
+        self.fn = fn
+        self.u_range = u_range
+        self.radius = radius.astype(u_range.dtype)
+
+    def tree_flatten(self):
+        return (self.u_range, self.radius), self.fn
+
+    @classmethod
+    def tree_unflatten(cls, fn, children):
+        obj = object.__new__(cls)
+        obj.fn = fn
+        obj.u_range, obj.radius = children
+        return obj
+
+    def point(self, u):
+        return jnp.asarray(self.fn(u), dtype=jnp.result_type(u))
+
+    def derivative(self, u):
+        return jax.jacfwd(self.point)(u)
+
+    def second_derivative(self, u):
+        return jax.jacfwd(jax.jacfwd(self.point))(u)
+
+    def astype(self, dtype):
+        return ParametricCurve.tree_unflatten(
+            self.fn, [jnp.asarray(self.u_range, dtype), jnp.asarray(self.radius, dtype)]
+        )
+
+    def __repr__(self):
+        return f"ParametricCurve(fn={self.fn!r}, u_range={self.u_range!r}, radius={self.radius!r})"
+
+
+def line_segment(a, b, radius=0.0) -> PolynomialCurve:
+    """The straight segment from ``a`` (u = 0) to ``b`` (u = 1) as a degree-1 curve."""
+    a = as_float_array(a, "a")
+    b = as_float_array(b, "b")
+    if a.shape != (3,) or b.shape != (3,):
+        raise ValueError(f"line_segment endpoints must have shape (3,); got {a.shape} and {b.shape}")
+    check_finite(a, "a")
+    check_finite(b, "b")
+    return PolynomialCurve(jnp.stack([a, b - a], axis=1), jnp.array([0.0, 1.0], dtype=a.dtype), radius)
+
+
+def stack_curves(curves, size: int | None = None, degree: int | None = None):
+    """Stack polynomial curves into one padded batch.
+
+    Args:
+      curves: sequence of single :class:`PolynomialCurve` (may be empty when
+        ``size`` is given).
+      size: number of obstacle slots m (>= len(curves)); default len(curves).
+      degree: padded degree (>= every curve's degree); default the largest.
+
+    Returns:
+      ``(batch, mask)``: a PolynomialCurve with coeffs (m, 3, degree + 1),
+      u_range (m, 2) and radius (m,), and a bool mask (m,) that is False for
+      padding slots (whose coefficients are zero and u_range (0, 1)).
+    """
+    curves = list(curves)
+    for k, c in enumerate(curves):
+        if not isinstance(c, PolynomialCurve) or c.coeffs.ndim != 2:
+            raise ValueError(
+                f"curves[{k}] is {type(c).__name__}; only single PolynomialCurves can be stacked "
+                "(ParametricCurves are planned one by one)"
+            )
+    size = len(curves) if size is None else int(size)
+    if size < len(curves) or size < 1:
+        raise ValueError(f"size = {size} must be >= 1 and >= the number of curves ({len(curves)})")
+    max_deg = max((c.degree for c in curves), default=0)
+    degree = max_deg if degree is None else int(degree)
+    if degree < max_deg:
+        raise ValueError(f"degree = {degree} is smaller than the largest curve degree {max_deg}")
+    dtype = jnp.result_type(*[c.coeffs.dtype for c in curves]) if curves else jnp.result_type(float)
+    coeffs = np.zeros((size, 3, degree + 1))
+    u_range = np.tile(np.array([0.0, 1.0]), (size, 1))
+    radius = np.zeros(size)
+    mask = np.zeros(size, dtype=bool)
+    for k, c in enumerate(curves):
+        coeffs[k, :, : c.degree + 1] = np.asarray(c.coeffs)
+        u_range[k] = np.asarray(c.u_range)
+        radius[k] = float(c.radius)
+        mask[k] = True
+    batch = PolynomialCurve.tree_unflatten(
+        None, [jnp.asarray(coeffs, dtype), jnp.asarray(u_range, dtype), jnp.asarray(radius, dtype)]
+    )
+    return batch, jnp.asarray(mask)
+
+
+def curve_points(curve, n_points: int):
+    """N points evenly spaced in u: N = 1 the middle of the range, N >= 2 both ends.
+
+    This is the obstacle model of the N-point method (paper §3). Returns (N, 3).
+    """
+    n_points = int(n_points)
+    if n_points < 1:
+        raise ValueError(f"n_points must be >= 1, got {n_points}")
+    u0, u1 = curve.u_range[..., 0], curve.u_range[..., 1]
+    if n_points == 1:
+        u = jnp.reshape(0.5 * (u0 + u1), (1,))
+    else:
+        u = u0 + (u1 - u0) * jnp.linspace(0.0, 1.0, n_points, dtype=curve.u_range.dtype)
+    return jax.vmap(curve.point)(u)
+
+
+def fit_polynomial_curve(points, degree: int = 3, radius=0.0) -> PolynomialCurve:
+    """Fit a polynomial curve to an ordered point cloud by least squares.
+
+    The parameter is the normalised cumulative chord length, so u runs over
+    [0, 1] from the first point to the last. Ordered means the points follow
+    the obstacle from one end to the other (a branch scanned along its length).
+
+    Args:
+      points: (N, 3), N >= degree + 1, not all identical.
+      degree: polynomial degree >= 1.
+
+    Returns:
+      PolynomialCurve with coeffs (3, degree + 1) and u_range (0, 1).
+    """
+    points = check_points(points)
+    degree = int(degree)
+    if degree < 1:
+        raise ValueError(f"degree must be >= 1, got {degree}")
+    if points.shape[0] < degree + 1:
+        raise ValueError(
+            f"fitting degree {degree} needs at least {degree + 1} points; got {points.shape[0]}"
+        )
+    chord = jnp.linalg.norm(jnp.diff(points, axis=0), axis=1)
+    total = jnp.sum(chord)
+    if is_concrete(total) and float(total) == 0.0:
+        raise ValueError("points are all identical: no curve can be fitted")
+    u = jnp.concatenate([jnp.zeros(1, points.dtype), jnp.cumsum(chord)]) / total
+    V = u[:, None] ** jnp.arange(degree + 1)  # Vandermonde, lowest power first
+    coeffs, *_ = jnp.linalg.lstsq(V, points)
+    return PolynomialCurve(coeffs.T, jnp.array([0.0, 1.0], dtype=points.dtype), radius)

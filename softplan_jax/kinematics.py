@@ -1,0 +1,221 @@
+"""Piecewise-constant-curvature (PCC) kinematics, exactly as the paper's §2.1–2.2.
+
+A configuration ``q`` has shape ``(n, 3)``: row i is ``[L_i, theta_i, phi_i]``.
+Segment i bends by ``theta_i`` in the direction ``phi_i``; its tip frame relative
+to its base is ``H_i^{i-1} = [[R_i, P_i], [0, 1]]`` with the paper's
+``R_i = Rz(phi_i) Ry(theta_i)`` and ``P_i`` (Webster & Jones 2010). The base of
+segment 0 is the origin with the identity orientation, z up.
+
+Every function here is pure and composes with ``jit``, ``vmap`` and ``grad``.
+``theta = 0`` (a straight segment) is an ordinary input: the ratios
+``(1 - cos x)/x`` and ``sin(x)/x`` come from :mod:`softplan_jax.numerics`, so
+values and derivatives of every order are finite and accurate there.
+
+The public functions validate their input (shapes always, values when not
+traced); the underscored twins do not and are what the solvers call.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+
+from .numerics import one_minus_cos_over_x, sin_over_x
+from .validation import check_configuration, check_fraction, check_segment_index
+
+__all__ = [
+    "segment_transform",
+    "segment_frames",
+    "segment_point",
+    "tip_position",
+    "point_jacobian",
+    "tip_jacobian",
+    "backbone_points",
+]
+
+
+def arc_point_local(q_i, s):
+    """Point at fraction ``s`` of one segment, in the segment's base frame.
+
+    The bracket of paper §2.2 (``P_si`` before the rotation), rewritten with
+    ``x = theta * s`` so that it has no singularity:
+    ``L/theta (1 - cos x) = L s (1 - cos x)/x`` and ``L/theta sin x = L s sin(x)/x``.
+
+    Args:
+      q_i: (3,) ``[L, theta, phi]``.
+      s: scalar fraction.
+
+    Returns:
+      (3,) point.
+    """
+    L, theta, phi = q_i[0], q_i[1], q_i[2]
+    x = theta * s
+    radial = L * s * one_minus_cos_over_x(x)
+    return jnp.stack([radial * jnp.cos(phi), radial * jnp.sin(phi), L * s * sin_over_x(x)])
+
+
+def arc_derivatives_local(q_i, s):
+    """First and second derivatives in ``s`` of :func:`arc_point_local` (closed form).
+
+    ``d/ds = L [sin(theta s) cos phi, sin(theta s) sin phi, cos(theta s)]`` (the
+    tangent, length L) and ``d2/ds2 = L theta [cos(theta s) cos phi,
+    cos(theta s) sin phi, -sin(theta s)]``. Neither is singular at theta = 0.
+    """
+    L, theta, phi = q_i[0], q_i[1], q_i[2]
+    x = theta * s
+    sx, cx = jnp.sin(x), jnp.cos(x)
+    cphi, sphi = jnp.cos(phi), jnp.sin(phi)
+    d1 = L * jnp.stack([sx * cphi, sx * sphi, cx])
+    d2 = L * theta * jnp.stack([cx * cphi, cx * sphi, -sx])
+    return d1, d2
+
+
+def _rotation(q_i):
+    """The paper's R_i = Rz(phi) Ry(theta) (paper §2.1)."""
+    theta, phi = q_i[1], q_i[2]
+    ct, st, cp, sp = jnp.cos(theta), jnp.sin(theta), jnp.cos(phi), jnp.sin(phi)
+    zero = jnp.zeros_like(ct)
+    return jnp.stack(
+        [
+            jnp.stack([cp * ct, -sp, cp * st]),
+            jnp.stack([sp * ct, cp, sp * st]),
+            jnp.stack([-st, zero, ct]),
+        ]
+    )
+
+
+def _segment_transform(q_i):
+    return _rotation(q_i), arc_point_local(q_i, jnp.ones_like(q_i[0]))
+
+
+def _frames(q):
+    """Base frames of all n segments and the tip frame (H_n^0 = prod H_i^{i-1})."""
+    dtype = q.dtype
+
+    def body(carry, q_i):
+        R, P = carry
+        R_i, P_i = _segment_transform(q_i)
+        return (R @ R_i, P + R @ P_i), (R, P)
+
+    init = (jnp.eye(3, dtype=dtype), jnp.zeros(3, dtype=dtype))
+    (R_tip, P_tip), (R_bases, P_bases) = jax.lax.scan(body, init, q)
+    return R_bases, P_bases, R_tip, P_tip
+
+
+@jax.jit
+def _segment_point(q, i, s):
+    R_bases, P_bases, _, _ = _frames(q)
+    return P_bases[i] + R_bases[i] @ arc_point_local(q[i], s)
+
+
+@jax.jit
+def _tip_position(q):
+    return _frames(q)[3]
+
+
+@jax.jit
+def _point_jacobian(q, i, s):
+    n = q.shape[0]
+    return jax.jacfwd(_segment_point)(q, i, s).reshape(3, 3 * n)
+
+
+@jax.jit
+def _tip_jacobian(q):
+    n = q.shape[0]
+    return jax.jacfwd(_tip_position)(q).reshape(3, 3 * n)
+
+
+@partial(jax.jit, static_argnums=1)
+def _backbone_points(q, points_per_segment: int):
+    """(n * k, 3) arm samples at s = j/k, j = 1..k, of every segment."""
+    R_bases, P_bases, _, _ = _frames(q)
+    s = jnp.arange(1, points_per_segment + 1, dtype=q.dtype) / points_per_segment
+    local = jax.vmap(lambda q_i: jax.vmap(lambda s_j: arc_point_local(q_i, s_j))(s))(q)
+    pts = P_bases[:, None, :] + jnp.einsum("nab,nkb->nka", R_bases, local)
+    return pts.reshape(-1, 3)
+
+
+# ----------------------------------------------------------------------------
+# Public, validated entry points.
+
+
+def segment_transform(q_i):
+    """The paper's ``R_i`` and ``P_i`` of one segment (paper §2.1).
+
+    Args:
+      q_i: (3,) ``[L_i, theta_i, phi_i]``.
+
+    Returns:
+      ``(R_i (3, 3), P_i (3,))``; ``P_i = [0, 0, L_i]`` at theta = 0.
+    """
+    if jnp.shape(q_i) != (3,):
+        raise ValueError(f"q_i must be one row [L, theta, phi] of shape (3,); got {jnp.shape(q_i)}")
+    return _segment_transform(check_configuration(jnp.reshape(q_i, (1, 3)))[0])
+
+
+def segment_frames(q):
+    """Orientation and position of the base of every segment.
+
+    Args:
+      q: (n, 3) configuration.
+
+    Returns:
+      ``(R_bases (n, 3, 3), P_bases (n, 3))``: the paper's ``R_{i-1}^0`` and
+      ``P_{i-1}^0`` for i = 1..n (segment 0's base is the identity at the origin).
+    """
+    q = check_configuration(q)
+    R_bases, P_bases, _, _ = _frames(q)
+    return R_bases, P_bases
+
+
+def segment_point(q, i, s):
+    """The paper's ``P_si``: the point at fraction ``s`` of segment ``i`` (0-based).
+
+    Args:
+      q: (n, 3) configuration.
+      i: segment index (int, may be traced).
+      s: scalar fraction in [0, 1].
+
+    Returns:
+      (3,) position in the base frame.
+    """
+    q = check_configuration(q)
+    check_segment_index(i, q.shape[0])
+    s = check_fraction(s).astype(q.dtype)
+    return _segment_point(q, i, s)
+
+
+def tip_position(q):
+    """Position of the arm tip, the translation of ``H_n^0`` (paper §2.1). (n, 3) -> (3,)."""
+    return _tip_position(check_configuration(q))
+
+
+def point_jacobian(q, i, s):
+    """``J_si = dP_si/dq`` by ``jax.jacfwd`` (paper §2.2).
+
+    Returns:
+      (3, 3n): columns ``L_1, theta_1, phi_1, L_2, ...`` (``q`` flattened row-major).
+    """
+    q = check_configuration(q)
+    check_segment_index(i, q.shape[0])
+    s = check_fraction(s).astype(q.dtype)
+    return _point_jacobian(q, i, s)
+
+
+def tip_jacobian(q):
+    """``J_e``: Jacobian of the tip position, (3, 3n), by ``jax.jacfwd``."""
+    return _tip_jacobian(check_configuration(q))
+
+
+def backbone_points(q, points_per_segment: int = 10):
+    """Sampled backbone: segment i at s = j/k, j = 1..k (k = points_per_segment).
+
+    This is the arm discretisation of the N-point method (paper Table 1: 10
+    points per segment). Returns (n * k, 3), segment-major.
+    """
+    q = check_configuration(q)
+    if int(points_per_segment) < 1:
+        raise ValueError(f"points_per_segment must be >= 1, got {points_per_segment}")
+    return _backbone_points(q, int(points_per_segment))

@@ -1,0 +1,112 @@
+"""Dtype-aware numerics: the PCC kinematics' singular ratios and a damped
+pseudo-inverse.
+
+The arc of a PCC segment involves ``(1 - cos x) / x`` and ``sin(x) / x``, which
+are 0/0 at ``x = 0`` (a straight segment).  Both are evaluated with a Taylor
+series below a dtype-dependent threshold and with the closed form above it,
+using the "double where" shim so that neither branch ever produces a NaN that
+reverse mode could multiply by zero (jaxlie ``_so3.py``; optax
+``numerics.safe_norm``).
+
+The threshold is chosen so that BOTH branches are accurate to machine
+precision in value and in the first two derivatives:
+
+* the closed form's k-th derivative loses about ``eps / x**k`` to cancellation,
+  so the threshold must not be too small (float64: 0.1 gives ~1e-14 for k = 2);
+* the series, truncated after the ``x**12`` term, has a relative truncation
+  error below ``x**14 / 15!`` (< 1e-26 at 0.1, < 1e-16 at 0.6).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+__all__ = [
+    "get_epsilon",
+    "series_threshold",
+    "one_minus_cos_over_x",
+    "sin_over_x",
+    "safe_norm",
+    "damped_pinv",
+]
+
+
+def get_epsilon(dtype) -> float:
+    """Machine-precision scale used for tolerances: 1e-5 (float32), 1e-10 (float64)."""
+    return 1e-10 if jnp.dtype(dtype) == jnp.float64 else 1e-5
+
+
+def series_threshold(dtype) -> float:
+    """|x| below which the Taylor branches of the sinc-like ratios are used."""
+    return 0.1 if jnp.dtype(dtype) == jnp.float64 else 0.5
+
+
+# Taylor coefficients in powers of x**2 (Horner order, highest first).
+# sin(x)/x = 1 - x^2/3! + x^4/5! - ... ; (1-cos x)/x = x/2! - x^3/4! + x^5/6! - ...
+_SIN_OVER_X = (1 / 6227020800, -1 / 39916800, 1 / 362880, -1 / 5040, 1 / 120, -1 / 6, 1.0)
+_ONE_MINUS_COS_OVER_X = (
+    1 / 87178291200,
+    -1 / 479001600,
+    1 / 3628800,
+    -1 / 40320,
+    1 / 720,
+    -1 / 24,
+    1 / 2,
+)
+
+
+def _horner_x2(coeffs, x):
+    x2 = x * x
+    acc = jnp.zeros_like(x) + coeffs[0]
+    for c in coeffs[1:]:
+        acc = acc * x2 + c
+    return acc
+
+
+def sin_over_x(x):
+    """``sin(x) / x`` with value 1 at 0; smooth, finite derivatives of all orders."""
+    x = jnp.asarray(x)
+    small = jnp.abs(x) < series_threshold(x.dtype)
+    x_safe = jnp.where(small, jnp.ones_like(x), x)  # double-where shim
+    return jnp.where(small, _horner_x2(_SIN_OVER_X, x), jnp.sin(x_safe) / x_safe)
+
+
+def one_minus_cos_over_x(x):
+    """``(1 - cos x) / x`` with value 0 at 0; smooth, finite derivatives of all orders.
+
+    The closed form uses ``1 - cos x = 2 sin^2(x/2)`` to avoid cancellation.
+    """
+    x = jnp.asarray(x)
+    small = jnp.abs(x) < series_threshold(x.dtype)
+    x_safe = jnp.where(small, jnp.ones_like(x), x)
+    closed = 2.0 * jnp.sin(0.5 * x_safe) ** 2 / x_safe
+    return jnp.where(small, x * _horner_x2(_ONE_MINUS_COS_OVER_X, x), closed)
+
+
+def safe_norm(v, axis=-1):
+    """Euclidean norm whose gradient is finite (zero) at ``v = 0``."""
+    sq = jnp.sum(v * v, axis=axis)
+    zero = sq == 0
+    sq_safe = jnp.where(zero, jnp.ones_like(sq), sq)
+    return jnp.where(zero, jnp.zeros_like(sq), jnp.sqrt(sq_safe))
+
+
+def damped_pinv(J, damping):
+    """Damped least-squares pseudo-inverse ``J^T (J J^T + damping^2 I)^-1``.
+
+    The paper's pseudo-inverse ``J^T (J J^T)^-1`` (paper §2.2) is singular for a
+    straight arm, whose position Jacobian has rank 2; the damping term keeps it
+    well defined and smooth (Wampler 1986; Nakamura & Hanafusa 1986).
+
+    Args:
+      J: (m, k) Jacobian, m <= k.
+      damping: scalar lambda >= 0.
+
+    Returns:
+      (k, m) matrix.
+    """
+    m = J.shape[0]
+    A = J @ J.T + (damping * damping) * jnp.eye(m, dtype=J.dtype)
+    # A is symmetric positive definite for damping > 0: solve instead of invert.
+    return jnp.linalg.solve(A, J).T

@@ -1,0 +1,559 @@
+"""The potential-field planner of paper eq. (9), one jitted step, and rollouts.
+
+One step::
+
+    qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj)          (paper eq. 9)
+    q   <- q + dt * qdot,  L_i clipped to [L_min_i, L_max_i]
+
+with ``V_e = goal - tip`` and ``V_sj = (obstacle point) - (closest arm point)``
+for obstacle j; ``J^+`` is the damped least-squares pseudo-inverse.
+
+* ``method="curve"`` (the paper's proposed method): a curve obstacle's closest
+  point comes from the exact solver of :mod:`softplan_jax.closest`.
+* ``method="points"``: every curve is replaced by ``n_points`` points evenly
+  spaced in u and handled by the N-point method (arm sampled at 10 points per
+  segment, Jacobian at the arm sample nearest the obstacle).
+Point-set obstacles always use the N-point method.
+
+Rollouts (:func:`rollout`) run a fixed number of steps with ``lax.scan``; a
+finished rollout is frozen. Each step records q, the tip and the TRUE clearance
+to every obstacle (the real curve or point set, whatever model the planner
+used), and checks the motion BETWEEN steps for a pass through an obstacle (see
+:func:`softplan_jax.metrics.between_steps`).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .closest import (
+    DEFAULT_OPTIONS,
+    ClosestPoint,
+    SolverOptions,
+    _closest_point_curve,
+    _closest_point_to_points,
+)
+from .curves import curve_points
+from .kinematics import _point_jacobian, _tip_jacobian, _tip_position
+from .metrics import between_steps, true_closest
+from .numerics import damped_pinv, safe_norm
+from .scenarios import Scenario
+
+__all__ = [
+    "Gains",
+    "default_gains",
+    "attraction",
+    "repulsion",
+    "PlanOptions",
+    "Status",
+    "STATUS_NAMES",
+    "planner_step",
+    "Rollout",
+    "rollout",
+]
+
+
+class Gains(NamedTuple):
+    """Gains of the gain functions and of the integration (a pytree of arrays;
+    every field is differentiable).
+
+    Attributes:
+      k_att: attraction gain [1/s]: F_e(V_e) = k_att V_e below saturation.
+      v_max: saturation speed of the attraction [m/s].
+      eta: repulsion gain.
+      d0: influence distance of the repulsion [m] (clearance beyond it: no force).
+      rep_max: smooth cap on the repulsion speed [m/s].
+      damping: damping lambda of the pseudo-inverse J^T (J J^T + lambda^2 I)^-1.
+      dt: integration step [s]: q <- q + dt * qdot.
+    """
+
+    k_att: jax.Array
+    v_max: jax.Array
+    eta: jax.Array
+    d0: jax.Array
+    rep_max: jax.Array
+    damping: jax.Array
+    dt: jax.Array
+
+
+def default_gains(dtype=None) -> Gains:
+    """The default gains (chosen by measurement on the paper's scenarios; see
+    the README's "Gains" section).
+
+    The tip moves at most ``v_max * dt = 0.05`` per step; the attraction is
+    linear within ``v_max / k_att = 0.25`` of the goal. The influence distance
+    ``d0 = 0.12`` is below the 0.3 at which Sim1's goal would sit inside the
+    line's field, and lets the arm approach the tree goal (0.08 from a branch).
+    """
+    dtype = dtype or jnp.result_type(float)
+    vals = dict(k_att=2.0, v_max=0.5, eta=2e-3, d0=0.12, rep_max=1.0, damping=0.05, dt=0.1)
+    return Gains(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
+
+
+def attraction(V_e, gains: Gains):
+    """F_e(V_e): linear with gain k_att, saturated to speed v_max (paper eq. 9)."""
+    speed = gains.k_att * safe_norm(V_e)
+    return gains.k_att * V_e / jnp.maximum(1.0, speed / gains.v_max)
+
+
+def repulsion(V_s, clearance, gains: Gains, kind: str = "khatib"):
+    """F_s(V_s): repulsion speed along ``V_s`` (towards the obstacle; eq. 9
+    subtracts it), as a function of the surface clearance.
+
+    * ``"khatib"``: ``eta (1/d - 1/d0) / d^2`` for d < d0, 0 beyond (Khatib
+      1986; Ataka et al. 2016), smoothly capped at ``rep_max``;
+    * ``"exponential"``: ``rep_max * exp(-d / d0)`` — smooth everywhere, never
+      exactly zero.
+    ``d`` is floored at ``1e-3 d0`` (contact or penetration still repels).
+    """
+    d = jnp.maximum(clearance, 1e-3 * gains.d0)
+    if kind == "khatib":
+        raw = gains.eta * (1.0 / d - 1.0 / gains.d0) / (d * d)
+        raw = jnp.where(d < gains.d0, raw, 0.0)
+        mag = gains.rep_max * jnp.tanh(raw / gains.rep_max)
+    elif kind == "exponential":
+        mag = gains.rep_max * jnp.exp(-d / gains.d0)
+    else:
+        raise ValueError(f"unknown repulsion {kind!r}; choose 'khatib' or 'exponential'")
+    return mag * V_s / jnp.maximum(safe_norm(V_s), jnp.finfo(V_s.dtype).tiny)
+
+
+class PlanOptions(NamedTuple):
+    """Static planner settings (hashable: changing one recompiles).
+
+    Attributes:
+      method: "curve" (exact closest points) or "points" (N-point model).
+      n_points: N of the N-point model of each curve (method "points").
+      points_per_segment: arm samples per segment for the N-point method (paper: 10).
+      repulsion: "khatib" or "exponential".
+      goal_tolerance: reached when |V_e| < goal_tolerance.
+      stall_window: stalled after this many steps without improving the best
+        |V_e| by more than stall_tolerance.
+      stall_tolerance: see stall_window.
+      solver: SolverOptions of the exact closest-point solver.
+    """
+
+    method: str = "curve"
+    n_points: int = 10
+    points_per_segment: int = 10
+    repulsion: str = "khatib"
+    goal_tolerance: float = 1e-2
+    stall_window: int = 60
+    stall_tolerance: float = 1e-4
+    solver: SolverOptions = DEFAULT_OPTIONS
+
+
+class Status:
+    """Rollout status codes."""
+
+    RUNNING = 0
+    REACHED = 1
+    COLLIDED = 2
+    STALLED = 3
+    MAX_STEPS = 4
+    NONFINITE = 5
+
+
+STATUS_NAMES = {0: "running", 1: "reached", 2: "collided", 3: "stalled", 4: "max_steps", 5: "non_finite"}
+
+
+def check_options(options: PlanOptions) -> PlanOptions:
+    if options.method not in ("curve", "points"):
+        raise ValueError(f"unknown method {options.method!r}; choose 'curve' or 'points'")
+    if options.repulsion not in ("khatib", "exponential"):
+        raise ValueError(f"unknown repulsion {options.repulsion!r}; choose 'khatib' or 'exponential'")
+    if int(options.n_points) < 1:
+        raise ValueError(f"n_points must be >= 1, got {options.n_points}")
+    if int(options.points_per_segment) < 1:
+        raise ValueError(f"points_per_segment must be >= 1, got {options.points_per_segment}")
+    if not options.goal_tolerance > 0:
+        raise ValueError(f"goal_tolerance must be > 0, got {options.goal_tolerance}")
+    if int(options.stall_window) < 1:
+        raise ValueError(f"stall_window must be >= 1, got {options.stall_window}")
+    return options
+
+
+def _planner_closest(q, scenario: Scenario, truth: ClosestPoint, options: PlanOptions):
+    """Closest points as the planner models the obstacles; (m,) ClosestPoint
+    in the obstacle order of :func:`softplan_jax.metrics.true_closest`
+    (polynomial curves, point sets, parametric curves)."""
+    m_c = scenario.curves.coeffs.shape[0]
+    m_p = scenario.points.shape[0]
+    k = options.points_per_segment
+    n_pts = lambda pts, mask: _closest_point_to_points(q, pts, mask, k)  # noqa: E731
+    point_sets = jax.vmap(n_pts)(scenario.points, scenario.point_mask)
+    if options.method == "curve":
+        take = lambda a, b: jax.tree_util.tree_map(lambda x: x[a:b], truth)  # noqa: E731
+        parts = [take(0, m_c), point_sets, take(m_c + m_p, m_c + m_p + len(scenario.parametric))]
+    else:
+        N = options.n_points
+        pts_c = jax.vmap(lambda c: curve_points(c, N))(scenario.curves)
+        all_true = jnp.ones((N,), bool)
+        curves_n = jax.vmap(lambda p: _closest_point_to_points(q, p, all_true, k))(pts_c)
+        parts = [curves_n, point_sets]
+        for pc in scenario.parametric:
+            pcp = _closest_point_to_points(q, curve_points(pc, N), all_true, k)
+            parts.append(jax.tree_util.tree_map(lambda x: x[None], pcp))
+    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
+
+
+def _obstacle_radius_and_mask(scenario: Scenario):
+    radius = jnp.concatenate(
+        [
+            scenario.curves.radius,
+            scenario.point_radius,
+            jnp.stack([pc.radius for pc in scenario.parametric])
+            if scenario.parametric
+            else jnp.zeros((0,), scenario.q0.dtype),
+        ]
+    )
+    mask = jnp.concatenate(
+        [
+            scenario.curve_mask,
+            jnp.any(scenario.point_mask, axis=-1),
+            jnp.ones((len(scenario.parametric),), bool),
+        ]
+    )
+    return radius, mask
+
+
+def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions):
+    """Paper eq. (9): qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj)."""
+    n = q.shape[0]
+    V_e = scenario.goal - _tip_position(q)
+    qdot = damped_pinv(_tip_jacobian(q), gains.damping) @ attraction(V_e, gains)
+    cps = _planner_closest(q, scenario, truth, options)
+    radius, mask = _obstacle_radius_and_mask(scenario)
+    V_s = cps.obstacle_point - cps.arm_point
+    clearance = cps.distance - scenario.arm_radius - radius
+    F_s = jax.vmap(lambda v, d: repulsion(v, d, gains, options.repulsion))(V_s, clearance)
+    J_s = jax.vmap(lambda i, s: _point_jacobian(q, i, s))(cps.segment, cps.s)
+    terms = jax.vmap(lambda J, F: damped_pinv(J, gains.damping) @ F)(J_s, F_s)
+    qdot = qdot - jnp.sum(jnp.where(mask[:, None], terms, 0.0), axis=0)
+    return qdot.reshape(n, 3)
+
+
+def _apply_step(q, qdot, scenario: Scenario, gains: Gains):
+    q_next = q + gains.dt * qdot
+    return q_next.at[:, 0].set(jnp.clip(q_next[:, 0], scenario.L_min, scenario.L_max))
+
+
+@partial(jax.jit, static_argnames=("options",))
+def planner_step(q, scenario: Scenario, gains: Gains, options: PlanOptions = PlanOptions()):
+    """One planner step (paper eq. 9) as a single jitted function.
+
+    Args:
+      q: (n, 3) configuration.
+      scenario: Scenario (one, not batched; vmap for batches).
+      gains: Gains.
+      options: PlanOptions (static).
+
+    Returns:
+      (n, 3) next configuration ``q + dt qdot`` with lengths clipped to limits.
+    """
+    truth = true_closest(q, scenario, options.solver) if options.method == "curve" else None
+    if truth is None:
+        # The points method never uses the exact solver: a placeholder of the right shape.
+        truth = _placeholder_truth(q, scenario)
+    return _apply_step(q, _qdot(q, scenario, gains, truth, options), scenario, gains)
+
+
+def _placeholder_truth(q, scenario: Scenario) -> ClosestPoint:
+    m = (
+        scenario.curves.coeffs.shape[0]
+        + scenario.points.shape[0]
+        + len(scenario.parametric)
+    )
+    z = jnp.zeros((m,), q.dtype)
+    return ClosestPoint(z, jnp.zeros((m,), jnp.int32), z, z, jnp.zeros((m, 3), q.dtype),
+                        jnp.zeros((m, 3), q.dtype), jnp.ones((m,), bool))
+
+
+class Rollout(NamedTuple):
+    """A planned rollout (arrays padded to max_steps + 1 along time).
+
+    Attributes:
+      q: (T+1, n, 3) configurations; frozen after the rollout finished.
+      tip: (T+1, 3).
+      clearance: (T+1, m) true clearance (surface to surface) to every obstacle
+        slot (padding slots: +inf).
+      between: (T+1, m) estimated minimum clearance during the motion from the
+        previous step (entry 0: the start's clearance).
+      status: () int, a :class:`Status` code.
+      iterations: () int, planner steps taken.
+      reached, collided: () bool.
+      min_clearance: () minimum over time, obstacles and between-step motion.
+      final_error: () |goal - tip| at the end.
+    """
+
+    q: jax.Array
+    tip: jax.Array
+    clearance: jax.Array
+    between: jax.Array
+    status: jax.Array
+    iterations: jax.Array
+    reached: jax.Array
+    collided: jax.Array
+    min_clearance: jax.Array
+    final_error: jax.Array
+
+
+class _Carry(NamedTuple):
+    q: jax.Array
+    truth: ClosestPoint
+    status: jax.Array
+    iterations: jax.Array
+    best_error: jax.Array
+    since_best: jax.Array
+
+
+def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
+    """Roll the planner out for ``max_steps`` steps with ``lax.scan`` (pure;
+    wrap in jit/vmap/grad as needed; :func:`softplan_jax.plan` is the jitted
+    entry point).
+
+    Status: reached (|V_e| < goal_tolerance), collided (true clearance <= 0 at
+    a step or during the motion between two steps), stalled (no progress over
+    ``stall_window`` steps), non-finite (a NaN/inf configuration: the last
+    finite one is kept), else max_steps. Once finished, the state is frozen.
+    """
+    radius, mask = _obstacle_radius_and_mask(scenario)
+    solver = options.solver
+    q0 = scenario.q0
+    dtype = q0.dtype
+
+    def clearance_of(truth):
+        c = truth.distance - scenario.arm_radius - radius
+        return jnp.where(mask, c, jnp.inf)
+
+    truth0 = true_closest(q0, scenario, solver)
+    c0 = clearance_of(truth0)
+    err0 = safe_norm(scenario.goal - _tip_position(q0))
+    status0 = jnp.where(
+        jnp.any(c0 <= 0), Status.COLLIDED, jnp.where(err0 < options.goal_tolerance, Status.REACHED, Status.RUNNING)
+    )
+    carry0 = _Carry(q0, truth0, status0.astype(jnp.int32), jnp.zeros((), jnp.int32), err0, jnp.zeros((), jnp.int32))
+
+    def body(carry: _Carry, _):
+        running = carry.status == Status.RUNNING
+        q_new = _apply_step(carry.q, _qdot(carry.q, scenario, gains, carry.truth, options), scenario, gains)
+        finite = jnp.all(jnp.isfinite(q_new))
+        q_new = jnp.where(finite, q_new, carry.q)
+        truth_new = true_closest(q_new, scenario, solver)
+        c_new = clearance_of(truth_new)
+        c_between = between_steps(carry.q, q_new, carry.truth, truth_new, scenario.arm_radius + radius)
+        c_between = jnp.where(mask, c_between, jnp.inf)
+        err = safe_norm(scenario.goal - _tip_position(q_new))
+        improved = err < carry.best_error - options.stall_tolerance
+        since = jnp.where(improved, 0, carry.since_best + 1)
+        collided = jnp.any(c_new <= 0) | jnp.any(c_between <= 0)
+        status = jnp.where(
+            ~finite,
+            Status.NONFINITE,
+            jnp.where(
+                collided,
+                Status.COLLIDED,
+                jnp.where(
+                    err < options.goal_tolerance,
+                    Status.REACHED,
+                    jnp.where(since >= options.stall_window, Status.STALLED, Status.RUNNING),
+                ),
+            ),
+        ).astype(jnp.int32)
+        new = _Carry(
+            q_new,
+            truth_new,
+            status,
+            carry.iterations + 1,
+            jnp.minimum(err, carry.best_error),
+            since,
+        )
+        # Freeze a finished rollout.
+        out_carry = jax.tree_util.tree_map(lambda a, b: jnp.where(running, a, b), new, carry)
+        record = (
+            out_carry.q,
+            _tip_position(out_carry.q),
+            jnp.where(running, c_new, clearance_of(carry.truth)),
+            jnp.where(running, c_between, clearance_of(carry.truth)),
+        )
+        return out_carry, record
+
+    final, (qs, tips, cs, cbs) = jax.lax.scan(body, carry0, None, length=max_steps)
+    qs = jnp.concatenate([q0[None], qs])
+    tips = jnp.concatenate([_tip_position(q0)[None], tips])
+    cs = jnp.concatenate([c0[None], cs])
+    cbs = jnp.concatenate([c0[None], cbs])
+    status = jnp.where(final.status == Status.RUNNING, Status.MAX_STEPS, final.status)
+    min_clearance = jnp.minimum(jnp.min(cs), jnp.min(cbs)).astype(dtype)
+    return Rollout(
+        q=qs,
+        tip=tips,
+        clearance=cs,
+        between=cbs,
+        status=status,
+        iterations=final.iterations,
+        reached=status == Status.REACHED,
+        collided=status == Status.COLLIDED,
+        min_clearance=min_clearance,
+        final_error=safe_norm(scenario.goal - tips[-1]),
+    )
+
+
+def status_name(code) -> str:
+    """Human name of a status code."""
+    return STATUS_NAMES[int(np.asarray(code))]
+
+
+# ----------------------------------------------------------------------------
+# Entry points.
+
+
+@partial(jax.jit, static_argnames=("options", "max_steps"))
+def rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
+    """:func:`rollout` under ``jit`` (options and max_steps static)."""
+    return rollout(scenario, gains, options, max_steps)
+
+
+@partial(jax.jit, static_argnames=("options", "max_steps"))
+def rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
+    """:func:`rollout` vmapped over a batch of scenarios of one padded shape
+    (every leaf of ``scenarios`` has a leading batch axis; gains shared)."""
+    return jax.vmap(lambda sc: rollout(sc, gains, options, max_steps))(scenarios)
+
+
+class PlanResult(NamedTuple):
+    """What :func:`plan` returns (host-side, trimmed to the steps taken).
+
+    Attributes:
+      reached: bool, the tip reached the goal without collision.
+      iterations: int, planner steps taken (paper: "iterations to reach goal").
+      collided: bool, the true clearance fell to <= 0 at a step or between steps.
+      min_clearance: float, minimum true clearance over the motion.
+      q: (iterations + 1, n, 3) configurations, start first.
+      tip: (iterations + 1, 3) tip positions.
+      status: "reached", "collided", "stalled", "max_steps" or "non_finite".
+      clearance: (iterations + 1, m) true clearance per step and real obstacle.
+      final_error: float, |goal - tip| at the end.
+    """
+
+    reached: bool
+    iterations: int
+    collided: bool
+    min_clearance: float
+    q: np.ndarray
+    tip: np.ndarray
+    status: str
+    clearance: np.ndarray
+    final_error: float
+
+
+def make_options(method="curve", n_points=10, **kwargs) -> PlanOptions:
+    """PlanOptions from keyword arguments, validated."""
+    unknown = set(kwargs) - set(PlanOptions._fields)
+    if unknown:
+        raise ValueError(f"unknown planner option(s) {sorted(unknown)}; known: {list(PlanOptions._fields)}")
+    return check_options(PlanOptions(method=method, n_points=int(n_points), **kwargs))
+
+
+def check_gains(gains: Gains | None, dtype) -> Gains:
+    if gains is None:
+        return default_gains(dtype)
+    if not isinstance(gains, Gains):
+        raise ValueError(f"gains must be a Gains, got {type(gains).__name__}")
+    vals = {k: np.asarray(v) for k, v in gains._asdict().items()}
+    for k, v in vals.items():
+        if v.shape != () or not np.isfinite(v) or v <= 0:
+            if not (k == "damping" and v.shape == () and v == 0):
+                raise ValueError(f"gain {k} must be a finite positive scalar, got {v!r}")
+    return Gains(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
+
+
+def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
+         max_steps: int = 300, **options) -> PlanResult:
+    """Plan a path for one scenario (jitted rollout; compiles once per padded
+    scenario shape, method and option set).
+
+    Args:
+      scenario: a :class:`~softplan_jax.scenarios.Scenario` (make_scenario,
+        paper_scenario or load_scenario).
+      method: "curve" (the paper's exact closest points) or "points" (each curve
+        modelled by ``n_points`` points).
+      n_points: N of the N-point model (method "points").
+      gains: :class:`Gains`; default :func:`default_gains`.
+      max_steps: the most planner steps.
+      **options: further :class:`PlanOptions` fields (goal_tolerance,
+        repulsion, stall_window, solver, ...).
+
+    Returns:
+      :class:`PlanResult`.
+    """
+    if not isinstance(scenario, Scenario):
+        raise ValueError(f"scenario must be a Scenario (see make_scenario), got {type(scenario).__name__}")
+    if scenario.q0.ndim != 2:
+        raise ValueError("plan takes one scenario; use plan_batch for a batch")
+    if int(max_steps) < 1:
+        raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+    opts = make_options(method, n_points, **options)
+    g = check_gains(gains, scenario.q0.dtype)
+    r = rollout_jit(scenario, g, opts, int(max_steps))
+    return result_from_rollout(r, scenario)
+
+
+def result_from_rollout(r: Rollout, scenario: Scenario) -> PlanResult:
+    """Trim a single (unbatched) Rollout to the steps taken, on the host."""
+    it = int(r.iterations)
+    _, mask = _obstacle_radius_and_mask(scenario)
+    mask = np.asarray(mask)
+    return PlanResult(
+        reached=bool(r.reached),
+        iterations=it,
+        collided=bool(r.collided),
+        min_clearance=float(r.min_clearance),
+        q=np.asarray(r.q[: it + 1]),
+        tip=np.asarray(r.tip[: it + 1]),
+        status=status_name(r.status),
+        clearance=np.asarray(r.clearance[: it + 1])[:, mask],
+        final_error=float(r.final_error),
+    )
+
+
+def stack_scenarios(scenarios) -> Scenario:
+    """Stack scenarios of one padded shape into a batch (leading axis)."""
+    scenarios = list(scenarios)
+    if not scenarios:
+        raise ValueError("stack_scenarios needs at least one scenario")
+    ref = jax.tree_util.tree_structure(scenarios[0])
+    shapes0 = [x.shape for x in jax.tree_util.tree_leaves(scenarios[0])]
+    for k, sc in enumerate(scenarios):
+        if jax.tree_util.tree_structure(sc) != ref or [x.shape for x in jax.tree_util.tree_leaves(sc)] != shapes0:
+            raise ValueError(
+                f"scenario {k} has a different padded shape or obstacle functions than scenario 0; "
+                "build them with the same curve_slots/point_slots/max_points/degree"
+            )
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *scenarios)
+
+
+def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
+               max_steps: int = 300, **options) -> Rollout:
+    """Plan a batch of scenarios in one vmapped, jitted call.
+
+    Args:
+      scenarios: a batched Scenario (:func:`stack_scenarios`, or
+        :func:`softplan_jax.scenarios.random_scenarios`).
+      Other arguments as :func:`plan`.
+
+    Returns:
+      A batched :class:`Rollout` (leading axis: scenario; time padded to max_steps + 1).
+    """
+    if not isinstance(scenarios, Scenario) or scenarios.q0.ndim != 3:
+        raise ValueError("plan_batch takes a batched Scenario (see stack_scenarios)")
+    if int(max_steps) < 1:
+        raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+    opts = make_options(method, n_points, **options)
+    g = check_gains(gains, scenarios.q0.dtype)
+    return rollout_batch(scenarios, g, opts, int(max_steps))

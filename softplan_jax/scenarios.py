@@ -1,0 +1,458 @@
+"""Scenarios: the arm's start, the goal and the obstacles, as one pytree.
+
+Obstacles come in three padded groups so that scenes of one padded shape share
+one compilation:
+
+* ``curves`` — polynomial curves stacked to ``(m_c, 3, K)`` with ``curve_mask``;
+* ``points`` — point-set obstacles padded to ``(m_p, N_max, 3)`` with
+  ``point_mask`` ``(m_p, N_max)`` (a slot with no real point is padding);
+* ``parametric`` — a tuple of :class:`ParametricCurve` (their functions are
+  static, so each distinct function compiles separately).
+
+:func:`paper_scenario` gives the paper's three simulations (Tables 2–4);
+:func:`load_scenario` / :func:`save_scenario` read and write the JSON format
+documented in the README.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .curves import ParametricCurve, PolynomialCurve, line_segment, stack_curves
+from .validation import as_float_array, check_configuration, check_finite, check_points
+
+__all__ = [
+    "Scenario",
+    "default_start",
+    "make_scenario",
+    "paper_scenario",
+    "PAPER_SCENARIOS",
+    "PAPER_RESULTS",
+    "load_scenario",
+    "save_scenario",
+    "scenario_from_dict",
+    "scenario_to_dict",
+    "obstacle_count",
+]
+
+
+class Scenario(NamedTuple):
+    """A planning problem (a pytree; every leaf an array except the static
+    functions of ``parametric``).
+
+    Attributes:
+      q0: (n, 3) start configuration.
+      goal: (3,) goal position of the tip.
+      curves: PolynomialCurve with coeffs (m_c, 3, K), u_range (m_c, 2), radius (m_c,).
+      curve_mask: (m_c,) bool, False for padding slots.
+      points: (m_p, N_max, 3) point-set obstacles.
+      point_mask: (m_p, N_max) bool, False for padding points.
+      point_radius: (m_p,) radius of each point obstacle's points.
+      parametric: tuple of ParametricCurve obstacles.
+      arm_radius: () radius of the arm (clearance is measured from its surface).
+      L_min: (n,) lower actuator limit on each L_i.
+      L_max: (n,) upper actuator limit on each L_i (inf for none).
+    """
+
+    q0: jax.Array
+    goal: jax.Array
+    curves: PolynomialCurve
+    curve_mask: jax.Array
+    points: jax.Array
+    point_mask: jax.Array
+    point_radius: jax.Array
+    parametric: tuple
+    arm_radius: jax.Array
+    L_min: jax.Array
+    L_max: jax.Array
+
+    @property
+    def n_segments(self) -> int:
+        return self.q0.shape[-2]
+
+
+def obstacle_count(scenario: Scenario) -> int:
+    """Number of obstacle slots (padding included): curves + point sets + parametric."""
+    return scenario.curves.coeffs.shape[-3] + scenario.points.shape[-3] + len(scenario.parametric)
+
+
+def default_start(n_segments: int = 3, length: float = 1.0, dtype=None):
+    """The documented default start pose: a straight, vertical arm.
+
+    Every segment has length ``length`` and theta = 0; the bending planes phi
+    are 0, 2*pi/3, 2*pi/3, ... so that, the paper's ``R_i = Rz(phi) Ry(theta)``
+    composing, consecutive segments bend in planes 120 degrees apart and the
+    three lateral directions are all reachable from the straight pose.
+    """
+    if int(n_segments) < 1:
+        raise ValueError(f"n_segments must be >= 1, got {n_segments}")
+    n = int(n_segments)
+    phi = np.full(n, 2 * math.pi / 3)
+    phi[0] = 0.0
+    q = np.stack([np.full(n, float(length)), np.zeros(n), phi], axis=1)
+    return jnp.asarray(q, dtype=dtype or jnp.result_type(float))
+
+
+def make_scenario(
+    goal,
+    obstacles,
+    q0=None,
+    *,
+    arm_radius=0.0,
+    L_min=None,
+    L_max=None,
+    curve_slots: int | None = None,
+    point_slots: int | None = None,
+    max_points: int | None = None,
+    degree: int | None = None,
+) -> Scenario:
+    """Build a :class:`Scenario`.
+
+    Args:
+      goal: (3,) goal of the tip.
+      obstacles: a list of PolynomialCurve, ParametricCurve or (N, 3) point arrays.
+      q0: (n, 3) start; None = :func:`default_start` (3 segments of length 1).
+      arm_radius: radius of the arm, >= 0.
+      L_min, L_max: scalars or (n,) actuator limits on L_i; None = (1e-3, inf).
+      curve_slots, point_slots, max_points, degree: pad the obstacle groups
+        to these sizes (to share one compiled shape across scenes); default
+        the sizes of this scene (at least one slot each, masked out if unused).
+
+    Returns:
+      Scenario.
+    """
+    q0 = default_start() if q0 is None else check_configuration(q0)
+    dtype = q0.dtype
+    goal = as_float_array(goal, "goal")
+    if goal.shape != (3,):
+        raise ValueError(f"goal must have shape (3,); got {goal.shape}")
+    check_finite(goal, "goal")
+    if not isinstance(obstacles, (list, tuple)):
+        raise ValueError(f"obstacles must be a list; got {type(obstacles).__name__}")
+    polys, params, point_sets, point_radii = [], [], [], []
+    for k, ob in enumerate(obstacles):
+        if isinstance(ob, PolynomialCurve):
+            if ob.coeffs.ndim != 2:
+                raise ValueError(f"obstacles[{k}] is a stacked PolynomialCurve; pass single curves")
+            polys.append(ob)
+        elif isinstance(ob, ParametricCurve):
+            params.append(ob.astype(dtype))
+        else:
+            try:
+                pts = check_points(ob, f"obstacles[{k}]")
+            except ValueError as err:
+                raise ValueError(
+                    f"{err} (each obstacle must be a PolynomialCurve, a ParametricCurve or an "
+                    "(N, 3) point array)"
+                ) from None
+            point_sets.append(np.asarray(pts))
+            point_radii.append(0.0)
+    curves, curve_mask = stack_curves(polys, size=max(curve_slots or 0, len(polys), 1), degree=degree)
+    if curve_slots is not None and curve_slots < len(polys):
+        raise ValueError(f"curve_slots = {curve_slots} < number of polynomial curves {len(polys)}")
+    n_p = max(point_slots or 0, len(point_sets), 1)
+    if point_slots is not None and point_slots < len(point_sets):
+        raise ValueError(f"point_slots = {point_slots} < number of point obstacles {len(point_sets)}")
+    n_max = max([max_points or 0, 1] + [p.shape[0] for p in point_sets])
+    if max_points is not None and max_points < max([0] + [p.shape[0] for p in point_sets]):
+        raise ValueError(f"max_points = {max_points} is smaller than the largest point set")
+    points = np.zeros((n_p, n_max, 3))
+    point_mask = np.zeros((n_p, n_max), bool)
+    for k, p in enumerate(point_sets):
+        points[k, : p.shape[0]] = p
+        point_mask[k, : p.shape[0]] = True
+    n = q0.shape[0]
+    L_min = jnp.broadcast_to(jnp.asarray(1e-3 if L_min is None else L_min, dtype), (n,))
+    L_max = jnp.broadcast_to(jnp.asarray(jnp.inf if L_max is None else L_max, dtype), (n,))
+    if bool(jnp.any(L_min <= 0)) or bool(jnp.any(L_max <= L_min)) or bool(jnp.any(jnp.isnan(L_max))):
+        raise ValueError(f"need 0 < L_min < L_max; got L_min = {L_min.tolist()}, L_max = {L_max.tolist()}")
+    if bool(jnp.any(q0[:, 0] < L_min)) or bool(jnp.any(q0[:, 0] > L_max)):
+        raise ValueError(f"start lengths {q0[:, 0].tolist()} lie outside [L_min, L_max]")
+    arm_radius = as_float_array(arm_radius, "arm_radius")
+    if arm_radius.shape != () or not bool(jnp.isfinite(arm_radius)) or float(arm_radius) < 0:
+        raise ValueError(f"arm_radius must be a finite scalar >= 0; got {arm_radius}")
+    return Scenario(
+        q0=q0,
+        goal=goal.astype(dtype),
+        curves=curves.astype(dtype),
+        curve_mask=curve_mask,
+        points=jnp.asarray(points, dtype),
+        point_mask=jnp.asarray(point_mask),
+        point_radius=jnp.asarray(np.pad(point_radii, (0, n_p - len(point_radii))), dtype),
+        parametric=tuple(params),
+        arm_radius=arm_radius.astype(dtype),
+        L_min=L_min,
+        L_max=L_max,
+    )
+
+
+# ----------------------------------------------------------------------------
+# The paper's scenarios (Tables 2-4).
+
+
+def _poly(x, y, z, u_range):
+    """PolynomialCurve from per-axis coefficient lists (lowest degree first)."""
+    K = max(len(x), len(y), len(z))
+    coeffs = np.zeros((3, K))
+    for row, c in enumerate((x, y, z)):
+        coeffs[row, : len(c)] = c
+    return PolynomialCurve(coeffs, u_range)
+
+
+PAPER_SCENARIOS = {
+    # Table 2: X = 1, Y = u, Z = 0.5 - u, -2 < u < 2.
+    "sim1": dict(goal=[1.1, -0.8, 0.9], curves=[([1.0], [0.0, 1.0], [0.5, -1.0], (-2.0, 2.0))]),
+    # Table 3: X = 0.5, Y = u, Z = 5u^2, -2 < u < 2.
+    "sim2": dict(goal=[1.0, 1.0, 1.0], curves=[([0.5], [0.0, 1.0], [0.0, 0.0, 5.0], (-2.0, 2.0))]),
+    # Table 4, the four legible branches, plus the trunk X = 1, Y = 1, Z = u,
+    # u in [0, 3]: the table is garbled after its fourth row (DESIGN.md).
+    "tree": dict(
+        goal=[1.0, 0.7, 1.45],
+        curves=[
+            ([1.0, -0.2], [1.0, -1.0], [2.0, 0.0, -1.0], (0.0, 1.0)),
+            ([1.0, -0.5], [1.0, 1.0, -1.0], [1.7, 0.3], (0.0, 1.5)),
+            ([1.0, 1.0, -1.0], [1.0, -1.0], [2.0, -0.1], (0.0, 1.5)),
+            ([1.0], [1.0, -1.0], [1.5, 0.1], (0.0, 1.5)),
+            ([1.0], [1.0], [0.0, 1.0], (0.0, 3.0)),
+        ],
+    ),
+}
+
+# The paper's reported results: (iterations to reach goal, average computation
+# time in seconds) per obstacle model, Tables 2-4 ("curve" = proposed method).
+PAPER_RESULTS = {
+    "sim1": {"curve": (60, 0.2914), 1: (24, 0.0053), 10: (24, 0.0690), 50: (24, 0.4254), 100: (66, 1.6679)},
+    "sim2": {"curve": (30, 0.2971), 1: (23, 0.0044), 10: (23, 0.0599), 50: (24, 0.2720), 100: (23, 0.5794)},
+    # Table 4's numbers are not legible in the source; the text says the curve
+    # method is "comparable to the 10-point method" and much faster than 50.
+    "tree": {},
+}
+
+
+def paper_scenario(name: str, *, dtype=None, **kwargs) -> Scenario:
+    """One of the paper's scenarios: "sim1" (Table 2), "sim2" (Table 3), "tree" (Table 4).
+
+    Three segments of static length 1 (paper Table 1), starting from
+    :func:`default_start`. The tree uses the four legible branches of Table 4
+    plus the trunk X = 1, Y = 1, Z = u, u in [0, 3] (the table is garbled
+    after its fourth row). Extra keyword arguments go to :func:`make_scenario`
+    (padding, radii, limits).
+    """
+    if name not in PAPER_SCENARIOS:
+        raise ValueError(f"unknown paper scenario {name!r}; choose one of {sorted(PAPER_SCENARIOS)}")
+    spec = PAPER_SCENARIOS[name]
+    curves = [_poly(x, y, z, ur) for x, y, z, ur in spec["curves"]]
+    q0 = kwargs.pop("q0", None)
+    q0 = default_start(dtype=dtype) if q0 is None else q0
+    return make_scenario(jnp.asarray(spec["goal"], q0.dtype), curves, q0, **kwargs)
+
+
+# ----------------------------------------------------------------------------
+# JSON scenario files.
+
+_TOP_KEYS = {"format", "arm", "goal", "obstacles", "name", "description"}
+_ARM_KEYS = {"segments", "start", "radius", "length_limits"}
+_FORMAT = "softplan-scenario/1"
+
+
+def _err(path: str, msg: str) -> ValueError:
+    return ValueError(f"scenario field {path}: {msg}")
+
+
+def _num_array(value, path: str, shape=None):
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise _err(path, f"must be numbers, got {value!r}") from None
+    if shape is not None and (arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape, shape))):
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise _err(path, f"must have shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise _err(path, f"must be finite, got {value!r}")
+    return arr
+
+
+def scenario_from_dict(data: dict, dtype=None) -> Scenario:
+    """Build a Scenario from the JSON structure (see the README); every
+    malformed field raises a ValueError naming the field."""
+    if not isinstance(data, dict):
+        raise _err("(top)", f"must be a JSON object, got {type(data).__name__}")
+    unknown = set(data) - _TOP_KEYS
+    if unknown:
+        raise _err(sorted(unknown)[0], f"unknown key (allowed: {sorted(_TOP_KEYS)})")
+    if data.get("format", _FORMAT) != _FORMAT:
+        raise _err("format", f"must be {_FORMAT!r}, got {data.get('format')!r}")
+    if "goal" not in data:
+        raise _err("goal", "is missing")
+    goal = _num_array(data["goal"], "goal", (3,))
+    arm = data.get("arm", {})
+    if not isinstance(arm, dict):
+        raise _err("arm", "must be an object")
+    unknown = set(arm) - _ARM_KEYS
+    if unknown:
+        raise _err(f"arm.{sorted(unknown)[0]}", f"unknown key (allowed: {sorted(_ARM_KEYS)})")
+    n = arm.get("segments", 3)
+    if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+        raise _err("arm.segments", f"must be an integer >= 1, got {n!r}")
+    if "start" in arm:
+        q0 = _num_array(arm["start"], "arm.start", (n, 3))
+        if np.any(q0[:, 0] <= 0):
+            raise _err("arm.start", f"segment lengths (first column) must be > 0, got {q0[:, 0].tolist()}")
+    else:
+        q0 = np.asarray(default_start(n))
+    radius = _num_array(arm.get("radius", 0.0), "arm.radius", ())
+    if radius < 0:
+        raise _err("arm.radius", f"must be >= 0, got {float(radius)}")
+    L_min, L_max = 1e-3, math.inf
+    if "length_limits" in arm:
+        lim = arm["length_limits"]
+        if not isinstance(lim, (list, tuple)) or len(lim) != 2:
+            raise _err("arm.length_limits", f"must be [L_min, L_max], got {lim!r}")
+        L_min = float(_num_array(lim[0], "arm.length_limits[0]", ()))
+        L_max = math.inf if lim[1] is None else float(_num_array(lim[1], "arm.length_limits[1]", ()))
+        if not 0 < L_min < L_max:
+            raise _err("arm.length_limits", f"need 0 < L_min < L_max, got {lim!r}")
+        if np.any(q0[:, 0] < L_min) or np.any(q0[:, 0] > L_max):
+            raise _err("arm.length_limits", f"the start lengths {q0[:, 0].tolist()} lie outside {lim!r}")
+    obstacles_json = data.get("obstacles", [])
+    if not isinstance(obstacles_json, list):
+        raise _err("obstacles", "must be a list")
+    obstacles = []
+    for k, ob in enumerate(obstacles_json):
+        path = f"obstacles[{k}]"
+        if not isinstance(ob, dict) or "type" not in ob:
+            raise _err(path, "must be an object with a 'type'")
+        kind = ob["type"]
+        allowed = {
+            "polynomial": {"type", "coeffs", "u_range", "radius", "name"},
+            "line_segment": {"type", "start", "end", "radius", "name"},
+            "points": {"type", "points", "radius", "name"},
+        }
+        if kind not in allowed:
+            raise _err(f"{path}.type", f"unknown obstacle type {kind!r}; choose one of {sorted(allowed)}")
+        extra = set(ob) - allowed[kind]
+        if extra:
+            raise _err(f"{path}.{sorted(extra)[0]}", f"unknown key for a {kind} obstacle")
+        r = _num_array(ob.get("radius", 0.0), f"{path}.radius", ())
+        if r < 0:
+            raise _err(f"{path}.radius", f"must be >= 0, got {float(r)}")
+        if kind == "polynomial":
+            for key in ("coeffs", "u_range"):
+                if key not in ob:
+                    raise _err(f"{path}.{key}", "is missing")
+            coeffs = _num_array(ob["coeffs"], f"{path}.coeffs", (3, None))
+            if coeffs.shape[1] < 1:
+                raise _err(f"{path}.coeffs", "needs at least one coefficient per axis")
+            u_range = _num_array(ob["u_range"], f"{path}.u_range", (2,))
+            if not u_range[0] < u_range[1]:
+                raise _err(f"{path}.u_range", f"must satisfy u_min < u_max, got {u_range.tolist()}")
+            obstacles.append(PolynomialCurve(coeffs, u_range, float(r)))
+        elif kind == "line_segment":
+            for key in ("start", "end"):
+                if key not in ob:
+                    raise _err(f"{path}.{key}", "is missing")
+            a = _num_array(ob["start"], f"{path}.start", (3,))
+            b = _num_array(ob["end"], f"{path}.end", (3,))
+            obstacles.append(line_segment(a, b, float(r)))
+        else:
+            if "points" not in ob:
+                raise _err(f"{path}.points", "is missing")
+            pts = _num_array(ob["points"], f"{path}.points", (None, 3))
+            if pts.shape[0] == 0:
+                raise _err(f"{path}.points", "is empty")
+            obstacles.append((pts, float(r)))
+    # Point radii are per obstacle: build, then set them.
+    plain = [o[0] if isinstance(o, tuple) else o for o in obstacles]
+    q0 = jnp.asarray(q0, dtype or jnp.result_type(float))
+    scen = make_scenario(jnp.asarray(goal, q0.dtype), plain, q0, arm_radius=float(radius), L_min=L_min, L_max=L_max)
+    radii = [o[1] for o in obstacles if isinstance(o, tuple)]
+    if radii:
+        pr = np.zeros(scen.point_radius.shape)
+        pr[: len(radii)] = radii
+        scen = scen._replace(point_radius=jnp.asarray(pr, q0.dtype))
+    return scen
+
+
+def scenario_to_dict(scenario: Scenario, name: str | None = None) -> dict:
+    """The JSON structure of a Scenario (padding dropped). ParametricCurves
+    cannot be written: their functions are arbitrary code."""
+    if scenario.parametric:
+        raise ValueError(
+            "a scenario with ParametricCurve obstacles cannot be saved to JSON; "
+            "fit a PolynomialCurve to it (fit_polynomial_curve) first"
+        )
+    if scenario.q0.ndim != 2:
+        raise ValueError("save one scenario at a time (this one is batched)")
+    q0 = np.asarray(scenario.q0)
+    obstacles = []
+    coeffs = np.asarray(scenario.curves.coeffs)
+    for k in np.nonzero(np.asarray(scenario.curve_mask))[0]:
+        obstacles.append(
+            {
+                "type": "polynomial",
+                "coeffs": coeffs[k].tolist(),
+                "u_range": np.asarray(scenario.curves.u_range[k]).tolist(),
+                "radius": float(scenario.curves.radius[k]),
+            }
+        )
+    pm = np.asarray(scenario.point_mask)
+    for k in range(pm.shape[0]):
+        if pm[k].any():
+            obstacles.append(
+                {
+                    "type": "points",
+                    "points": np.asarray(scenario.points[k])[pm[k]].tolist(),
+                    "radius": float(scenario.point_radius[k]),
+                }
+            )
+    L_max = float(scenario.L_max.max())
+    out = {
+        "format": _FORMAT,
+        "arm": {
+            "segments": int(q0.shape[0]),
+            "start": q0.tolist(),
+            "radius": float(scenario.arm_radius),
+            "length_limits": [float(scenario.L_min.min()), None if math.isinf(L_max) else L_max],
+        },
+        "goal": np.asarray(scenario.goal).tolist(),
+        "obstacles": obstacles,
+    }
+    if name:
+        out = {"name": name, **out}
+    return out
+
+
+def load_scenario(path, dtype=None) -> Scenario:
+    """Read a scenario JSON file (format ``softplan-scenario/1``, see the README)."""
+    path = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = json.load(fh)
+    except FileNotFoundError:
+        raise ValueError(f"scenario file not found: {path}") from None
+    except json.JSONDecodeError as err:
+        raise ValueError(f"scenario file {path} is not valid JSON: {err}") from None
+    try:
+        return scenario_from_dict(data, dtype=dtype)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
+
+
+def save_scenario(scenario: Scenario, path, name: str | None = None, overwrite: bool = False) -> None:
+    """Write a scenario as JSON. Refuses to replace an existing file unless
+    ``overwrite=True``; the file is written whole (via a temporary file) or not at all."""
+    path = os.fspath(path)
+    if os.path.exists(path) and not overwrite:
+        raise ValueError(f"{path} exists; pass overwrite=True to replace it")
+    text = json.dumps(scenario_to_dict(scenario, name), indent=2)
+    tmp = path + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as fh:
+        fh.write(text + "\n")
+    os.replace(tmp, path)

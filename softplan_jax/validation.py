@@ -1,0 +1,114 @@
+"""Host-side checks of user input, raising ``ValueError`` with a clear message.
+
+Shapes are always checked (they are static under ``jit``); values (finite,
+positive lengths, ordered ranges) are checked only when the input is concrete,
+i.e. not a tracer inside ``jit``/``vmap``/``grad``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import jax
+import jax.numpy as jnp
+
+
+def is_concrete(x) -> bool:
+    """True when ``x`` holds actual values (not a JAX tracer)."""
+    return not isinstance(x, jax.core.Tracer)
+
+
+def as_float_array(x, name: str):
+    """``x`` as a floating JAX array (integers become the default float dtype)."""
+    if isinstance(x, jax.core.Tracer):
+        return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(float)
+    try:
+        arr = jnp.asarray(x)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must be a numeric array, got {type(x).__name__}: {err}") from None
+    if not (jnp.issubdtype(arr.dtype, jnp.floating) or jnp.issubdtype(arr.dtype, jnp.integer)):
+        raise ValueError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
+    if not jnp.issubdtype(arr.dtype, jnp.floating):
+        arr = arr.astype(jnp.result_type(float))
+    return arr
+
+
+def check_finite(x, name: str) -> None:
+    if is_concrete(x) and not bool(np.all(np.isfinite(np.asarray(x)))):
+        raise ValueError(f"{name} contains non-finite values (NaN or inf): {np.asarray(x)!r}")
+
+
+def check_configuration(q):
+    """Validate a configuration ``q`` of shape (n, 3), rows [L_i, theta_i, phi_i].
+
+    Returns the configuration as a float array.
+    """
+    q = as_float_array(q, "q")
+    if q.ndim != 2 or q.shape[1] != 3:
+        raise ValueError(
+            f"q must have shape (n, 3) with rows [L_i, theta_i, phi_i]; got shape {q.shape}"
+        )
+    if q.shape[0] < 1:
+        raise ValueError("q must describe at least one segment (n >= 1); got n = 0")
+    if is_concrete(q):
+        check_finite(q, "q")
+        lengths = np.asarray(q[:, 0])
+        if np.any(lengths <= 0):
+            bad = [int(k) for k in np.nonzero(lengths <= 0)[0]]
+            raise ValueError(
+                f"segment lengths L_i must be > 0; got L = {lengths.tolist()} (bad segments {bad})"
+            )
+    return q
+
+
+def check_segment_index(i, n: int):
+    if is_concrete(i):
+        i_arr = np.asarray(i)
+        if i_arr.ndim != 0 or not np.issubdtype(i_arr.dtype, np.integer):
+            raise ValueError(f"segment index i must be an integer scalar, got {i!r}")
+        if not 0 <= int(i_arr) < n:
+            raise ValueError(f"segment index i = {int(i_arr)} is out of range for n = {n} segments")
+    return i
+
+
+def check_fraction(s):
+    s = as_float_array(s, "s")
+    if s.ndim != 0:
+        raise ValueError(f"s must be a scalar fraction of the segment, got shape {s.shape}")
+    check_finite(s, "s")
+    return s
+
+
+def check_u_range(u_range, name: str = "u_range"):
+    """Validate a parameter range ``(u_min, u_max)`` with u_min < u_max, both finite."""
+    u_range = as_float_array(u_range, name)
+    if u_range.shape[-1:] != (2,):
+        raise ValueError(f"{name} must be (u_min, u_max); got shape {u_range.shape}")
+    if is_concrete(u_range):
+        arr = np.asarray(u_range)
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite; got {arr.tolist()}")
+        if np.any(arr[..., 0] >= arr[..., 1]):
+            if np.any(arr[..., 0] == arr[..., 1]):
+                raise ValueError(f"{name} is empty (u_min == u_max); got {arr.tolist()}")
+            raise ValueError(f"{name} is reversed (u_min > u_max); got {arr.tolist()}")
+    return u_range
+
+
+def check_points(points, name: str = "points"):
+    """Validate an (N, 3) point set with N >= 1."""
+    points = as_float_array(points, name)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3); got shape {points.shape}")
+    if points.shape[0] == 0:
+        raise ValueError(f"{name} is empty: a point-set obstacle needs at least one point")
+    check_finite(points, name)
+    return points
+
+
+def check_radius(radius, name: str = "radius"):
+    radius = as_float_array(radius, name)
+    if is_concrete(radius):
+        arr = np.asarray(radius)
+        if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            raise ValueError(f"{name} must be finite and >= 0; got {arr.tolist()}")
+    return radius
