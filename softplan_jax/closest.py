@@ -143,65 +143,62 @@ def _psd_shift(a, b, c, dtype):
     return jnp.where(lam_min > floor, 0.0, floor - lam_min)
 
 
-def _newton_2d(seg: _Segment, curve, x0, iterations: int):
-    """Case 1: box-constrained Newton on D^2/2 from x0 = (s, u)."""
-    u_lo, u_hi = curve.u_range[0], curve.u_range[1]
-    lo = jnp.stack([jnp.zeros_like(u_lo), u_lo])
-    hi = jnp.stack([jnp.ones_like(u_hi), u_hi])
-    width = hi - lo
+def _newton_step(seg: _Segment, curve, x, free):
+    """One safeguarded Newton step on f(s, u) = |F_Ri(s) - F_o(u)|^2 / 2.
+
+    ``free`` (2,) bool says which of (s, u) may move: both for case 1 (paper
+    eqs. 13-14), one for the boundary problems of case 2 (eqs. 15-18). A
+    coordinate on a bound with its gradient pointing outward is also held.
+    Returns the Newton step (zero in held coordinates).
+    """
+    s, u = x[0], x[1]
+    dtype = x.dtype
+    r = seg.point(s) - curve.point(u)
+    A1, A2 = seg.derivatives(s)
+    C1, C2 = curve.derivative(u), curve.second_derivative(u)
+    # Stationarity equations g = 0 and their Jacobian [[a, b], [b, c]].
+    g = jnp.stack([jnp.dot(r, A1), -jnp.dot(r, C1)])
+    # Active set: a coordinate on a bound whose gradient points out of the box
+    # is held there, and Newton runs in the others (projected Newton).
+    lo = jnp.stack([jnp.zeros((), dtype), curve.u_range[0]])
+    hi = jnp.stack([jnp.ones((), dtype), curve.u_range[1]])
+    held = ((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0))
+    free = free & ~held
+    g = jnp.where(free, g, 0.0)
+    a = jnp.where(free[0], jnp.dot(A1, A1) + jnp.dot(r, A2), 1.0)
+    c = jnp.where(free[1], jnp.dot(C1, C1) - jnp.dot(r, C2), 1.0)
+    b = jnp.where(free[0] & free[1], -jnp.dot(A1, C1), 0.0)
+    mu = _psd_shift(a, b, c, dtype)
+    a, c = a + mu, c + mu
+    det = a * c - b * b
+    return -jnp.stack([c * g[0] - b * g[1], a * g[1] - b * g[0]]) / det
+
+
+def _newton(seg: _Segment, curve, x0, free, iterations: int):
+    """Box-constrained, safeguarded Newton from x0 = (s, u) over the free coordinates.
+
+    The step is capped to a quarter of the box, then the best of the step
+    lengths 1, 1/2, 1/4, 1/8 and 0 is kept (so f never increases) and the
+    point is clipped into the box.
+    """
     dtype = x0.dtype
+    lo = jnp.stack([jnp.zeros((), dtype), curve.u_range[0]])
+    hi = jnp.stack([jnp.ones((), dtype), curve.u_range[1]])
+    width = hi - lo
+    ts = jnp.array([1.0, 0.5, 0.25, 0.125, 0.0], dtype)
 
     def f(x):
         r = seg.point(x[0]) - curve.point(x[1])
-        return 0.5 * jnp.dot(r, r)
+        return jnp.dot(r, r)
 
     def body(_, x):
-        s, u = x[0], x[1]
-        r = seg.point(s) - curve.point(u)
-        A1, A2 = seg.derivatives(s)
-        C1, C2 = curve.derivative(u), curve.second_derivative(u)
-        # Stationarity equations, paper eqs. (13)-(14), and their Jacobian.
-        g = jnp.stack([jnp.dot(r, A1), -jnp.dot(r, C1)])
-        a = jnp.dot(A1, A1) + jnp.dot(r, A2)
-        b = -jnp.dot(A1, C1)
-        c = jnp.dot(C1, C1) - jnp.dot(r, C2)
-        mu = _psd_shift(a, b, c, dtype)
-        a, c = a + mu, c + mu
-        det = a * c - b * b
-        step = -jnp.stack([c * g[0] - b * g[1], a * g[1] - b * g[0]]) / det
-        # Cap the step to a quarter of the box (keeps starts in their basins).
+        step = _newton_step(seg, curve, x, free)
         size = jnp.max(jnp.abs(step) / width)
         step = step * jnp.minimum(1.0, 0.25 / jnp.maximum(size, jnp.finfo(dtype).tiny))
-        ts = jnp.array([1.0, 0.5, 0.25, 0.125, 0.0], dtype)
         cands = jnp.clip(x[None, :] + ts[:, None] * step[None, :], lo, hi)
-        vals = jax.vmap(f)(cands)
-        return cands[jnp.argmin(vals)]
-
-    return jax.lax.fori_loop(0, iterations, body, jnp.clip(x0, lo, hi))
-
-
-def _newton_1d(residual, t0, lo, hi, iterations: int):
-    """Case 2: Newton on |r(t)|^2/2 over [lo, hi]; residual(t) -> (r, r', r'')."""
-    dtype = t0.dtype
-    width = hi - lo
-
-    def f(t):
-        r = residual(t)[0]
-        return 0.5 * jnp.dot(r, r)
-
-    def body(_, t):
-        r, r1, r2 = residual(t)
-        g = jnp.dot(r, r1)
-        h = jnp.dot(r1, r1) + jnp.dot(r, r2)
-        floor = 1e3 * jnp.finfo(dtype).eps * (jnp.abs(h) + jnp.dot(r1, r1)) + jnp.finfo(dtype).tiny
-        h = jnp.where(h > floor, h, floor + jnp.abs(h))
-        step = -g / h
-        step = jnp.clip(step, -0.25 * width, 0.25 * width)
-        ts = jnp.array([1.0, 0.5, 0.25, 0.125, 0.0], dtype)
-        cands = jnp.clip(t + ts * step, lo, hi)
         return cands[jnp.argmin(jax.vmap(f)(cands))]
 
-    return jax.lax.fori_loop(0, iterations, body, jnp.clip(t0, lo, hi))
+    return jax.lax.fori_loop(0, iterations, body, jnp.clip(x0, lo, hi))
 
 
 def _local_minima_1d(vals, k: int):
@@ -231,66 +228,52 @@ def _local_minima_2d(vals, k: int):
 def _solve_pair(seg: _Segment, curve, options: SolverOptions):
     """All three cases for one segment and one curve (no derivatives w.r.t. q).
 
-    Returns (s, u, converged) of the best candidate.
+    Returns (s, u, D^2, converged) of the best candidate.
     """
     dtype = seg.q_i.dtype
     u_lo, u_hi = curve.u_range[0], curve.u_range[1]
-    s_grid = jnp.linspace(0.0, 1.0, options.grid_s, dtype=dtype)
-    u_grid = u_lo + (u_hi - u_lo) * jnp.linspace(0.0, 1.0, options.grid_u, dtype=dtype)
+    zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
+    n_s, n_u, ke = options.grid_s, options.grid_u, options.edge_starts
+    s_grid = jnp.linspace(0.0, 1.0, n_s, dtype=dtype)
+    u_grid = u_lo + (u_hi - u_lo) * jnp.linspace(0.0, 1.0, n_u, dtype=dtype)
     A = jax.vmap(seg.point)(s_grid)  # (n_s, 3)
     C = jax.vmap(curve.point)(u_grid)  # (n_u, 3)
     grid = jnp.sum((A[:, None, :] - C[None, :, :]) ** 2, axis=-1)  # (n_s, n_u)
 
-    # Case 1: interior stationary points, 2-D Newton from the grid's local minima.
+    # Case 1 starts: the grid's 2-D local minima, both coordinates free.
     flat = _local_minima_2d(grid, options.starts)
-    x0 = jnp.stack([s_grid[flat // options.grid_u], u_grid[flat % options.grid_u]], axis=-1)
-    x_int = jax.vmap(lambda x: _newton_2d(seg, curve, x, options.iterations))(x0)
-
-    # Case 2: the four boundary problems, 1-D Newton from each edge's local minima.
-    def on_u_edge(u_fixed):  # u = u_min or u_max: solve dD^2/ds = 0 for s (eqs. 15-16)
-        p = curve.point(u_fixed)
-
-        def residual(s):
-            d1, d2 = seg.derivatives(s)
-            return seg.point(s) - p, d1, d2
-
-        return residual
-
-    def on_s_edge(s_fixed):  # s = 0 or 1: solve dD^2/du = 0 for u (eqs. 17-18)
-        p = seg.point(s_fixed)
-
-        def residual(u):
-            return p - curve.point(u), -curve.derivative(u), -curve.second_derivative(u)
-
-        return residual
-
-    ke, it = options.edge_starts, options.iterations
-    zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
-    s_starts_lo = s_grid[_local_minima_1d(grid[:, 0], ke)]
-    s_starts_hi = s_grid[_local_minima_1d(grid[:, -1], ke)]
-    u_starts_0 = u_grid[_local_minima_1d(grid[0, :], ke)]
-    u_starts_1 = u_grid[_local_minima_1d(grid[-1, :], ke)]
-    solve_s = lambda res, t0: _newton_1d(res, t0, zero, one, it)  # noqa: E731
-    solve_u = lambda res, t0: _newton_1d(res, t0, u_lo, u_hi, it)  # noqa: E731
-    s_lo = jax.vmap(lambda t: solve_s(on_u_edge(u_lo), t))(s_starts_lo)
-    s_hi = jax.vmap(lambda t: solve_s(on_u_edge(u_hi), t))(s_starts_hi)
-    u_0 = jax.vmap(lambda t: solve_u(on_s_edge(zero), t))(u_starts_0)
-    u_1 = jax.vmap(lambda t: solve_u(on_s_edge(one), t))(u_starts_1)
+    x_int = jnp.stack([s_grid[flat // n_u], u_grid[flat % n_u]], axis=-1)
+    # Case 2 starts: each edge's 1-D local minima, one coordinate free.
+    # u = u_min / u_max: solve dD^2/ds = 0 for s (eqs. 15-16);
+    # s = 0 / 1: solve dD^2/du = 0 for u (eqs. 17-18).
+    s_lo = s_grid[_local_minima_1d(grid[:, 0], ke)]
+    s_hi = s_grid[_local_minima_1d(grid[:, -1], ke)]
+    u_0 = u_grid[_local_minima_1d(grid[0, :], ke)]
+    u_1 = u_grid[_local_minima_1d(grid[-1, :], ke)]
+    full = lambda v: jnp.full((ke,), v, dtype)  # noqa: E731
     x_edge = jnp.concatenate(
         [
-            jnp.stack([s_lo, jnp.full_like(s_lo, u_lo)], -1),
-            jnp.stack([s_hi, jnp.full_like(s_hi, u_hi)], -1),
-            jnp.stack([jnp.full_like(u_0, 0.0), u_0], -1),
-            jnp.stack([jnp.full_like(u_1, 1.0), u_1], -1),
+            jnp.stack([s_lo, full(u_lo)], -1),
+            jnp.stack([s_hi, full(u_hi)], -1),
+            jnp.stack([full(0.0), u_0], -1),
+            jnp.stack([full(1.0), u_1], -1),
         ]
     )
-
+    free = jnp.concatenate(
+        [
+            jnp.ones((options.starts, 2), bool),
+            jnp.tile(jnp.array([[True, False]]), (2 * ke, 1)),
+            jnp.tile(jnp.array([[False, True]]), (2 * ke, 1)),
+        ]
+    )
+    x_newton = jax.vmap(lambda x, m: _newton(seg, curve, x, m, options.iterations))(
+        jnp.concatenate([x_int, x_edge]), free
+    )
     # Case 3: the four endpoint pairs.
     x_corner = jnp.stack(
         [jnp.stack([zero, u_lo]), jnp.stack([zero, u_hi]), jnp.stack([one, u_lo]), jnp.stack([one, u_hi])]
     )
-
-    cands = jnp.concatenate([x_int, x_edge, x_corner])
+    cands = jnp.concatenate([x_newton, x_corner])
     d2 = jax.vmap(lambda x: jnp.sum((seg.point(x[0]) - curve.point(x[1])) ** 2))(cands)
     best = jnp.argmin(d2)
     x = cands[best]
@@ -447,6 +430,24 @@ def closest_point_to_points(q, points, points_per_segment: int = 10) -> ClosestP
     return _closest_point_to_points_jit(q, points, None, int(points_per_segment))
 
 
+class _FixedPoint(NamedTuple):
+    """A point as a degenerate curve (u unused), for the 1-D point-to-arm problem."""
+
+    p: jax.Array
+
+    @property
+    def u_range(self):
+        return jnp.array([0.0, 1.0], self.p.dtype)
+
+    def point(self, u):
+        return self.p
+
+    def derivative(self, u):
+        return jnp.zeros_like(self.p)
+
+    second_derivative = derivative
+
+
 def _point_closest(q, p, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoint:
     """Exact closest point of the arm backbone to one point p (3,): the
     boundary problem of paper eqs. (15)-(16) with a fixed obstacle point,
@@ -460,15 +461,15 @@ def _point_closest(q, p, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoi
     s_grid = jnp.linspace(0.0, 1.0, options.grid_s, dtype=dtype)
     zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
 
-    def per_segment(seg):
-        def residual(s):
-            d1, d2 = seg.derivatives(s)
-            return seg.point(s) - p_ng, d1, d2
+    point_curve = _FixedPoint(p_ng)
+    free = jnp.array([True, False])
 
+    def per_segment(seg):
         vals = jnp.sum((jax.vmap(seg.point)(s_grid) - p_ng) ** 2, axis=-1)
         starts = s_grid[_local_minima_1d(vals, options.edge_starts)]
-        s_c = jax.vmap(lambda t: _newton_1d(residual, t, zero, one, options.iterations))(starts)
-        s_c = jnp.concatenate([s_c, jnp.stack([zero, one])])
+        x0 = jnp.stack([starts, jnp.zeros_like(starts)], -1)
+        x = jax.vmap(lambda x: _newton(seg, point_curve, x, free, options.iterations))(x0)
+        s_c = jnp.concatenate([x[:, 0], jnp.stack([zero, one])])
         d2 = jnp.sum((jax.vmap(seg.point)(s_c) - p_ng) ** 2, axis=-1)
         best = jnp.argmin(d2)
         return s_c[best], d2[best]

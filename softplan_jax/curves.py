@@ -228,8 +228,8 @@ def stack_curves(curves, size: int | None = None, degree: int | None = None):
                 "(ParametricCurves are planned one by one)"
             )
     size = len(curves) if size is None else int(size)
-    if size < len(curves) or size < 1:
-        raise ValueError(f"size = {size} must be >= 1 and >= the number of curves ({len(curves)})")
+    if size < len(curves):
+        raise ValueError(f"size = {size} must be >= the number of curves ({len(curves)})")
     max_deg = max((c.degree for c in curves), default=0)
     degree = max_deg if degree is None else int(degree)
     if degree < max_deg:

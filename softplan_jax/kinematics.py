@@ -17,8 +17,6 @@ traced); the underscored twins do not and are what the solvers call.
 
 from __future__ import annotations
 
-from functools import partial
-
 import jax
 import jax.numpy as jnp
 
@@ -91,43 +89,55 @@ def _segment_transform(q_i):
 
 
 def _frames(q):
-    """Base frames of all n segments and the tip frame (H_n^0 = prod H_i^{i-1})."""
-    dtype = q.dtype
+    """Base frames of all n segments and the tip frame (H_n^0 = prod H_i^{i-1}).
 
-    def body(carry, q_i):
-        R, P = carry
-        R_i, P_i = _segment_transform(q_i)
-        return (R @ R_i, P + R @ P_i), (R, P)
+    A Python loop over the (static, small) number of segments: straight-line
+    code that XLA fuses, cheaper to compile inside the solvers' loops than a scan.
+    """
+    R = jnp.eye(3, dtype=q.dtype)
+    P = jnp.zeros(3, dtype=q.dtype)
+    Rs, Ps = [], []
+    for i in range(q.shape[0]):
+        Rs.append(R)
+        Ps.append(P)
+        R_i, P_i = _segment_transform(q[i])
+        R, P = R @ R_i, P + R @ P_i
+    return jnp.stack(Rs), jnp.stack(Ps), R, P
 
-    init = (jnp.eye(3, dtype=dtype), jnp.zeros(3, dtype=dtype))
-    (R_tip, P_tip), (R_bases, P_bases) = jax.lax.scan(body, init, q)
-    return R_bases, P_bases, R_tip, P_tip
 
-
-@jax.jit
 def _segment_point(q, i, s):
     R_bases, P_bases, _, _ = _frames(q)
     return P_bases[i] + R_bases[i] @ arc_point_local(q[i], s)
 
 
-@jax.jit
 def _tip_position(q):
     return _frames(q)[3]
 
 
-@jax.jit
 def _point_jacobian(q, i, s):
     n = q.shape[0]
     return jax.jacfwd(_segment_point)(q, i, s).reshape(3, 3 * n)
 
 
-@jax.jit
 def _tip_jacobian(q):
     n = q.shape[0]
     return jax.jacfwd(_tip_position)(q).reshape(3, 3 * n)
 
 
-@partial(jax.jit, static_argnums=1)
+def _points_jacobians(q, segments, s):
+    """Jacobians ``J_si = dP_si/dq`` (m, 3, 3n) of m arm points (segments[k],
+    s[k]) in one forward-mode pass: the frames are computed once, with 3n
+    tangents, instead of once per point. ``s`` is held fixed (the paper's J_si)."""
+    n = q.shape[0]
+
+    def points(q):
+        R_bases, P_bases, _, _ = _frames(q)
+        local = jax.vmap(lambda i, s_k: arc_point_local(q[i], s_k))(segments, s)
+        return P_bases[segments] + jnp.einsum("kab,kb->ka", R_bases[segments], local)
+
+    return jax.jacfwd(points)(q).reshape(segments.shape[0], 3, 3 * n)
+
+
 def _backbone_points(q, points_per_segment: int):
     """(n * k, 3) arm samples at s = j/k, j = 1..k, of every segment."""
     R_bases, P_bases, _, _ = _frames(q)
@@ -138,7 +148,14 @@ def _backbone_points(q, points_per_segment: int):
 
 
 # ----------------------------------------------------------------------------
-# Public, validated entry points.
+# Public, validated entry points: validation on the host, then a jitted core.
+
+_segment_point_jit = jax.jit(_segment_point)
+_tip_position_jit = jax.jit(_tip_position)
+_point_jacobian_jit = jax.jit(_point_jacobian)
+_tip_jacobian_jit = jax.jit(_tip_jacobian)
+_backbone_points_jit = jax.jit(_backbone_points, static_argnums=1)
+_frames_jit = jax.jit(_frames)
 
 
 def segment_transform(q_i):
@@ -166,7 +183,7 @@ def segment_frames(q):
       ``P_{i-1}^0`` for i = 1..n (segment 0's base is the identity at the origin).
     """
     q = check_configuration(q)
-    R_bases, P_bases, _, _ = _frames(q)
+    R_bases, P_bases, _, _ = _frames_jit(q)
     return R_bases, P_bases
 
 
@@ -184,12 +201,12 @@ def segment_point(q, i, s):
     q = check_configuration(q)
     check_segment_index(i, q.shape[0])
     s = check_fraction(s).astype(q.dtype)
-    return _segment_point(q, i, s)
+    return _segment_point_jit(q, i, s)
 
 
 def tip_position(q):
     """Position of the arm tip, the translation of ``H_n^0`` (paper §2.1). (n, 3) -> (3,)."""
-    return _tip_position(check_configuration(q))
+    return _tip_position_jit(check_configuration(q))
 
 
 def point_jacobian(q, i, s):
@@ -201,12 +218,12 @@ def point_jacobian(q, i, s):
     q = check_configuration(q)
     check_segment_index(i, q.shape[0])
     s = check_fraction(s).astype(q.dtype)
-    return _point_jacobian(q, i, s)
+    return _point_jacobian_jit(q, i, s)
 
 
 def tip_jacobian(q):
     """``J_e``: Jacobian of the tip position, (3, 3n), by ``jax.jacfwd``."""
-    return _tip_jacobian(check_configuration(q))
+    return _tip_jacobian_jit(check_configuration(q))
 
 
 def backbone_points(q, points_per_segment: int = 10):
@@ -218,4 +235,4 @@ def backbone_points(q, points_per_segment: int = 10):
     q = check_configuration(q)
     if int(points_per_segment) < 1:
         raise ValueError(f"points_per_segment must be >= 1, got {points_per_segment}")
-    return _backbone_points(q, int(points_per_segment))
+    return _backbone_points_jit(q, int(points_per_segment))

@@ -39,8 +39,8 @@ from .closest import (
     _closest_point_to_points,
 )
 from .curves import curve_points
-from .kinematics import _point_jacobian, _tip_jacobian, _tip_position
-from .metrics import between_steps, true_closest
+from .kinematics import _points_jacobians, _tip_position
+from .metrics import between_steps, empty_closest, true_closest
 from .numerics import damped_pinv, safe_norm
 from .scenarios import Scenario
 
@@ -91,7 +91,7 @@ def default_gains(dtype=None) -> Gains:
     line's field, and lets the arm approach the tree goal (0.08 from a branch).
     """
     dtype = dtype or jnp.result_type(float)
-    vals = dict(k_att=2.0, v_max=0.5, eta=2e-3, d0=0.12, rep_max=1.0, damping=0.05, dt=0.1)
+    vals = dict(k_att=2.0, v_max=0.5, eta=1e-3, d0=0.07, rep_max=1.0, damping=0.05, dt=0.1)
     return Gains(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
 
 
@@ -135,6 +135,14 @@ class PlanOptions(NamedTuple):
       stall_window: stalled after this many steps without improving the best
         |V_e| by more than stall_tolerance.
       stall_tolerance: see stall_window.
+      check_collisions: compute the true clearance and the between-step
+        check inside the rollout (default). False gives a planning-only
+        rollout (clearance records NaN, never "collided"), for timing the
+        planner alone; :func:`apply_collision_checks` adds the checks after.
+      contact_tolerance: a clearance at or below this counts as a collision
+        (zero-radius curves that cross meet at a single point, which a
+        solver reaches only to rounding). The rollout uses
+        ``max(contact_tolerance, 10 sqrt(eps))``: 1e-6 in float64, 3.5e-3 in float32.
       solver: SolverOptions of the exact closest-point solver.
     """
 
@@ -145,6 +153,8 @@ class PlanOptions(NamedTuple):
     goal_tolerance: float = 1e-2
     stall_window: int = 60
     stall_tolerance: float = 1e-4
+    check_collisions: bool = True
+    contact_tolerance: float = 1e-6
     solver: SolverOptions = DEFAULT_OPTIONS
 
 
@@ -173,6 +183,8 @@ def check_options(options: PlanOptions) -> PlanOptions:
         raise ValueError(f"points_per_segment must be >= 1, got {options.points_per_segment}")
     if not options.goal_tolerance > 0:
         raise ValueError(f"goal_tolerance must be > 0, got {options.goal_tolerance}")
+    if not options.contact_tolerance >= 0:
+        raise ValueError(f"contact_tolerance must be >= 0, got {options.contact_tolerance}")
     if int(options.stall_window) < 1:
         raise ValueError(f"stall_window must be >= 1, got {options.stall_window}")
     return options
@@ -184,21 +196,31 @@ def _planner_closest(q, scenario: Scenario, truth: ClosestPoint, options: PlanOp
     (polynomial curves, point sets, parametric curves)."""
     m_c = scenario.curves.coeffs.shape[0]
     m_p = scenario.points.shape[0]
+    m_par = len(scenario.parametric)
     k = options.points_per_segment
-    n_pts = lambda pts, mask: _closest_point_to_points(q, pts, mask, k)  # noqa: E731
-    point_sets = jax.vmap(n_pts)(scenario.points, scenario.point_mask)
+    parts = []
     if options.method == "curve":
-        take = lambda a, b: jax.tree_util.tree_map(lambda x: x[a:b], truth)  # noqa: E731
-        parts = [take(0, m_c), point_sets, take(m_c + m_p, m_c + m_p + len(scenario.parametric))]
+        if m_c:
+            parts.append(jax.tree_util.tree_map(lambda x: x[:m_c], truth))
     else:
         N = options.n_points
-        pts_c = jax.vmap(lambda c: curve_points(c, N))(scenario.curves)
         all_true = jnp.ones((N,), bool)
-        curves_n = jax.vmap(lambda p: _closest_point_to_points(q, p, all_true, k))(pts_c)
-        parts = [curves_n, point_sets]
+        if m_c:
+            pts_c = jax.vmap(lambda c: curve_points(c, N))(scenario.curves)
+            parts.append(jax.vmap(lambda p: _closest_point_to_points(q, p, all_true, k))(pts_c))
+    if m_p:
+        n_pts = lambda pts, mask: _closest_point_to_points(q, pts, mask, k)  # noqa: E731
+        parts.append(jax.vmap(n_pts)(scenario.points, scenario.point_mask))
+    if options.method == "curve":
+        if m_par:
+            parts.append(jax.tree_util.tree_map(lambda x: x[m_c + m_p :], truth))
+    else:
         for pc in scenario.parametric:
-            pcp = _closest_point_to_points(q, curve_points(pc, N), all_true, k)
+            pcp = _closest_point_to_points(q, curve_points(pc, options.n_points), jnp.ones((options.n_points,), bool), k)
             parts.append(jax.tree_util.tree_map(lambda x: x[None], pcp))
+    if not parts:
+        return empty_closest(q.dtype)
+    parts = [p._replace(segment=p.segment.astype(jnp.int32), u=p.u.astype(q.dtype)) for p in parts]
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
 
 
@@ -226,15 +248,19 @@ def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: Pla
     """Paper eq. (9): qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj)."""
     n = q.shape[0]
     V_e = scenario.goal - _tip_position(q)
-    qdot = damped_pinv(_tip_jacobian(q), gains.damping) @ attraction(V_e, gains)
     cps = _planner_closest(q, scenario, truth, options)
     radius, mask = _obstacle_radius_and_mask(scenario)
+    # J_e (the tip: s = 1 of the last segment) and every J_sj in one pass.
+    segments = jnp.concatenate([jnp.array([n - 1], jnp.int32), cps.segment])
+    s = jnp.concatenate([jnp.ones((1,), q.dtype), cps.s])
+    J = _points_jacobians(q, segments, s)
+    pinvs = jax.vmap(lambda J_k: damped_pinv(J_k, gains.damping))(J)  # (1 + m, 3n, 3)
     V_s = cps.obstacle_point - cps.arm_point
     clearance = cps.distance - scenario.arm_radius - radius
     F_s = jax.vmap(lambda v, d: repulsion(v, d, gains, options.repulsion))(V_s, clearance)
-    J_s = jax.vmap(lambda i, s: _point_jacobian(q, i, s))(cps.segment, cps.s)
-    terms = jax.vmap(lambda J, F: damped_pinv(J, gains.damping) @ F)(J_s, F_s)
-    qdot = qdot - jnp.sum(jnp.where(mask[:, None], terms, 0.0), axis=0)
+    F_s = jnp.where(mask[:, None], F_s, 0.0)
+    # Paper eq. (9).
+    qdot = pinvs[0] @ attraction(V_e, gains) - jnp.einsum("kij,kj->i", pinvs[1:], F_s)
     return qdot.reshape(n, 3)
 
 
@@ -304,8 +330,10 @@ class Rollout(NamedTuple):
 
 
 class _Carry(NamedTuple):
-    q: jax.Array
-    truth: ClosestPoint
+    q: jax.Array  # q_k
+    q_prev: jax.Array  # q_{k-1} (q_0 at k = 0)
+    truth_prev: ClosestPoint  # exact closest pairs at q_{k-1}
+    first: jax.Array
     status: jax.Array
     iterations: jax.Array
     best_error: jax.Array
@@ -317,79 +345,84 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
     wrap in jit/vmap/grad as needed; :func:`softplan_jax.plan` is the jitted
     entry point).
 
-    Status: reached (|V_e| < goal_tolerance), collided (true clearance <= 0 at
-    a step or during the motion between two steps), stalled (no progress over
-    ``stall_window`` steps), non-finite (a NaN/inf configuration: the last
-    finite one is kept), else max_steps. Once finished, the state is frozen.
+    Scan iteration k (k = 0..max_steps) looks at q_k: exact closest pairs to
+    every obstacle (shared by the clearance record and, for the curve method,
+    by the planner), the true clearance at q_k and during the motion from
+    q_{k-1}; then the status; then, while running, the step to q_{k+1}.
+
+    Status: reached (|V_e| < goal_tolerance), collided (true clearance <= the
+    contact tolerance at a step or during the motion between two steps; this
+    wins over reached),
+    stalled (the best |V_e| did not improve by stall_tolerance over
+    stall_window steps), non-finite (a step gave NaN/inf: the last finite
+    configuration is kept), else max_steps. Once finished, the state is frozen.
     """
     radius, mask = _obstacle_radius_and_mask(scenario)
-    solver = options.solver
     q0 = scenario.q0
-    dtype = q0.dtype
+    contact = _contact(options, q0.dtype)
 
     def clearance_of(truth):
-        c = truth.distance - scenario.arm_radius - radius
-        return jnp.where(mask, c, jnp.inf)
+        return jnp.where(mask, truth.distance - scenario.arm_radius - radius, jnp.inf)
 
-    truth0 = true_closest(q0, scenario, solver)
-    c0 = clearance_of(truth0)
-    err0 = safe_norm(scenario.goal - _tip_position(q0))
-    status0 = jnp.where(
-        jnp.any(c0 <= 0), Status.COLLIDED, jnp.where(err0 < options.goal_tolerance, Status.REACHED, Status.RUNNING)
-    )
-    carry0 = _Carry(q0, truth0, status0.astype(jnp.int32), jnp.zeros((), jnp.int32), err0, jnp.zeros((), jnp.int32))
+    check = options.check_collisions
 
-    def body(carry: _Carry, _):
-        running = carry.status == Status.RUNNING
-        q_new = _apply_step(carry.q, _qdot(carry.q, scenario, gains, carry.truth, options), scenario, gains)
-        finite = jnp.all(jnp.isfinite(q_new))
-        q_new = jnp.where(finite, q_new, carry.q)
-        truth_new = true_closest(q_new, scenario, solver)
-        c_new = clearance_of(truth_new)
-        c_between = between_steps(carry.q, q_new, carry.truth, truth_new, scenario.arm_radius + radius)
-        c_between = jnp.where(mask, c_between, jnp.inf)
-        err = safe_norm(scenario.goal - _tip_position(q_new))
+    def body(carry: _Carry, k):
+        q = carry.q
+        if check or options.method == "curve":
+            truth = true_closest(q, scenario, options.solver)
+        else:
+            truth = _placeholder_truth(q, scenario)
+        if check:
+            c = clearance_of(truth)
+            cb = between_steps(carry.q_prev, q, carry.truth_prev, truth, scenario, scenario.arm_radius + radius)
+            cb = jnp.where(carry.first | ~mask, c, cb)
+        else:
+            c = cb = jnp.full(mask.shape, jnp.nan, q.dtype)
+        err = safe_norm(scenario.goal - _tip_position(q))
         improved = err < carry.best_error - options.stall_tolerance
-        since = jnp.where(improved, 0, carry.since_best + 1)
-        collided = jnp.any(c_new <= 0) | jnp.any(c_between <= 0)
-        status = jnp.where(
-            ~finite,
-            Status.NONFINITE,
+        since = jnp.where(improved | carry.first, 0, carry.since_best + 1)
+        running = carry.status == Status.RUNNING
+        judged = jnp.where(
+            check & (jnp.any(c <= contact) | jnp.any(cb <= contact)),
+            Status.COLLIDED,
             jnp.where(
-                collided,
-                Status.COLLIDED,
-                jnp.where(
-                    err < options.goal_tolerance,
-                    Status.REACHED,
-                    jnp.where(since >= options.stall_window, Status.STALLED, Status.RUNNING),
-                ),
+                err < options.goal_tolerance,
+                Status.REACHED,
+                jnp.where(since >= options.stall_window, Status.STALLED, Status.RUNNING),
             ),
-        ).astype(jnp.int32)
+        )
+        status = jnp.where(running, judged, carry.status)
+        # The step to q_{k+1}, taken only while running (and not past max_steps).
+        stepping = (status == Status.RUNNING) & (k < max_steps)
+        q_next = _apply_step(q, _qdot(q, scenario, gains, truth, options), scenario, gains)
+        finite = jnp.all(jnp.isfinite(q_next))
+        status = jnp.where(stepping & ~finite, Status.NONFINITE, status).astype(jnp.int32)
+        moved = stepping & finite
         new = _Carry(
-            q_new,
-            truth_new,
-            status,
-            carry.iterations + 1,
-            jnp.minimum(err, carry.best_error),
-            since,
+            q=jnp.where(moved, q_next, q),
+            q_prev=q,
+            truth_prev=truth,
+            first=jnp.zeros((), bool),
+            status=status,
+            iterations=carry.iterations + moved.astype(jnp.int32),
+            best_error=jnp.minimum(err, carry.best_error),
+            since_best=since,
         )
-        # Freeze a finished rollout.
-        out_carry = jax.tree_util.tree_map(lambda a, b: jnp.where(running, a, b), new, carry)
-        record = (
-            out_carry.q,
-            _tip_position(out_carry.q),
-            jnp.where(running, c_new, clearance_of(carry.truth)),
-            jnp.where(running, c_between, clearance_of(carry.truth)),
-        )
-        return out_carry, record
+        return new, (q, _tip_position(q), c, cb)
 
-    final, (qs, tips, cs, cbs) = jax.lax.scan(body, carry0, None, length=max_steps)
-    qs = jnp.concatenate([q0[None], qs])
-    tips = jnp.concatenate([_tip_position(q0)[None], tips])
-    cs = jnp.concatenate([c0[None], cs])
-    cbs = jnp.concatenate([c0[None], cbs])
+    truth_dummy = _placeholder_truth(q0, scenario)
+    carry0 = _Carry(
+        q=q0,
+        q_prev=q0,
+        truth_prev=truth_dummy,
+        first=jnp.ones((), bool),
+        status=jnp.asarray(Status.RUNNING, jnp.int32),
+        iterations=jnp.zeros((), jnp.int32),
+        best_error=jnp.asarray(jnp.inf, q0.dtype),
+        since_best=jnp.zeros((), jnp.int32),
+    )
+    final, (qs, tips, cs, cbs) = jax.lax.scan(body, carry0, jnp.arange(max_steps + 1))
     status = jnp.where(final.status == Status.RUNNING, Status.MAX_STEPS, final.status)
-    min_clearance = jnp.minimum(jnp.min(cs), jnp.min(cbs)).astype(dtype)
     return Rollout(
         q=qs,
         tip=tips,
@@ -399,8 +432,51 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         iterations=final.iterations,
         reached=status == Status.REACHED,
         collided=status == Status.COLLIDED,
-        min_clearance=min_clearance,
+        min_clearance=jnp.minimum(jnp.min(cs, initial=jnp.inf), jnp.min(cbs, initial=jnp.inf)),
         final_error=safe_norm(scenario.goal - tips[-1]),
+    )
+
+
+def _contact(options: PlanOptions, dtype) -> float:
+    return max(float(options.contact_tolerance), 10.0 * float(np.sqrt(np.finfo(dtype).eps)))
+
+
+def apply_collision_checks(r: Rollout, scenario: Scenario, options: PlanOptions) -> Rollout:
+    """Add the true-clearance and between-step checks to a planning-only
+    rollout (``check_collisions=False``), vectorised over time.
+
+    The result equals what the checked rollout gives: the dynamics do not
+    depend on the checks until the first collision, after which the checked
+    rollout freezes, so the trajectory is cut and frozen at the first step
+    whose clearance (at the step, or during the motion to it) is at or below
+    the contact tolerance. Pure; vmap it over a batch.
+    """
+    radius, mask = _obstacle_radius_and_mask(scenario)
+    contact = _contact(options, scenario.q0.dtype)
+    truths = jax.vmap(lambda q: true_closest(q, scenario, options.solver))(r.q)
+    c = jnp.where(mask, truths.distance - scenario.arm_radius - radius, jnp.inf)
+    prev = jax.tree_util.tree_map(lambda x: x[:-1], truths)
+    nxt = jax.tree_util.tree_map(lambda x: x[1:], truths)
+    cb = jax.vmap(lambda qa, qb, ta, tb: between_steps(qa, qb, ta, tb, scenario, scenario.arm_radius + radius))(
+        r.q[:-1], r.q[1:], prev, nxt
+    )
+    cb = jnp.concatenate([c[:1], jnp.where(mask, cb, jnp.inf)])
+    steps = jnp.arange(r.q.shape[0])
+    hit = (jnp.any(c <= contact, axis=1) | jnp.any(cb <= contact, axis=1)) & (steps <= r.iterations)
+    first = jnp.argmax(hit)
+    collided = jnp.any(hit)
+    end = jnp.where(collided, first, r.iterations)
+    keep = steps <= end
+    q = jnp.where(keep[:, None, None], r.q, r.q[end])
+    tip = jnp.where(keep[:, None], r.tip, r.tip[end])
+    c = jnp.where(keep[:, None], c, c[end])
+    cb = jnp.where(keep[:, None], cb, c[end])
+    status = jnp.where(collided, Status.COLLIDED, r.status).astype(r.status.dtype)
+    return r._replace(
+        q=q, tip=tip, clearance=c, between=cb, status=status, iterations=end.astype(r.iterations.dtype),
+        reached=status == Status.REACHED, collided=status == Status.COLLIDED,
+        min_clearance=jnp.minimum(jnp.min(c, initial=jnp.inf), jnp.min(cb, initial=jnp.inf)),
+        final_error=safe_norm(scenario.goal - tip[-1]),
     )
 
 

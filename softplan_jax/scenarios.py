@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import tempfile
 from typing import NamedTuple
 
 import jax
@@ -123,7 +124,7 @@ def make_scenario(
       L_min, L_max: scalars or (n,) actuator limits on L_i; None = (1e-3, inf).
       curve_slots, point_slots, max_points, degree: pad the obstacle groups
         to these sizes (to share one compiled shape across scenes); default
-        the sizes of this scene (at least one slot each, masked out if unused).
+        the sizes of this scene (a group with no obstacle has zero slots).
 
     Returns:
       Scenario.
@@ -154,10 +155,10 @@ def make_scenario(
                 ) from None
             point_sets.append(np.asarray(pts))
             point_radii.append(0.0)
-    curves, curve_mask = stack_curves(polys, size=max(curve_slots or 0, len(polys), 1), degree=degree)
+    curves, curve_mask = stack_curves(polys, size=max(curve_slots or 0, len(polys)), degree=degree)
     if curve_slots is not None and curve_slots < len(polys):
         raise ValueError(f"curve_slots = {curve_slots} < number of polynomial curves {len(polys)}")
-    n_p = max(point_slots or 0, len(point_sets), 1)
+    n_p = max(point_slots or 0, len(point_sets))
     if point_slots is not None and point_slots < len(point_sets):
         raise ValueError(f"point_slots = {point_slots} < number of point obstacles {len(point_sets)}")
     n_max = max([max_points or 0, 1] + [p.shape[0] for p in point_sets])
@@ -266,7 +267,17 @@ def _err(path: str, msg: str) -> ValueError:
     return ValueError(f"scenario field {path}: {msg}")
 
 
+def _only_numbers(value) -> bool:
+    if isinstance(value, bool) or isinstance(value, str) or value is None:
+        return False
+    if isinstance(value, (list, tuple)):
+        return all(_only_numbers(v) for v in value)
+    return isinstance(value, (int, float))
+
+
 def _num_array(value, path: str, shape=None):
+    if not _only_numbers(value):
+        raise _err(path, f"must be numbers (JSON numbers, not strings or booleans), got {value!r}")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -284,6 +295,9 @@ def scenario_from_dict(data: dict, dtype=None) -> Scenario:
     malformed field raises a ValueError naming the field."""
     if not isinstance(data, dict):
         raise _err("(top)", f"must be a JSON object, got {type(data).__name__}")
+    for key in ("name", "description"):
+        if key in data and not isinstance(data[key], str):
+            raise _err(key, f"must be a string, got {data[key]!r}")
     unknown = set(data) - _TOP_KEYS
     if unknown:
         raise _err(sorted(unknown)[0], f"unknown key (allowed: {sorted(_TOP_KEYS)})")
@@ -439,6 +453,10 @@ def load_scenario(path, dtype=None) -> Scenario:
         raise ValueError(f"scenario file not found: {path}") from None
     except json.JSONDecodeError as err:
         raise ValueError(f"scenario file {path} is not valid JSON: {err}") from None
+    except UnicodeDecodeError as err:
+        raise ValueError(f"scenario file {path} is not UTF-8 text: {err}") from None
+    except OSError as err:
+        raise ValueError(f"cannot read scenario file {path}: {err.strerror or err}") from None
     try:
         return scenario_from_dict(data, dtype=dtype)
     except ValueError as err:
@@ -452,7 +470,12 @@ def save_scenario(scenario: Scenario, path, name: str | None = None, overwrite: 
     if os.path.exists(path) and not overwrite:
         raise ValueError(f"{path} exists; pass overwrite=True to replace it")
     text = json.dumps(scenario_to_dict(scenario, name), indent=2)
-    tmp = path + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write(text + "\n")
-    os.replace(tmp, path)
+    fd, tmp = tempfile.mkstemp(prefix=".softplan-", suffix=".json", dir=os.path.dirname(os.path.abspath(path)))
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

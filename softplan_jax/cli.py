@@ -1,0 +1,412 @@
+"""The ``softplan`` command.
+
+::
+
+    softplan run SCENARIO [--method curve|points] [--n-points N] [--max-steps N]
+                          [--goal-tolerance TOL] [--repulsion khatib|exponential]
+                          [--plot PNG] [--gif GIF] [--json] [--float32] [--require-reached]
+    softplan scenarios [--json]
+    softplan export NAME PATH [--force]
+
+SCENARIO is a paper scenario name (``sim1``, ``sim2``, ``tree``) or the path of
+a JSON scenario file (a file literally named like a paper scenario: write
+``./sim1``).
+
+Exit codes: 0 success (for ``run``: planning finished, whatever its status —
+reached, stalled, collided or max_steps; the status is in the summary);
+2 bad input (unknown scenario, missing or malformed file, bad option value,
+output path that cannot be written), with one line ``softplan: error: ...`` on
+stderr; 3 ``run --require-reached`` and the goal was not reached.
+
+jax is imported inside :func:`main`, after the arguments are parsed, so
+``--help`` is fast and float64 (``jax_enable_x64``) can be switched on before
+any array exists.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+EXIT_NOT_REACHED = 3
+
+PAPER_DESCRIPTIONS = {
+    "sim1": "paper Table 2: line X = 1, Y = u, Z = 0.5 - u, u in [-2, 2]; goal [1.1, -0.8, 0.9]",
+    "sim2": "paper Table 3: parabola X = 0.5, Y = u, Z = 5u^2, u in [-2, 2]; goal [1, 1, 1]",
+    "tree": "paper Table 4: four branches + trunk X = 1, Y = 1, Z = u, u in [0, 3] "
+    "(the table is garbled after its 4th row); goal [1, 0.7, 1.45]",
+}
+
+
+class InputError(Exception):
+    """Bad user input: reported as one line on stderr, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports errors as one line ``softplan: error: ...`` (exit 2)."""
+
+    def error(self, message):
+        raise InputError(f"{message} (see '{self.prog} --help')")
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("softplan_jax")
+    except PackageNotFoundError:
+        return "0.0.0+unknown"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="softplan",
+        description="Plan paths of a soft continuum arm around curve-like obstacles (softplan_jax).",
+        epilog="Exit codes: 0 success, 2 bad input, 3 goal not reached with --require-reached.",
+    )
+    parser.add_argument("--version", action="version", version=f"softplan {_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    run = sub.add_parser(
+        "run",
+        help="plan one scenario and print a summary",
+        description="Plan one scenario (paper name or JSON file) and print a summary: status, "
+        "iterations, collisions, minimum true clearance, final tip error, compile time and time "
+        "per scan step.",
+        epilog="Exit codes: 0 planning finished, whatever the status (use --require-reached to "
+        "exit 3 when the goal was not reached); 2 bad input.",
+    )
+    run.add_argument("scenario", metavar="SCENARIO",
+                     help="paper scenario (sim1, sim2, tree) or path to a JSON scenario file")
+    run.add_argument("--method", choices=("curve", "points"), default="curve",
+                     help="curve: exact closest points (the paper's method); points: each curve "
+                     "modelled by N points (default: curve)")
+    run.add_argument("--n-points", type=int, default=10, metavar="N",
+                     help="N of the N-point model, >= 1 (method points only; default 10)")
+    run.add_argument("--max-steps", type=int, default=300, metavar="N",
+                     help="most planner steps, >= 1 (default 300)")
+    run.add_argument("--goal-tolerance", type=float, default=None, metavar="TOL",
+                     help="reached when |goal - tip| < TOL (default: the planner's, 0.01)")
+    run.add_argument("--repulsion", choices=("khatib", "exponential"), default="khatib",
+                     help="repulsion gain function (default: khatib)")
+    run.add_argument("--plot", metavar="PATH", help="write the snapshot figure (PNG, PDF, SVG, ...)")
+    run.add_argument("--gif", metavar="PATH", help="write an animated GIF of the motion (needs pillow)")
+    run.add_argument("--json", action="store_true", help="print the summary as JSON")
+    run.add_argument("--float32", action="store_true",
+                     help="plan in float32 (default float64)")
+    run.add_argument("--require-reached", action="store_true",
+                     help="exit with code 3 when the goal was not reached")
+
+    scen = sub.add_parser("scenarios", help="list the paper scenarios",
+                          description="List the paper's scenarios (names for 'softplan run').")
+    scen.add_argument("--json", action="store_true", help="print the list as JSON")
+
+    export = sub.add_parser("export", help="write a paper scenario as a JSON scenario file",
+                            description="Write a paper scenario as a JSON scenario file "
+                            "(format softplan-scenario/1) to edit and run with 'softplan run'.")
+    export.add_argument("name", metavar="NAME", help="paper scenario (sim1, sim2, tree)")
+    export.add_argument("path", metavar="PATH", help="output .json file")
+    export.add_argument("--force", action="store_true", help="overwrite PATH if it exists")
+    return parser
+
+
+# ----------------------------------------------------------------------------
+# Checks on the host, before any planning.
+
+
+def _check_output_path(path: str, option: str, inputs=()) -> str:
+    """An output path whose directory exists and is writable, that is not a
+    directory, and that is none of the input files."""
+    if not path:
+        raise InputError(f"{option}: empty path")
+    if os.path.isdir(path):
+        raise InputError(f"{option}: {path} is a directory")
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(parent):
+        raise InputError(f"{option}: directory {parent} does not exist")
+    if not os.access(parent, os.W_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise InputError(f"{option}: {path} is not writable")
+    for inp in inputs:
+        if inp and os.path.exists(path) and os.path.exists(inp) and os.path.samefile(path, inp):
+            raise InputError(f"{option}: {path} is the input scenario file; refusing to overwrite it")
+    return path
+
+
+def _check_plot_format(path: str) -> None:
+    from matplotlib.figure import Figure
+
+    ext = os.path.splitext(path)[1].lower().lstrip(".")
+    supported = Figure().canvas.get_supported_filetypes()
+    if ext not in supported:
+        raise InputError(
+            f"--plot: cannot tell the image format of {path!r}; use one of the extensions "
+            f"{', '.join('.' + e for e in sorted(supported))}"
+        )
+
+
+def _check_run_args(args, paper_names) -> None:
+    if args.n_points < 1:
+        raise InputError(f"--n-points must be >= 1, got {args.n_points}")
+    if args.max_steps < 1:
+        raise InputError(f"--max-steps must be >= 1, got {args.max_steps}")
+    tol = args.goal_tolerance
+    if tol is not None and not (math.isfinite(tol) and tol > 0):
+        raise InputError(f"--goal-tolerance must be a finite number > 0, got {args.goal_tolerance}")
+    is_file = args.scenario not in paper_names
+    if is_file:
+        if not os.path.exists(args.scenario):
+            raise InputError(
+                f"unknown scenario {args.scenario!r}: not a paper scenario ({', '.join(paper_names)}) "
+                "and no such file"
+            )
+        if os.path.isdir(args.scenario):
+            raise InputError(f"scenario {args.scenario} is a directory, not a JSON file")
+    inputs = (args.scenario,) if is_file else ()
+    if args.plot is not None and args.gif is not None and os.path.abspath(args.plot) == os.path.abspath(
+        args.gif
+    ):
+        raise InputError("--plot and --gif name the same file")
+    if args.plot is not None:
+        _check_output_path(args.plot, "--plot", inputs)
+        _check_plot_format(args.plot)
+    if args.gif is not None:
+        _check_output_path(args.gif, "--gif", inputs)
+        if not args.gif.lower().endswith(".gif"):
+            raise InputError(f"--gif: the path must end in .gif, got {args.gif!r}")
+        try:
+            import PIL  # noqa: F401
+        except ImportError:
+            raise InputError("--gif needs pillow: pip install pillow") from None
+
+
+# ----------------------------------------------------------------------------
+# Commands.
+
+
+def _load(args, dtype):
+    from .scenarios import load_scenario, paper_scenario
+
+    if args.scenario in _paper_names():
+        return paper_scenario(args.scenario, dtype=dtype), args.scenario
+    try:
+        return load_scenario(args.scenario, dtype=dtype), args.scenario
+    except OSError as err:  # unreadable file, permission denied, ...
+        raise InputError(f"cannot read scenario file {args.scenario}: {err.strerror or err}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"scenario file {args.scenario} is not UTF-8 text (is it a JSON file?)") from None
+
+
+def _paper_names():
+    from .scenarios import PAPER_SCENARIOS
+
+    return sorted(PAPER_SCENARIOS)
+
+
+def _fmt_seconds(t: float) -> str:
+    if t >= 1.0:
+        return f"{t:.2f} s"
+    if t >= 1e-3:
+        return f"{t * 1e3:.2f} ms"
+    return f"{t * 1e6:.1f} us"
+
+
+def _cmd_run(args) -> int:
+    import jax
+
+    if not args.float32:
+        # float64 needs x64 on before any array is created.
+        jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp
+
+    from .planner import default_gains, make_options, result_from_rollout, rollout_jit
+
+    paper_names = _paper_names()
+    _check_run_args(args, paper_names)
+    dtype = jnp.float32 if args.float32 else jnp.float64
+    try:
+        scenario, label = _load(args, dtype)
+        extra = {"repulsion": args.repulsion}
+        if args.goal_tolerance is not None:
+            extra["goal_tolerance"] = args.goal_tolerance
+        options = make_options(args.method, args.n_points, **extra)
+    except ValueError as err:
+        raise InputError(str(err)) from None
+    gains = default_gains(scenario.q0.dtype)
+    max_steps = int(args.max_steps)
+
+    if sys.stderr.isatty():
+        print("softplan: compiling the planner (once per scenario shape and option set) ...",
+              file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    compiled = rollout_jit.lower(scenario, gains, options, max_steps).compile()
+    compile_time = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rollout = jax.block_until_ready(compiled(scenario, gains))
+    run_time = time.perf_counter() - t0
+    result = result_from_rollout(rollout, scenario)
+
+    summary = {
+        "scenario": label,
+        "method": args.method,
+        "n_points": args.n_points if args.method == "points" else None,
+        "repulsion": args.repulsion,
+        "dtype": str(jnp.dtype(scenario.q0.dtype)),
+        "status": result.status,
+        "iterations": result.iterations,
+        "max_steps": max_steps,
+        "reached": result.reached,
+        "collided": result.collided,
+        "min_clearance": result.min_clearance,
+        "final_error": result.final_error,
+        "goal_tolerance": options.goal_tolerance,
+        "compile_time_s": compile_time,
+        "run_time_s": run_time,
+        # lax.scan executes all max_steps steps even after the rollout froze.
+        "time_per_scan_step_s": run_time / max_steps,
+        "plot": None,
+        "gif": None,
+    }
+
+    title = (
+        f"{label} — {args.method} method"
+        + (f" (N = {args.n_points})" if args.method == "points" else "")
+        + f" — {result.status} after {result.iterations} iterations\n"
+        f"min true clearance {result.min_clearance:.3f}, final tip error {result.final_error:.3f}"
+    )
+    if args.plot is not None or args.gif is not None:
+        if "matplotlib.pyplot" not in sys.modules:
+            import matplotlib
+
+            matplotlib.use("Agg")  # the command never opens a window
+        import matplotlib.pyplot as plt
+
+        from . import plotting
+
+        try:
+            if args.plot is not None:
+                fig = plotting.plot_snapshots(scenario, result, title=title)
+                try:
+                    fig.savefig(args.plot, dpi=120, bbox_inches="tight", pad_inches=0.2)
+                finally:
+                    plt.close(fig)
+                summary["plot"] = os.path.abspath(args.plot)
+            if args.gif is not None:
+                plotting.animate(scenario, result, args.gif, title=title.split("\n")[0])
+                summary["gif"] = os.path.abspath(args.gif)
+        except OSError as err:
+            raise InputError(f"cannot write output: {err}") from None
+
+    if args.json:
+        # Non-finite numbers (min clearance without obstacles is inf) become null.
+        clean = {
+            k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()
+        }
+        print(json.dumps(clean, indent=2))
+    else:
+        print(_text_summary(summary))
+    if args.require_reached and not result.reached:
+        return EXIT_NOT_REACHED
+    return EXIT_OK
+
+
+def _text_summary(s: dict) -> str:
+    method = s["method"] + (f" (N = {s['n_points']} points per curve)" if s["method"] == "points" else "")
+    rows = [
+        ("scenario", s["scenario"]),
+        ("method", method),
+        ("repulsion", s["repulsion"]),
+        ("dtype", s["dtype"]),
+        ("status", s["status"]),
+        ("iterations", f"{s['iterations']} (max steps {s['max_steps']})"),
+        ("reached", "yes" if s["reached"] else "no"),
+        ("collided", "yes" if s["collided"] else "no"),
+        ("min true clearance", f"{s['min_clearance']:.4f}"),
+        ("final tip error", f"{s['final_error']:.4f} (goal tolerance {s['goal_tolerance']:g})"),
+        ("compile time", _fmt_seconds(s["compile_time_s"])),
+        ("run time", f"{_fmt_seconds(s['run_time_s'])} for {s['max_steps']} scan steps"),
+        ("time per scan step", f"{_fmt_seconds(s['time_per_scan_step_s'])} "
+         "(run time / max steps: the scan runs every step, also after the rollout stops)"),
+    ]
+    if s["plot"]:
+        rows.append(("plot", s["plot"]))
+    if s["gif"]:
+        rows.append(("gif", s["gif"]))
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def _cmd_scenarios(args) -> int:
+    from .scenarios import PAPER_SCENARIOS
+
+    rows = []
+    for name in sorted(PAPER_SCENARIOS):
+        spec = PAPER_SCENARIOS[name]
+        rows.append(
+            {
+                "name": name,
+                "goal": list(spec["goal"]),
+                "obstacles": len(spec["curves"]),
+                "description": PAPER_DESCRIPTIONS.get(name, ""),
+            }
+        )
+    if args.json:
+        print(json.dumps(rows, indent=2))
+    else:
+        for r in rows:
+            print(f"{r['name']:<6} {r['obstacles']} obstacle curve(s)  {r['description']}")
+    return EXIT_OK
+
+
+def _cmd_export(args) -> int:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)  # write the paper's numbers exactly
+    from .scenarios import paper_scenario, save_scenario
+
+    names = _paper_names()
+    if args.name not in names:
+        raise InputError(f"unknown paper scenario {args.name!r}; choose one of {', '.join(names)}")
+    if os.path.exists(args.path) and not args.force:
+        raise InputError(f"{args.path} exists; pass --force to overwrite it")
+    _check_output_path(args.path, "PATH")
+    try:
+        save_scenario(paper_scenario(args.name), args.path, name=args.name, overwrite=args.force)
+    except (OSError, ValueError) as err:
+        raise InputError(f"cannot write {args.path}: {err}") from None
+    print(f"wrote {args.name} to {args.path}")
+    return EXIT_OK
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``softplan`` command; returns the exit code."""
+    parser = build_parser()
+    try:
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as exit_:  # --help, --version
+            return int(exit_.code or 0) if not isinstance(exit_.code, str) else EXIT_BAD_INPUT
+        if args.command is None:
+            parser.print_help(sys.stderr)
+            return EXIT_BAD_INPUT
+        if args.command == "run":
+            return _cmd_run(args)
+        if args.command == "scenarios":
+            return _cmd_scenarios(args)
+        return _cmd_export(args)
+    except InputError as err:
+        msg = " ".join(str(err).split())  # one line
+        print(f"softplan: error: {msg}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("softplan: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,531 @@
+"""Figures of planned motions (matplotlib only, host side).
+
+* :func:`plot_snapshots` — the arm at a few iterations in one 3D view, like
+  the paper's Figs. 3-5 (obstacle curves, goal, tip path).
+* :func:`plot_snapshot_panels` — the same snapshots side by side, the paper's
+  panels (a) (b) (c).
+* :func:`animate` — an animated GIF of the whole motion (needs pillow).
+* :func:`plot_clearance` — true clearance to every obstacle per iteration.
+
+Every function takes a :class:`~softplan_jax.planner.PlanResult` (what
+:func:`softplan_jax.plan` returns) or a single, unbatched
+:class:`~softplan_jax.planner.Rollout`, returns the matplotlib Figure and never
+calls ``plt.show()``. Figures are made with pyplot (so they display in
+notebooks and scripts); without a display pyplot falls back to the Agg backend.
+Close figures you do not keep (``plt.close(fig)``).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+
+__all__ = ["plot_snapshots", "plot_snapshot_panels", "animate", "plot_clearance"]
+
+# Arm samples per segment for drawing the smooth backbone.
+ARM_SAMPLES = 30
+# Samples of an obstacle curve over its u_range.
+CURVE_SAMPLES = 600
+
+_OBSTACLE_COLOR = "#8c5a2b"  # branch brown
+_POINTS_COLOR = "#6b4423"
+_GOAL_COLOR = "#f2b705"
+_PATH_COLOR = "#444444"
+_BASE_COLOR = "black"
+
+
+# ----------------------------------------------------------------------------
+# Host-side data.
+
+
+def _pyplot():
+    """pyplot, with the Agg backend when there is no display and the user has
+    not chosen a backend (scripts on servers, CI)."""
+    if "matplotlib.pyplot" not in sys.modules:
+        import matplotlib
+
+        headless = sys.platform.startswith("linux") and not (
+            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+        )
+        if headless and not os.environ.get("MPLBACKEND"):
+            matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _trajectory(scenario, result) -> dict:
+    """Configurations, tips and outcome of ``result`` as NumPy, trimmed to the
+    steps taken."""
+    from .planner import Rollout, result_from_rollout
+
+    if scenario.q0.ndim != 2:
+        raise ValueError("plot one scenario at a time (this Scenario is batched)")
+    if isinstance(result, Rollout):
+        if np.ndim(result.q) != 3:
+            raise ValueError("plot one rollout at a time (this Rollout is batched; index it first)")
+        result = result_from_rollout(result, scenario)
+    for field in ("q", "tip", "iterations", "status"):
+        if not hasattr(result, field):
+            raise ValueError(
+                f"result must be a PlanResult (from plan) or a Rollout; "
+                f"{type(result).__name__} has no {field!r}"
+            )
+    q = np.asarray(result.q, dtype=float)
+    n = int(np.shape(scenario.q0)[0])
+    if q.ndim != 3 or q.shape[1:] != (n, 3) or q.shape[0] < 1:
+        raise ValueError(f"result.q must have shape (steps + 1, {n}, 3) for this scenario; got {q.shape}")
+    clearance = getattr(result, "clearance", None)
+    return dict(
+        q=q,
+        tip=np.asarray(result.tip, dtype=float),
+        iterations=int(result.iterations),
+        status=str(result.status),
+        min_clearance=float(getattr(result, "min_clearance", np.nan)),
+        collided=bool(getattr(result, "collided", False)),
+        clearance=None if clearance is None else np.asarray(clearance, dtype=float),
+    )
+
+
+def _backbones(qs) -> np.ndarray:
+    """(T, n * ARM_SAMPLES + 1, 3) smooth backbones, the base (origin) first."""
+    from .kinematics import backbone_points
+
+    out = []
+    for q in qs:
+        pts = np.asarray(backbone_points(q, ARM_SAMPLES), dtype=float)
+        out.append(np.concatenate([np.zeros((1, 3)), pts]))
+    return np.stack(out)
+
+
+def _joint_indices(n_segments: int) -> np.ndarray:
+    """Backbone indices of the base and every segment end (the last is the tip)."""
+    return np.arange(n_segments + 1) * ARM_SAMPLES
+
+
+def _obstacles(scenario) -> list[dict]:
+    """Every real obstacle as a dict(kind "curve" | "points", pts (N, 3), radius)."""
+    from .curves import curve_points
+
+    obs = []
+    coeffs = np.asarray(scenario.curves.coeffs, dtype=float)
+    u_range = np.asarray(scenario.curves.u_range, dtype=float)
+    radius = np.asarray(scenario.curves.radius, dtype=float)
+    for k in np.nonzero(np.asarray(scenario.curve_mask))[0]:
+        u = np.linspace(u_range[k, 0], u_range[k, 1], CURVE_SAMPLES)
+        pts = np.stack([np.polynomial.polynomial.polyval(u, coeffs[k, a]) for a in range(3)], axis=-1)
+        obs.append(dict(kind="curve", pts=pts, radius=float(radius[k])))
+    points = np.asarray(scenario.points, dtype=float)
+    point_mask = np.asarray(scenario.point_mask)
+    point_radius = np.asarray(scenario.point_radius, dtype=float)
+    for k in range(points.shape[0]):
+        if point_mask[k].any():
+            obs.append(dict(kind="points", pts=points[k][point_mask[k]], radius=float(point_radius[k])))
+    for pc in scenario.parametric:
+        pts = np.asarray(curve_points(pc, CURVE_SAMPLES), dtype=float)
+        obs.append(dict(kind="curve", pts=pts, radius=float(np.asarray(pc.radius))))
+    return obs
+
+
+def _view_box(core: np.ndarray, obstacles: list[dict]):
+    """Axis limits (3, 2) and the obstacles clipped to them.
+
+    The view is the box around the arm, tip path and goal (``core``), grown by
+    a margin; obstacle parts outside it are not drawn (a long curve such as
+    sim2's Z = 5 u^2 would otherwise shrink the arm to a few pixels), and the
+    final limits are the union of the core and the visible obstacle parts.
+    """
+    lo, hi = core.min(axis=0), core.max(axis=0)
+    span = float(np.max(hi - lo))
+    margin = max(0.5 * span, 0.3)
+    box_lo, box_hi = lo - margin, hi + margin
+    clipped = []
+    all_lo, all_hi = lo.copy(), hi.copy()
+    for ob in obstacles:
+        pts = ob["pts"]
+        inside = np.all((pts >= box_lo) & (pts <= box_hi), axis=1)
+        if ob["kind"] == "curve":
+            shown = np.where(inside[:, None], pts, np.nan)  # NaN breaks the line
+        else:
+            shown = pts[inside]
+        if inside.any():
+            all_lo = np.minimum(all_lo, pts[inside].min(axis=0))
+            all_hi = np.maximum(all_hi, pts[inside].max(axis=0))
+        clipped.append(dict(ob, pts=shown, hidden=int((~inside).sum())))
+    ranges = all_hi - all_lo
+    min_range = 0.35 * float(np.max(ranges)) if np.max(ranges) > 0 else 1.0
+    centre = 0.5 * (all_lo + all_hi)
+    half = 0.5 * np.maximum(ranges, min_range) * 1.05
+    limits = np.stack([centre - half, centre + half], axis=1)
+    return limits, clipped
+
+
+def _radius_linewidth(ax, limits, radius: float, floor: float) -> float:
+    """Line width in points that shows a tube of ``radius`` (data units), at
+    least ``floor``: approximate, the 3D projection has no exact scale."""
+    if radius <= 0:
+        return floor
+    fig = ax.figure
+    width_pts = fig.get_figwidth() * 72.0 * ax.get_position().width
+    span = float(np.max(limits[:, 1] - limits[:, 0]))
+    # An axis of the box spans roughly 70 % of the axes width at the default view.
+    return max(floor, 2.0 * radius / span * 0.7 * width_pts)
+
+
+def _auto_view(scenario, view):
+    """(elevation, azimuth): given, or looking across the goal's direction
+    from the base so that the arm's sideways motion lies in the picture plane."""
+    if view is not None:
+        if len(view) != 2:
+            raise ValueError(f"view must be (elevation, azimuth) in degrees, got {view!r}")
+        return float(view[0]), float(view[1])
+    g = np.asarray(scenario.goal, dtype=float)
+    if np.hypot(g[0], g[1]) < 1e-9:
+        return 22.0, -60.0
+    return 22.0, float(np.degrees(np.arctan2(g[1], g[0]))) - 90.0
+
+
+def _setup_axes(ax, limits, view):
+    from matplotlib.ticker import MaxNLocator
+
+    ax.set_xlim(*limits[0])
+    ax.set_ylim(*limits[1])
+    ax.set_zlim(*limits[2])
+    ax.set_box_aspect(tuple(limits[:, 1] - limits[:, 0]))
+    ax.set_xlabel("X")
+    ax.set_ylabel("Y")
+    ax.set_zlabel("Z")
+    ax.view_init(elev=view[0], azim=view[1])
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.pane.set_alpha(0.25)
+    ax.tick_params(labelsize=8, pad=0)
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_major_locator(MaxNLocator(nbins=5, steps=[1, 2, 2.5, 5, 10]))
+
+
+def _draw_scene(ax, scenario, limits, obstacles, tip_path=None):
+    """Obstacles, goal and the base; returns the artists of the tip path."""
+    curve_labelled = points_labelled = False
+    for ob in obstacles:
+        pts = ob["pts"]
+        if ob["kind"] == "curve":
+            lw = _radius_linewidth(ax, limits, ob["radius"], floor=2.5)
+            label = None if curve_labelled else "obstacle curve"
+            ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=_OBSTACLE_COLOR, lw=lw, alpha=0.9,
+                    solid_capstyle="round", label=label)
+            _shadow(ax, pts, limits, lw=1.5)
+            curve_labelled = True
+        elif len(pts):
+            size = _radius_linewidth(ax, limits, ob["radius"], floor=4.0) ** 2
+            label = None if points_labelled else "obstacle points"
+            ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=size, color=_POINTS_COLOR, alpha=0.8,
+                       depthshade=False, label=label)
+            points_labelled = True
+    goal = np.asarray(scenario.goal, dtype=float)
+    # A drop line from the floor to the goal locates it in depth.
+    ax.plot([goal[0]] * 2, [goal[1]] * 2, [limits[2, 0], goal[2]], ls=":", lw=1.0, color=_PATH_COLOR,
+            alpha=0.7)
+    ax.scatter(goal[0], goal[1], limits[2, 0], marker="*", s=60, color="0.55", alpha=0.5, depthshade=False)
+    ax.scatter(*goal, marker="*", s=320, color=_GOAL_COLOR, edgecolors="black", linewidths=0.8,
+               depthshade=False, label="goal", zorder=10)
+    ax.scatter(0, 0, 0, marker="s", s=40, color=_BASE_COLOR, depthshade=False, label="base")
+    if tip_path is not None:
+        (line,) = ax.plot(tip_path[:, 0], tip_path[:, 1], tip_path[:, 2], ls="--", lw=1.0,
+                          color=_PATH_COLOR, label="tip path")
+        return line
+    return None
+
+
+def _legend(target, **kw):
+    """A legend whose handles keep a readable size (tube-width lines and
+    radius-sized markers are shrunk in the legend only)."""
+    from matplotlib.collections import PathCollection
+    from matplotlib.lines import Line2D
+
+    leg = target.legend(**kw)
+    for h in getattr(leg, "legend_handles", getattr(leg, "legendHandles", [])):
+        if isinstance(h, Line2D):
+            h.set_linewidth(min(h.get_linewidth(), 4.0))
+        elif isinstance(h, PathCollection):
+            h.set_sizes(np.minimum(h.get_sizes(), 200.0))
+    return leg
+
+
+def _snapshot_colors(k: int):
+    """Light (early) to dark (late) blues."""
+    from matplotlib import colormaps
+
+    cmap = colormaps["Blues"]
+    if k == 1:
+        return [cmap(0.95)]
+    return [cmap(v) for v in np.linspace(0.4, 0.95, k)]
+
+
+def _resolve_steps(steps, iterations: int) -> list[int]:
+    if steps is None:
+        steps = [0, iterations // 2, iterations]
+    out = []
+    for s in steps:
+        if isinstance(s, bool) or not isinstance(s, (int, np.integer)):
+            raise ValueError(f"steps must be integers, got {s!r}")
+        s = int(s)
+        if s < 0:
+            s += iterations + 1
+        if not 0 <= s <= iterations:
+            raise ValueError(f"step {s} is out of range: the result has iterations 0..{iterations}")
+        if s not in out:
+            out.append(s)
+    if not out:
+        raise ValueError("steps is empty")
+    return sorted(out)
+
+
+def _default_title(traj) -> str:
+    clr = traj["min_clearance"]
+    extra = f", min clearance {clr:.3f}" if np.isfinite(clr) else ""
+    return f"{traj['status']} after {traj['iterations']} iterations{extra}"
+
+
+def _shadow(ax, pts, limits, **kw):
+    """Faint projection of a polyline onto the floor of the box (a depth cue)."""
+    z = np.full(len(pts), limits[2, 0])
+    ax.plot(pts[:, 0], pts[:, 1], z, color="0.55", alpha=0.35, zorder=1, **kw)
+
+
+def _draw_arm(ax, backbone, n_segments, color, lw, label):
+    joints = backbone[_joint_indices(n_segments)]
+    ax.plot(backbone[:, 0], backbone[:, 1], backbone[:, 2], color=color, lw=lw, label=label,
+            solid_capstyle="round", zorder=5)
+    ax.plot(joints[:, 0], joints[:, 1], joints[:, 2], ls="none", marker="o", ms=5, color=color,
+            markeredgecolor="white", markeredgewidth=0.8, zorder=6)
+
+
+def _step_label(step: int, iterations: int) -> str:
+    if step == iterations and step > 0:
+        return f"iteration {step} (final)"
+    return f"iteration {step}"
+
+
+# ----------------------------------------------------------------------------
+# Public functions.
+
+
+def plot_snapshots(scenario, result, steps=None, ax=None, title=None, view=None, figsize=(9, 7)):
+    """The arm at a few iterations in one 3D view (the paper's Figs. 3-5).
+
+    Args:
+      scenario: the (unbatched) Scenario that was planned.
+      result: PlanResult (from :func:`softplan_jax.plan`) or an unbatched Rollout.
+      steps: iterations to draw (negative counts from the end); default the
+        start, the middle and the final iteration.
+      ax: a 3D Axes to draw into (``projection="3d"``); default a new figure.
+      title: figure title; default the status, iterations and min clearance.
+      view: (elevation, azimuth) in degrees; default elevation 22 and the
+        azimuth that looks across the goal's horizontal direction (the arm's
+        sideways motion then lies in the picture plane).
+      figsize: size of a new figure (inches).
+
+    Returns:
+      The matplotlib Figure.
+    """
+    traj = _trajectory(scenario, result)
+    steps = _resolve_steps(steps, traj["iterations"])
+    n = traj["q"].shape[1]
+    backbones = _backbones(traj["q"][steps])
+    core = np.concatenate([backbones.reshape(-1, 3), traj["tip"], np.asarray(scenario.goal, float)[None]])
+    limits, obstacles = _view_box(core, _obstacles(scenario))
+    own_figure = ax is None
+    if own_figure:
+        plt = _pyplot()
+        fig = plt.figure(figsize=figsize)
+        # Leave the right-hand strip for the legend.
+        ax = fig.add_axes((0.0, 0.07, 0.74, 0.82), projection="3d")
+    elif getattr(ax, "name", None) != "3d":
+        raise ValueError("ax must be a 3D Axes (fig.add_subplot(projection='3d'))")
+    fig = ax.figure
+    _setup_axes(ax, limits, _auto_view(scenario, view))
+    _draw_scene(ax, scenario, limits, obstacles, tip_path=traj["tip"])
+    arm_lw = _radius_linewidth(ax, limits, float(np.asarray(scenario.arm_radius)), floor=3.0)
+    for step, color, backbone in zip(steps, _snapshot_colors(len(steps)), backbones, strict=True):
+        _shadow(ax, backbone, limits, lw=1.5)
+        _draw_arm(ax, backbone, n, color, arm_lw, _step_label(step, traj["iterations"]))
+    if own_figure:
+        _legend(ax, loc="upper left", bbox_to_anchor=(0.97, 0.9), fontsize=9, framealpha=0.9)
+        fig.suptitle(_default_title(traj) if title is None else title, fontsize=12, y=0.97)
+    else:
+        _legend(ax, loc="upper left", fontsize=8, framealpha=0.85)
+        ax.set_title(_default_title(traj) if title is None else title, fontsize=11)
+    return fig
+
+
+def plot_snapshot_panels(scenario, result, steps=None, title=None, view=None, figsize=(13, 5.5)):
+    """The snapshots side by side, one per panel ((a), (b), (c) as in the paper).
+
+    Args: as :func:`plot_snapshots` (one panel per step, shared limits).
+
+    Returns:
+      The matplotlib Figure.
+    """
+    traj = _trajectory(scenario, result)
+    steps = _resolve_steps(steps, traj["iterations"])
+    n = traj["q"].shape[1]
+    backbones = _backbones(traj["q"][steps])
+    core = np.concatenate([backbones.reshape(-1, 3), traj["tip"], np.asarray(scenario.goal, float)[None]])
+    limits, obstacles = _view_box(core, _obstacles(scenario))
+    plt = _pyplot()
+    fig = plt.figure(figsize=figsize)
+    colors = _snapshot_colors(len(steps))
+    for k, (step, backbone) in enumerate(zip(steps, backbones, strict=True)):
+        ax = fig.add_subplot(1, len(steps), k + 1, projection="3d")
+        _setup_axes(ax, limits, _auto_view(scenario, view))
+        _draw_scene(ax, scenario, limits, obstacles, tip_path=traj["tip"][: step + 1] if step > 0 else None)
+        arm_lw = _radius_linewidth(ax, limits, float(np.asarray(scenario.arm_radius)), floor=3.0)
+        _shadow(ax, backbone, limits, lw=1.5)
+        _draw_arm(ax, backbone, n, colors[-1], arm_lw, "arm")
+        ax.set_title(f"({chr(ord('a') + k)}) {_step_label(step, traj['iterations'])}", fontsize=10)
+        if k == len(steps) - 1:
+            handles, labels = ax.get_legend_handles_labels()
+            _legend(fig, handles=handles, labels=labels, loc="lower center", ncol=len(labels), fontsize=9,
+                    framealpha=0.9)
+    fig.suptitle(_default_title(traj) if title is None else title, fontsize=12)
+    return fig
+
+
+def animate(scenario, result, path, fps=15, max_frames=200, hold=1.0, title=None, view=None,
+            figsize=(8, 6), dpi=80):
+    """Write an animated GIF of the motion (matplotlib's PillowWriter).
+
+    Args:
+      scenario, result: as :func:`plot_snapshots`.
+      path: output file; must end in ``.gif``.
+      fps: frames per second (> 0).
+      max_frames: at most this many planner steps are shown (evenly
+        subsampled; the start and the final step always).
+      hold: seconds the final frame is held.
+      title: title prefix; default none.
+
+    Returns:
+      ``path``.
+
+    Raises:
+      ValueError: bad arguments, or pillow is not installed.
+    """
+    try:
+        import PIL  # noqa: F401
+    except ImportError:
+        raise ValueError("animate needs pillow to write GIFs: pip install pillow") from None
+    path = os.fspath(path)
+    if not path.lower().endswith(".gif"):
+        raise ValueError(f"animate writes GIF files; the path must end in .gif, got {path!r}")
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be > 0, got {fps!r}")
+    if int(max_frames) < 2:
+        raise ValueError(f"max_frames must be >= 2, got {max_frames!r}")
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    traj = _trajectory(scenario, result)
+    T = traj["iterations"]
+    steps = np.unique(np.round(np.linspace(0, T, min(T + 1, int(max_frames)))).astype(int))
+    n = traj["q"].shape[1]
+    backbones = _backbones(traj["q"][steps])
+    core = np.concatenate([backbones.reshape(-1, 3), traj["tip"], np.asarray(scenario.goal, float)[None]])
+    limits, obstacles = _view_box(core, _obstacles(scenario))
+    plt = _pyplot()
+    fig = plt.figure(figsize=figsize)
+    try:
+        ax = fig.add_axes((0.0, 0.04, 0.76, 0.86), projection="3d")
+        _setup_axes(ax, limits, _auto_view(scenario, view))
+        path_line = _draw_scene(ax, scenario, limits, obstacles, tip_path=traj["tip"][:1])
+        arm_lw = _radius_linewidth(ax, limits, float(np.asarray(scenario.arm_radius)), floor=3.0)
+        color = _snapshot_colors(1)[0]
+        (arm,) = ax.plot([], [], [], color=color, lw=arm_lw, solid_capstyle="round", label="arm")
+        (joints,) = ax.plot([], [], [], ls="none", marker="o", ms=5, color=color,
+                            markeredgecolor="white", markeredgewidth=0.8)
+        (shadow,) = ax.plot([], [], [], color="0.55", alpha=0.35, lw=1.5, zorder=1)
+        _legend(ax, loc="upper left", bbox_to_anchor=(0.97, 0.9), fontsize=8, framealpha=0.9)
+        prefix = "" if title is None else f"{title}\n"
+        text = fig.suptitle("", fontsize=11, y=0.97)
+        frames = list(range(len(steps))) + [len(steps) - 1] * int(round(hold * fps))
+
+        def update(k):
+            b = backbones[k]
+            arm.set_data_3d(b[:, 0], b[:, 1], b[:, 2])
+            shadow.set_data_3d(b[:, 0], b[:, 1], np.full(len(b), limits[2, 0]))
+            j = b[_joint_indices(n)]
+            joints.set_data_3d(j[:, 0], j[:, 1], j[:, 2])
+            tip = traj["tip"][: steps[k] + 1]
+            path_line.set_data_3d(tip[:, 0], tip[:, 1], tip[:, 2])
+            status = f" — {traj['status']}" if steps[k] == T else ""
+            text.set_text(f"{prefix}iteration {steps[k]} / {T}{status}")
+            return arm, joints, shadow, path_line, text
+
+        anim = FuncAnimation(fig, update, frames=frames, blit=False)
+        anim.save(path, writer=PillowWriter(fps=fps), dpi=dpi)
+    finally:
+        plt.close(fig)
+    return path
+
+
+def plot_clearance(result, scenario=None, ax=None, labels=None, title=None, figsize=(7, 4)):
+    """True clearance (surface to surface) to every obstacle vs iteration.
+
+    Obstacles are in the planner's order: polynomial curves, point sets,
+    parametric curves.
+
+    Args:
+      result: PlanResult, or an unbatched Rollout (padding slots dropped).
+      scenario: optional; names the obstacles by kind ("curve 1", "points 1",
+        "parametric 1") instead of "obstacle 1", "obstacle 2", ...
+      ax: a 2D Axes to draw into; default a new figure.
+      labels: one name per obstacle (overrides the names above).
+      title: axes title.
+
+    Returns:
+      The matplotlib Figure.
+    """
+    clearance = getattr(result, "clearance", None)
+    if clearance is None:
+        raise ValueError(
+            f"result must be a PlanResult or a Rollout; {type(result).__name__} has no clearance"
+        )
+    c = np.asarray(clearance, dtype=float)
+    if c.ndim != 2:
+        raise ValueError(f"plot one result at a time: clearance must be (steps + 1, m), got shape {c.shape}")
+    it = int(np.asarray(result.iterations))
+    c = c[: it + 1]
+    c = c[:, ~np.all(np.isinf(c), axis=0)]  # padding slots of a Rollout
+    if labels is None and scenario is not None:
+        n_c = int(np.asarray(scenario.curve_mask).sum())
+        n_p = int(np.asarray(scenario.point_mask).any(axis=-1).sum())
+        labels = (
+            [f"curve {k + 1}" for k in range(n_c)]
+            + [f"points {k + 1}" for k in range(n_p)]
+            + [f"parametric {k + 1}" for k in range(len(scenario.parametric))]
+        )
+        if len(labels) != c.shape[1]:
+            raise ValueError(f"the scenario has {len(labels)} obstacles, the result {c.shape[1]}")
+    if labels is None:
+        labels = [f"obstacle {k + 1}" for k in range(c.shape[1])]
+    elif len(labels) != c.shape[1]:
+        raise ValueError(f"{len(labels)} labels for {c.shape[1]} obstacles")
+    if ax is None:
+        plt = _pyplot()
+        fig, ax = plt.subplots(figsize=figsize)
+    fig = ax.figure
+    steps = np.arange(c.shape[0])
+    for k in range(c.shape[1]):
+        ax.plot(steps, c[:, k], lw=1.5, label=labels[k])
+    ax.axhline(0.0, color="crimson", lw=1.0, ls="--", label="contact")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("true clearance")
+    ax.set_xlim(0, max(1, c.shape[0] - 1))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    status = getattr(result, "status", None)
+    if title is None and isinstance(status, str):
+        title = f"clearance per obstacle ({status} after {it} iterations)"
+    if title:
+        ax.set_title(title, fontsize=11)
+    return fig

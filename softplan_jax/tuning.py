@@ -1,0 +1,142 @@
+"""Gradient tuning of the gain functions through whole rollouts (optax).
+
+The loss of one rollout (:func:`rollout_loss`) is differentiable in the gains:
+the planner step is smooth in the gains, the closest points carry implicit
+derivatives (:mod:`softplan_jax.closest`), and the status logic only freezes
+the state. It combines
+
+* ``w_path``: the mean tip error |V_e| over the steps (rewards reaching early),
+* ``w_final``: the final tip error,
+* ``w_clearance``: a soft penalty ``tau * softplus((margin - clearance)/tau)``
+  on the true clearance of every obstacle at every step.
+
+:func:`tune_gains` optimises the logarithms of the gains (they stay positive)
+with an optax optimiser over a batch of scenarios.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from functools import partial
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from .planner import Gains, PlanOptions, check_gains, make_options, rollout
+from .scenarios import Scenario
+
+__all__ = ["LossWeights", "rollout_loss", "batch_loss", "tune_gains", "TuningResult"]
+
+
+class LossWeights(NamedTuple):
+    """Weights of :func:`rollout_loss` (a pytree of floats)."""
+
+    w_path: float = 1.0
+    w_final: float = 1.0
+    w_clearance: float = 10.0
+    margin: float = 0.03
+    tau: float = 0.005
+
+
+def rollout_loss(gains: Gains, scenario: Scenario, options: PlanOptions, max_steps: int,
+                 weights: LossWeights = LossWeights()):
+    """Scalar loss of one rollout (see the module docstring); differentiable in gains."""
+    r = rollout(scenario, gains, options, max_steps)
+    err = jnp.linalg.norm(scenario.goal - r.tip, axis=-1)
+    finite_c = jnp.where(jnp.isfinite(r.clearance), r.clearance, 1e3)
+    penalty = weights.tau * jax.nn.softplus((weights.margin - finite_c) / weights.tau)
+    return (
+        weights.w_path * jnp.mean(err)
+        + weights.w_final * err[-1]
+        + weights.w_clearance * jnp.sum(jnp.mean(penalty, axis=0))
+    )
+
+
+def batch_loss(gains: Gains, scenarios: Scenario, options: PlanOptions, max_steps: int,
+               weights: LossWeights = LossWeights()):
+    """Mean :func:`rollout_loss` over a batch of scenarios (leading axis)."""
+    losses = jax.vmap(lambda sc: rollout_loss(gains, sc, options, max_steps, weights))(scenarios)
+    return jnp.mean(losses)
+
+
+class TuningResult(NamedTuple):
+    """Outcome of :func:`tune_gains`.
+
+    Attributes:
+      gains: the tuned Gains.
+      losses: (steps + 1,) loss before each update and after the last.
+      history: list of Gains after each update.
+      compile_seconds: time to compile the loss-and-gradient function.
+    """
+
+    gains: Gains
+    losses: np.ndarray
+    history: list
+    compile_seconds: float
+
+
+def tune_gains(scenarios: Scenario, gains: Gains | None = None, *, steps: int = 50,
+               learning_rate: float = 0.05, max_steps: int = 150, method: str = "curve",
+               n_points: int = 10, weights: LossWeights = LossWeights(),
+               tune: tuple[str, ...] = ("k_att", "eta", "d0", "dt"), optimizer=None,
+               progress: bool = True, **options) -> TuningResult:
+    """Tune gains by gradient descent on :func:`batch_loss` with optax.
+
+    Args:
+      scenarios: a batched Scenario (``stack_scenarios`` / ``random_scenarios``)
+        or a single one.
+      gains: starting gains (default :func:`default_gains`).
+      steps: optimiser updates.
+      learning_rate: of the default optimiser ``optax.adam`` on log-gains.
+      max_steps: rollout length.
+      tune: names of the Gains fields to tune; the others stay fixed.
+      optimizer: an optax GradientTransformation (overrides learning_rate).
+      progress: print one line per update to stderr.
+
+    Returns:
+      :class:`TuningResult`.
+    """
+    if not isinstance(scenarios, Scenario):
+        raise ValueError(f"scenarios must be a Scenario, got {type(scenarios).__name__}")
+    if scenarios.q0.ndim == 2:
+        scenarios = jax.tree_util.tree_map(lambda x: x[None], scenarios)
+    unknown = set(tune) - set(Gains._fields)
+    if unknown or not tune:
+        raise ValueError(f"tune must name Gains fields {list(Gains._fields)}; got {list(tune)}")
+    if int(steps) < 1 or int(max_steps) < 1:
+        raise ValueError(f"steps and max_steps must be >= 1; got {steps}, {max_steps}")
+    opts = make_options(method, n_points, **options)
+    g0 = check_gains(gains, scenarios.q0.dtype)
+    fixed = g0._asdict()
+    params = {k: jnp.log(fixed[k]) for k in tune}
+
+    def to_gains(p):
+        return Gains(**{k: (jnp.exp(p[k]) if k in p else v) for k, v in fixed.items()})
+
+    @partial(jax.jit)
+    def value_and_grad(p):
+        return jax.value_and_grad(lambda p: batch_loss(to_gains(p), scenarios, opts, int(max_steps), weights))(p)
+
+    opt = optimizer or optax.adam(learning_rate)
+    state = opt.init(params)
+    t0 = time.perf_counter()
+    compiled = value_and_grad.lower(params).compile()
+    compile_s = time.perf_counter() - t0
+    losses, history = [], []
+    for it in range(int(steps)):
+        loss, grad = compiled(params)
+        if not np.isfinite(float(loss)) or not all(np.all(np.isfinite(np.asarray(v))) for v in grad.values()):
+            raise FloatingPointError(f"non-finite loss or gradient at update {it}: loss = {float(loss)}")
+        updates, state = opt.update(grad, state, params)
+        params = optax.apply_updates(params, updates)
+        losses.append(float(loss))
+        history.append(to_gains(params))
+        if progress:
+            shown = " ".join(f"{k}={float(jnp.exp(params[k])):.4g}" for k in tune)
+            print(f"[tune {it + 1:4d}/{steps}] loss {float(loss):.5f}  {shown}", file=sys.stderr, flush=True)
+    losses.append(float(compiled(params)[0]))
+    return TuningResult(to_gains(params), np.asarray(losses), history, compile_s)
