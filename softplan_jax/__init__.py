@@ -35,6 +35,7 @@ from .scenarios import default_start as default_start
 from .scenarios import load_scenario as load_scenario
 from .scenarios import make_scenario as make_scenario
 from .scenarios import paper_scenario as paper_scenario
+from .scenarios import random_scenarios as random_scenarios
 from .scenarios import save_scenario as save_scenario
 from .kinematics import backbone_points as backbone_points
 from .kinematics import point_jacobian as point_jacobian

@@ -293,6 +293,6 @@ def fit_polynomial_curve(points, degree: int = 3, radius=0.0) -> PolynomialCurve
     if is_concrete(total) and float(total) == 0.0:
         raise ValueError("points are all identical: no curve can be fitted")
     u = jnp.concatenate([jnp.zeros(1, points.dtype), jnp.cumsum(chord)]) / total
-    V = u[:, None] ** jnp.arange(degree + 1)  # Vandermonde, lowest power first
+    V = u[:, None] ** jnp.arange(degree + 1, dtype=u.dtype)  # Vandermonde, lowest power first
     coeffs, *_ = jnp.linalg.lstsq(V, points)
     return PolynomialCurve(coeffs.T, jnp.array([0.0, 1.0], dtype=points.dtype), radius)

@@ -529,3 +529,65 @@ def plot_clearance(result, scenario=None, ax=None, labels=None, title=None, figs
     if title:
         ax.set_title(title, fontsize=11)
     return fig
+
+
+# ----------------------------------------------------------------------------
+# Benchmark plots (benchmarks/batch_sweep.py).
+
+
+def plot_benchmark(labels, cost_s, collision_rate, success_rate=None, highlight="curve", ax=None, title=None,
+                   xlabel="time per scenario-step", ylabel="collision rate", figsize=(7.5, 5)):
+    """Collision rate against per-step cost, one labelled point per method (log x-axis).
+
+    Args:
+      labels: method names, e.g. ``["curve", "N=1", "N=10"]``.
+      cost_s: per-step cost of each method in seconds (> 0).
+      collision_rate: fraction of scenarios that collided, in [0, 1].
+      success_rate: optional fractions reached without collision, shown in the labels.
+      highlight: the label drawn as the reference method (a star); None for none.
+      ax: a 2D Axes to draw into; default a new figure.
+      title, xlabel, ylabel: texts.
+
+    Returns:
+      The matplotlib Figure.
+    """
+    labels = [str(x) for x in labels]
+    cost = np.asarray(cost_s, dtype=float)
+    coll = np.asarray(collision_rate, dtype=float)
+    if cost.shape != (len(labels),) or coll.shape != (len(labels),):
+        raise ValueError(f"need one cost and one collision rate per label ({len(labels)}); "
+                         f"got shapes {cost.shape} and {coll.shape}")
+    if not np.all(np.isfinite(cost) & (cost > 0)):
+        raise ValueError(f"costs must be finite and > 0 (log axis); got {cost.tolist()}")
+    succ = None if success_rate is None else np.asarray(success_rate, dtype=float)
+    if succ is not None and succ.shape != (len(labels),):
+        raise ValueError(f"need one success rate per label; got shape {succ.shape}")
+    if ax is None:
+        plt = _pyplot()
+        fig, ax = plt.subplots(figsize=figsize)
+    fig = ax.figure
+    ref = np.array([lab == highlight for lab in labels])
+    others = ~ref
+    ax.plot(cost[others], 100 * coll[others], "o-", color="#3b75af", ms=7, lw=1.0, alpha=0.9,
+            label="N-point obstacle model")
+    if ref.any():
+        ax.plot(cost[ref], 100 * coll[ref], "*", color="#d62728", ms=18, markeredgecolor="black",
+                label="curve (exact closest points)")
+    for k, lab in enumerate(labels):
+        text = lab if succ is None else f"{lab}\n{100 * succ[k]:.0f}% success"
+        ax.annotate(text, (cost[k], 100 * coll[k]), textcoords="offset points", xytext=(6, 6), fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlabel(f"{xlabel} (s, log scale)")
+    ax.set_ylabel(f"{ylabel} (%)")
+    top = max(5.0, 100 * float(np.nanmax(coll)) * 1.2)
+    ax.set_ylim(-0.05 * top, top)
+    lo, hi = float(cost.min()), float(cost.max())
+    ax.set_xlim(lo / 2, hi * 3)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="upper right")
+    if title:
+        ax.set_title(title, fontsize=11)
+    return fig
+
+
+__all__.append("plot_benchmark")

@@ -51,7 +51,7 @@ def check_configuration(q):
         raise ValueError("q must describe at least one segment (n >= 1); got n = 0")
     if is_concrete(q):
         check_finite(q, "q")
-        lengths = np.asarray(q[:, 0])
+        lengths = np.asarray(q)[:, 0]
         if np.any(lengths <= 0):
             bad = [int(k) for k in np.nonzero(lengths <= 0)[0]]
             raise ValueError(

@@ -1,0 +1,162 @@
+"""Helpers shared by the benchmark scripts: machine header, formatting, a text
+progress bar, timing of compiled calls, and writing results.
+
+Import this AFTER choosing jax's precision (``jax_enable_x64``) in the script:
+it imports jax but does not change its configuration.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+
+import jax
+import numpy as np
+
+RESULTS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
+FIGURES_DIR = os.path.join(RESULTS_DIR, "figures")
+
+
+def log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def machine_info(dtype: str) -> dict:
+    """Platform, CPU, CPU count, versions, jax backend and devices, dtype, load average."""
+    import softplan_jax as sp
+
+    cpu = platform.processor() or ""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return dict(
+        platform=platform.platform(),
+        cpu=cpu,
+        cpu_count=os.cpu_count(),
+        python=platform.python_version(),
+        numpy=np.__version__,
+        jax=jax.__version__,
+        jax_backend=jax.default_backend(),
+        devices=[str(d) for d in jax.devices()],
+        xla_flags=os.environ.get("XLA_FLAGS", ""),
+        softplan_jax=sp.__version__,
+        dtype=dtype,
+        loadavg_start=_loadavg(),
+    )
+
+
+def _loadavg():
+    return [round(x, 2) for x in os.getloadavg()] if hasattr(os, "getloadavg") else None
+
+
+def finish_machine(machine: dict) -> dict:
+    machine["loadavg_end"] = _loadavg()
+    return machine
+
+
+def machine_lines(m: dict) -> list[str]:
+    """Markdown bullet lines of the machine header."""
+    return [
+        f"- machine: {m['platform']}, {m['cpu']}, {m['cpu_count']} CPUs; load average (1, 5, 15 min) "
+        f"{m['loadavg_start']} at start, {m.get('loadavg_end')} at end (the machine is shared)",
+        f"- python {m['python']}, numpy {m['numpy']}, jax {m['jax']} ({m['jax_backend']}, "
+        f"{len(m['devices'])} device(s)), softplan_jax {m['softplan_jax']}; dtype **{m['dtype']}**",
+    ]
+
+
+def fmt_s(x) -> str:
+    """Seconds, human-readable (s / ms / µs)."""
+    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+        return "—"
+    if x >= 1.0:
+        return f"{x:.2f} s"
+    if x >= 1e-3:
+        return f"{x * 1e3:.3g} ms"
+    return f"{x * 1e6:.3g} µs"
+
+
+def timed(fn, *args):
+    """(result, seconds) of fn(*args), blocking on the result."""
+    t0 = time.perf_counter()
+    out = fn(*args)
+    jax.block_until_ready(out)
+    return out, time.perf_counter() - t0
+
+
+def median_time(fn, *args, repeats: int = 3):
+    """(last result, median seconds, all seconds) over ``repeats`` blocked calls."""
+    times, out = [], None
+    for _ in range(max(1, int(repeats))):
+        out, dt = timed(fn, *args)
+        times.append(dt)
+    return out, statistics.median(times), times
+
+
+def compile_timed(jitted, *args):
+    """(compiled executable, lower + compile seconds) of a jitted function."""
+    t0 = time.perf_counter()
+    compiled = jitted.lower(*args).compile()
+    return compiled, time.perf_counter() - t0
+
+
+class ProgressBar:
+    """A one-line text progress bar on stderr (``[#####-----] 3/10 label 12.3 s``)."""
+
+    def __init__(self, total: int, label: str = "", width: int = 30, stream=None):
+        self.total, self.label, self.width = max(1, int(total)), label, width
+        self.stream = stream or sys.stderr
+        self.t0 = time.perf_counter()
+        self.done = 0
+        self._draw()
+
+    def update(self, k: int = 1, note: str = "") -> None:
+        self.done = min(self.total, self.done + k)
+        self._draw(note)
+
+    def _draw(self, note: str = "") -> None:
+        fill = int(round(self.width * self.done / self.total))
+        bar = "#" * fill + "-" * (self.width - fill)
+        elapsed = time.perf_counter() - self.t0
+        eta = elapsed / self.done * (self.total - self.done) if self.done else float("nan")
+        eta_s = f", eta {eta:.0f} s" if self.done and self.done < self.total else ""
+        self.stream.write(
+            f"\r{self.label} [{bar}] {self.done}/{self.total} chunks, {elapsed:.1f} s{eta_s} {note}".rstrip()
+            + " " * 4
+        )
+        if self.done >= self.total:
+            self.stream.write("\n")
+        self.stream.flush()
+
+
+def write_results(prefix: str, report: dict, markdown: str) -> None:
+    """Write ``prefix.json`` and ``prefix.md``."""
+    os.makedirs(os.path.dirname(os.path.abspath(prefix)), exist_ok=True)
+    with open(prefix + ".json", "w", encoding="utf-8") as fh:
+        json.dump(report, fh, indent=1, default=_json_default)
+    with open(prefix + ".md", "w", encoding="utf-8") as fh:
+        fh.write(markdown)
+
+
+def _json_default(x):
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.floating,)):
+        return float(x)
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
+
+
+def json_float(x):
+    """A float for JSON (inf/nan as None)."""
+    x = float(x)
+    return x if np.isfinite(x) else None

@@ -1,0 +1,398 @@
+"""Batched sweep: the curve method vs N-point obstacle models over thousands of
+seeded random scenarios, one vmapped, sharded call per chunk.
+
+The suite is ``softplan_jax.random_scenarios(seed, n)``: reachable goals (tips of
+random configurations), 1-8 polynomial curves (degree 1-2) placed across the
+straight path from the start tip to the goal, all padded to one shape (8 curve
+slots, degree 2) so that ONE compilation per method serves every scenario.
+
+For each method (``curve`` and N points, N in 1, 5, 10, 20, 50, 100, 200):
+
+1. **plan**: ``rollout`` vmapped over the batch (as ``rollout_batch``) with a
+   planning-only option set (``check_collisions=False``), compiled ahead with
+   ``.lower(...).compile()`` (compile time reported apart), run chunk by chunk
+   with ``block_until_ready``;
+2. **check**: ``apply_collision_checks`` vmapped over the batch (one
+   compilation shared by every method) — the true clearance to the real curves
+   at every step and during the motion between steps; the rollout is cut at
+   the first contact, exactly as the checked rollout would be;
+3. **report**: success rate (reached without collision), collision rate,
+   stalled / max-steps rates, mean iterations over successes, collisions the
+   planner did not notice (planning-only "reached" that the check turns into
+   "collided"), per-scenario-step time of planning and of checking =
+   median over chunks of chunk time / (chunk size x scan steps), compile apart.
+
+The batch axis is sharded over all devices: a ``Mesh`` over ``jax.devices()``,
+``NamedSharding(mesh, PartitionSpec("batch"))``, ``jax.device_put`` of each
+chunk (the batch is padded to a multiple of the chunk, and the chunk to a
+multiple of the device count, by repeating the last scenario; padding is
+dropped from every statistic); ``jax.shard_map`` runs the vmapped rollout and
+checks on each device's shard with no cross-device communication. On a CPU, ``--host-devices K`` (or
+``XLA_FLAGS=--xla_force_host_platform_device_count=K``) splits the host into K
+devices so that the shards run on K cores.
+
+Writes ``benchmarks/results/batch_sweep.{md,json}`` and the figure
+``benchmarks/results/figures/sweep_collision_vs_cost.png`` (collision rate
+against per-step cost, one point per method). ``--quick``: a few dozen
+scenarios, the curve and 10-point methods, 60 steps (a smoke test).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+DEFAULT_METHODS = "curve,1,5,10,20,50,100,200"
+QUICK = dict(n=30, chunk=16, max_steps=60, methods="curve,10")
+
+
+def parse_args(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument(
+        "--n", type=int, default=None, help="number of random scenarios (default 10000; quick 30)"
+    )
+    ap.add_argument(
+        "--chunk",
+        type=int,
+        default=None,
+        help="scenarios per vmapped call (default 500; quick 16); rounded up to a multiple of "
+        "the device count",
+    )
+    ap.add_argument(
+        "--max-steps", type=int, default=None, help="planner steps per rollout (default 200; quick 60)"
+    )
+    ap.add_argument(
+        "--methods",
+        default=None,
+        help=f"comma list of 'curve' and point counts N (default {DEFAULT_METHODS}; quick curve,10)",
+    )
+    ap.add_argument("--seed", type=int, default=0, help="seed of random_scenarios (default 0)")
+    ap.add_argument("--float32", action="store_true", help="float32 throughout (default float64)")
+    ap.add_argument("--quick", action="store_true", help="30 scenarios, curve and N=10, 60 steps (< ~90 s)")
+    ap.add_argument(
+        "--host-devices",
+        type=int,
+        default=None,
+        help="split the CPU into this many XLA devices (sets XLA_FLAGS before jax starts)",
+    )
+    ap.add_argument(
+        "--out",
+        default=None,
+        help="output prefix (default benchmarks/results/batch_sweep; quick: results/quick/batch_sweep)",
+    )
+    ap.add_argument(
+        "--figure",
+        default=None,
+        help="figure path (default benchmarks/results/figures/sweep_collision_vs_cost.png; '' = none)",
+    )
+    ap.add_argument(
+        "--dump",
+        default=None,
+        help="also save per-scenario statuses, iterations and checked q of every method to this .npz",
+    )
+    args = ap.parse_args(argv)
+    for key, val in QUICK.items():
+        if getattr(args, key) is None:
+            default = dict(n=10000, chunk=500, max_steps=200, methods=DEFAULT_METHODS)[key]
+            setattr(args, key, val if args.quick else default)
+    if args.n < 1 or args.chunk < 1 or args.max_steps < 1:
+        ap.error("--n, --chunk and --max-steps must be >= 1")
+    try:
+        args.method_list = [m if m == "curve" else int(m) for m in args.methods.split(",")]
+    except ValueError:
+        ap.error(f"--methods: use 'curve' and integers, got {args.methods!r}")
+    if any(m != "curve" and m < 1 for m in args.method_list):
+        ap.error("--methods: N must be >= 1")
+    return args
+
+
+def method_label(m) -> str:
+    return "curve" if m == "curve" else f"N={m}"
+
+
+def main(argv=None) -> dict:
+    args = parse_args(argv)
+    if args.host_devices:
+        flag = f"--xla_force_host_platform_device_count={int(args.host_devices)}"
+        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " " + flag).strip()
+
+    import jax
+
+    jax.config.update("jax_enable_x64", not args.float32)
+    import jax.numpy as jnp
+    import numpy as np
+    from _common import (
+        FIGURES_DIR,
+        RESULTS_DIR,
+        ProgressBar,
+        compile_timed,
+        finish_machine,
+        fmt_s,
+        log,
+        machine_info,
+        timed,
+        write_results,
+    )
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    import softplan_jax as sp
+    from softplan_jax.planner import Status, apply_collision_checks, make_options, rollout
+
+    t_start = time.perf_counter()
+    dtype = jnp.float32 if args.float32 else jnp.float64
+    machine = machine_info("float32" if args.float32 else "float64")
+    base = os.path.join(RESULTS_DIR, "quick") if args.quick else RESULTS_DIR
+    out = args.out or os.path.join(base, "batch_sweep")
+    figures_dir = os.path.join(base, "figures") if args.quick else FIGURES_DIR
+    figure = os.path.join(figures_dir, "sweep_collision_vs_cost.png") if args.figure is None else args.figure
+
+    # The suite, on the host.
+    log(f"random_scenarios(seed={args.seed}, n={args.n}) ...")
+    suite, gen_s = timed(lambda: sp.random_scenarios(args.seed, args.n, dtype=dtype))
+    host = jax.tree_util.tree_map(np.asarray, suite)
+    n_obstacles = host.curve_mask.sum(axis=1)
+
+    # Sharding: the batch axis over every device; chunks a multiple of the device count.
+    devices = jax.devices()
+    n_dev = len(devices)
+    mesh = Mesh(np.array(devices), ("batch",))
+    batch_sharding = NamedSharding(mesh, PartitionSpec("batch"))
+    replicated = NamedSharding(mesh, PartitionSpec())
+    chunk = math.ceil(min(args.chunk, args.n) / n_dev) * n_dev
+    n_chunks = math.ceil(args.n / chunk)
+    n_pad = n_chunks * chunk
+    pad = n_pad - args.n
+    padded = jax.tree_util.tree_map(lambda x: np.concatenate([x, np.repeat(x[-1:], pad, axis=0)]), host)
+    chunks = [
+        jax.device_put(jax.tree_util.tree_map(lambda x, a=a: x[a : a + chunk], padded), batch_sharding)
+        for a in range(0, n_pad, chunk)
+    ]
+    gains = jax.device_put(sp.default_gains(dtype), replicated)
+    T = int(args.max_steps)
+    scan_steps = T + 1
+    log(
+        f"{args.n} scenarios (+{pad} padding) in {n_chunks} chunk(s) of {chunk} over {n_dev} device(s); "
+        f"{T} steps; dtype {machine['dtype']}"
+    )
+
+    check_opts = make_options("curve", check_collisions=True)
+    batch, shared = PartitionSpec("batch"), PartitionSpec()
+
+    def per_shard(fn, in_specs):
+        # shard_map: every device runs the vmapped function on its own shard of the
+        # batch; scenarios are independent, so no cross-device communication at all.
+        # (Plain jit on NamedSharding inputs lets the SPMD partitioner choose, and it
+        # all-gathers the batch for the closest-point solver's top_k: redundant work,
+        # and we saw a 2-device CPU run hang in it.)
+        # check_vma=False: the library's scans start from constant (unvarying) carries.
+        return jax.jit(jax.shard_map(fn, mesh=mesh, in_specs=in_specs, out_specs=batch, check_vma=False))
+
+    check_jit = per_shard(
+        lambda r, s: jax.vmap(lambda r1, s1: apply_collision_checks(r1, s1, check_opts))(r, s), (batch, batch)
+    )
+    check_exe, check_compile = None, None
+
+    rows, dump = [], {}
+    for method in args.method_list:
+        label = method_label(method)
+        opts = (
+            make_options("curve", 10, check_collisions=False)
+            if method == "curve"
+            else make_options("points", method, check_collisions=False)
+        )
+        log(f"{label}: compiling the planning-only batch rollout ...")
+        plan_jit = per_shard(
+            lambda s, g, opts=opts: jax.vmap(lambda s1: rollout(s1, g, opts, T))(s), (batch, shared)
+        )
+        plan_exe, plan_compile = compile_timed(plan_jit, chunks[0], gains)
+        if check_exe is None:
+            log("compiling apply_collision_checks (vmapped; shared by every method) ...")
+            shapes = jax.eval_shape(plan_jit, chunks[0], gains)
+            shapes = jax.tree_util.tree_map(
+                lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=batch_sharding), shapes
+            )
+            check_exe, check_compile = compile_timed(check_jit, shapes, chunks[0])
+        plan_times, check_times, parts = [], [], []
+        bar = ProgressBar(n_chunks, label=f"{label:>6s}")
+        for sc in chunks:
+            r, dt = timed(plan_exe, sc, gains)
+            plan_times.append(dt)
+            rc, dt = timed(check_exe, r, sc)
+            check_times.append(dt)
+            keep = dict(
+                status=rc.status,
+                iterations=rc.iterations,
+                min_clearance=rc.min_clearance,
+                final_error=rc.final_error,
+                plan_status=r.status,
+            )
+            if args.dump:
+                keep["q"] = rc.q
+            parts.append({k: np.asarray(v) for k, v in keep.items()})
+            bar.update(1, f"plan {fmt_s(plan_times[-1])}, check {fmt_s(check_times[-1])}")
+        res = {k: np.concatenate([p[k] for p in parts])[: args.n] for k in parts[0]}
+        status = res["status"]
+        success = status == Status.REACHED
+        collided = status == Status.COLLIDED
+        per_plan = [t / (chunk * scan_steps) for t in plan_times]
+        per_check = [t / (chunk * scan_steps) for t in check_times]
+        row = dict(
+            method="curve" if method == "curve" else "points",
+            n_points=None if method == "curve" else method,
+            label=label,
+            scenarios=args.n,
+            success_rate=float(success.mean()),
+            collision_rate=float(collided.mean()),
+            stalled_rate=float((status == Status.STALLED).mean()),
+            max_steps_rate=float((status == Status.MAX_STEPS).mean()),
+            nonfinite_rate=float((status == Status.NONFINITE).mean()),
+            mean_iterations_success=float(res["iterations"][success].mean()) if success.any() else None,
+            median_iterations_success=float(np.median(res["iterations"][success])) if success.any() else None,
+            unnoticed_collisions=int(((res["plan_status"] == Status.REACHED) & collided).sum()),
+            collision_rate_by_obstacles={
+                int(k): float(collided[n_obstacles == k].mean()) for k in np.unique(n_obstacles)
+            },
+            min_clearance_median=float(np.median(res["min_clearance"])),
+            plan_per_step_s=float(np.median(per_plan)),
+            check_per_step_s=float(np.median(per_check)),
+            plan_total_s=float(sum(plan_times)),
+            check_total_s=float(sum(check_times)),
+            plan_chunk_times_s=plan_times,
+            check_chunk_times_s=check_times,
+            compile_plan_s=plan_compile,
+        )
+        rows.append(row)
+        log(
+            f"{label}: success {100 * row['success_rate']:.1f}%, "
+            f"collided {100 * row['collision_rate']:.1f}%, "
+            f"per scenario-step {fmt_s(row['plan_per_step_s'])} (check {fmt_s(row['check_per_step_s'])})"
+        )
+        if args.dump:
+            for k, v in res.items():
+                dump[f"{label}/{k}"] = v
+
+    report = dict(
+        quick=args.quick,
+        n=args.n,
+        seed=args.seed,
+        chunk=chunk,
+        chunks=n_chunks,
+        padding=pad,
+        max_steps=T,
+        scan_steps=scan_steps,
+        devices=n_dev,
+        methods=[method_label(m) for m in args.method_list],
+        generation_s=gen_s,
+        check_compile_s=check_compile,
+        machine=machine,
+        rows=rows,
+        obstacle_count_histogram={int(k): int((n_obstacles == k).sum()) for k in np.unique(n_obstacles)},
+        gains={k: float(v) for k, v in sp.default_gains(dtype)._asdict().items()},
+        contact_tolerance=max(check_opts.contact_tolerance, 10.0 * float(np.sqrt(np.finfo(dtype).eps))),
+        out=out,
+        command="python benchmarks/batch_sweep.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+    )
+    if figure:
+        report["figure"] = _figure(rows, figure, report)
+    finish_machine(machine)
+    report["wall_time_s"] = time.perf_counter() - t_start
+    text = markdown(report)
+    write_results(out, report, text)
+    if args.dump:
+        np.savez_compressed(args.dump, **dump)
+    log(f"wrote {out}.md and .json ({report['wall_time_s']:.0f} s)")
+    print(text)
+    return report
+
+
+def _figure(rows, path, report):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from softplan_jax.plotting import plot_benchmark
+
+    fig = plot_benchmark(
+        [r["label"] for r in rows],
+        [r["plan_per_step_s"] for r in rows],
+        [r["collision_rate"] for r in rows],
+        success_rate=[r["success_rate"] for r in rows],
+        title=f"{report['n']} random scenarios (seed {report['seed']}), {report['max_steps']} steps, "
+        f"{report['machine']['dtype']}: collisions vs planner cost",
+        xlabel="planning time per scenario-step (vmapped batch)",
+    )
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def markdown(report: dict) -> str:
+    from _common import fmt_s, machine_lines
+
+    m = report["machine"]
+    lines = [
+        "# Batched sweep: curve vs N-point obstacle models over random scenarios",
+        "",
+        f"- generated by `{report['command'].strip()}` in {report['wall_time_s']:.0f} s"
+        + (" (QUICK MODE: a smoke test, not a result)" if report["quick"] else ""),
+        *machine_lines(m),
+        f"- suite: `random_scenarios(seed={report['seed']}, n={report['n']})`, 8 curve slots of degree 2; "
+        f"obstacle counts {report['obstacle_count_histogram']} (generated in {report['generation_s']:.1f} s)",
+        f"- {report['chunks']} chunk(s) of {report['chunk']} scenarios "
+        f"(+{report['padding']} padding, dropped "
+        f"from the statistics), batch axis sharded over {report['devices']} device(s); max_steps "
+        f"{report['max_steps']} ({report['scan_steps']} scan steps); gains `default_gains()`; contact "
+        f"tolerance {report['contact_tolerance']:.2g}",
+        f"- compile: `apply_collision_checks` (vmapped, shared) {fmt_s(report['check_compile_s'])}; each "
+        "method's planning rollout in the table. Compile is excluded from every per-step figure.",
+        "",
+        "Per scenario-step = median over chunks of (chunk wall time) / (chunk size x scan steps), "
+        "`block_until_ready`; *plan* is the planning-only batched rollout, *check* the vmapped "
+        "`apply_collision_checks` on its output. Success = reached the goal without collision; collided = "
+        "true clearance <= contact tolerance at a step or between two steps; *unnoticed* = planning-only "
+        'rollouts that "reached" the goal through a collision. Mean iterations over successes.',
+        "",
+        "| method | success | collided | stalled | max steps | mean its (success) | unnoticed "
+        "| plan / scenario-step | x curve | check / scenario-step | plan compile |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    curve = next((r for r in report["rows"] if r["method"] == "curve"), None)
+    for r in report["rows"]:
+        ratio = f"{r['plan_per_step_s'] / curve['plan_per_step_s']:.3g}x" if curve else "—"
+        its = "—" if r["mean_iterations_success"] is None else f"{r['mean_iterations_success']:.1f}"
+        lines.append(
+            f"| {r['label']} | {100 * r['success_rate']:.1f}% | {100 * r['collision_rate']:.1f}% "
+            f"| {100 * r['stalled_rate']:.1f}% | {100 * r['max_steps_rate']:.1f}% | {its} "
+            f"| {r['unnoticed_collisions']} | {fmt_s(r['plan_per_step_s'])} | {ratio} "
+            f"| {fmt_s(r['check_per_step_s'])} | {fmt_s(r['compile_plan_s'])} |"
+        )
+    counts = sorted(report["obstacle_count_histogram"])
+    lines += [
+        "",
+        "Collision rate by number of obstacles:",
+        "",
+        "| method | " + " | ".join(str(k) for k in counts) + " |",
+        "|---|" + "---|" * len(counts),
+    ]
+    for r in report["rows"]:
+        by = r["collision_rate_by_obstacles"]
+        lines.append(
+            f"| {r['label']} | "
+            + " | ".join(f"{100 * by.get(k, by.get(str(k), float('nan'))):.1f}%" for k in counts)
+            + " |"
+        )
+    if report.get("figure"):
+        rel = os.path.relpath(report["figure"], os.path.dirname(os.path.abspath(report["out"])))
+        lines += ["", f"![collision rate vs per-step cost]({rel})"]
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,60 @@
+"""Regenerate every benchmark result: the NumPy baseline, the paper's tables and the
+batched sweep, one after the other (each in its own process, so that each sets
+jax's precision and devices itself).
+
+    python benchmarks/run_all.py                 # everything, as in benchmarks/README.md
+    python benchmarks/run_all.py --quick         # smoke run, written to benchmarks/results/quick/
+    python benchmarks/run_all.py --sweep-n 200   # a smaller sweep (the default is batch_sweep's)
+
+Extra arguments after ``--`` go to batch_sweep.py (e.g. ``-- --float32``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="quick mode of every script (results/quick/)")
+    ap.add_argument("--sweep-n", type=int, default=None, help="scenarios in the batched sweep (--n)")
+    ap.add_argument(
+        "--skip",
+        default="",
+        help="comma list of scripts to skip: numpy_baseline, paper_tables, batch_sweep",
+    )
+    ap.add_argument("sweep_args", nargs="*", help="further batch_sweep.py arguments (after --)")
+    args = ap.parse_args(argv)
+    skip = {s.strip() for s in args.skip.split(",") if s.strip()}
+    quick = ["--quick"] if args.quick else []
+    quick_dir = os.path.join(HERE, "results", "quick")
+    runs = [
+        ("numpy_baseline", quick + (["--out", os.path.join(quick_dir, "numpy_baseline")] if args.quick else [])),
+        ("paper_tables", quick),
+        ("batch_sweep", quick + (["--n", str(args.sweep_n)] if args.sweep_n else []) + args.sweep_args),
+    ]
+    times = {}
+    for name, extra in runs:
+        if name in skip:
+            continue
+        cmd = [sys.executable, os.path.join(HERE, f"{name}.py"), *extra]
+        print(f"$ {' '.join(cmd)}", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        rc = subprocess.call(cmd, stdout=subprocess.DEVNULL)
+        times[name] = time.perf_counter() - t0
+        if rc:
+            print(f"{name} failed (exit code {rc})", file=sys.stderr)
+            return rc
+    for name, t in times.items():
+        print(f"{name}: {t:.0f} s", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,380 @@
+"""Smoke tests of the benchmark scripts and tests of ``random_scenarios``.
+
+* ``benchmarks/paper_tables.py --quick`` and ``benchmarks/batch_sweep.py --quick``
+  run in subprocesses (outputs written to a temporary directory): they must
+  finish, and their Markdown, JSON and figures must exist and parse. No timing
+  is asserted (timings belong in the benchmarks).
+* The sweep's sharding: the same quick sweep on 2 host devices
+  (``XLA_FLAGS=--xla_force_host_platform_device_count=2``, batch axis sharded)
+  must give the same statuses and iterations, and q to 1e-10, as on 1 device.
+  The three subprocesses run at once (each spends most of its time compiling;
+  they share a persistent compilation cache under .pytest_cache, so a rerun
+  of the suite is much faster).
+* ``random_scenarios``: seeded and deterministic, the requested shapes, each
+  entry equal to ``make_scenario`` of its own obstacles, goals reachable (an
+  independent least-squares inverse kinematics finds a configuration within
+  the generator's bounds), obstacles crossing the straight start-tip -> goal
+  path, and the promised clearances (checked with independent oracles: the
+  closed-form closest point of a quadratic to a point, dense sampling against
+  the straight start arm).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy import optimize
+
+import softplan_jax as sp
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BENCH = os.path.join(ROOT, "benchmarks")
+SUBPROCESS_TIMEOUT = 1200  # seconds; generous for a loaded 2-core machine
+
+
+def _env(devices: int | None, cache_dir: str):
+    env = dict(os.environ)
+    # A persistent XLA compilation cache shared by these runs across test sessions
+    # (compilation dominates the quick runs; a rerun of the suite reuses it).
+    env.setdefault("JAX_COMPILATION_CACHE_DIR", cache_dir)
+    flags = [f for f in env.get("XLA_FLAGS", "").split() if "xla_force_host_platform_device_count" not in f]
+    if devices:
+        flags.append(f"--xla_force_host_platform_device_count={devices}")
+    env["XLA_FLAGS"] = " ".join(flags)
+    env["MPLBACKEND"] = "Agg"
+    return env
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory, request):
+    """Start the three quick benchmark runs at once; wait for all; return their outputs."""
+    d = tmp_path_factory.mktemp("bench")
+    cache_dir = str(request.config.cache.mkdir("jax_compilation_cache"))
+    py = sys.executable
+    specs = {
+        "paper": (
+            [
+                py,
+                os.path.join(BENCH, "paper_tables.py"),
+                "--quick",
+                "--out",
+                str(d / "paper_tables"),
+                "--figures",
+                str(d / "figures"),
+            ],
+            None,
+        ),
+        "sweep1": (
+            [
+                py,
+                os.path.join(BENCH, "batch_sweep.py"),
+                "--quick",
+                "--out",
+                str(d / "sweep1"),
+                "--figure",
+                str(d / "sweep1.png"),
+                "--dump",
+                str(d / "sweep1.npz"),
+            ],
+            1,
+        ),
+        "sweep2": (
+            [
+                py,
+                os.path.join(BENCH, "batch_sweep.py"),
+                "--quick",
+                "--out",
+                str(d / "sweep2"),
+                "--figure",
+                "",
+                "--dump",
+                str(d / "sweep2.npz"),
+            ],
+            2,
+        ),
+    }
+    procs = {}
+    for name, (cmd, devices) in specs.items():
+        procs[name] = subprocess.Popen(
+            cmd,
+            cwd=ROOT,
+            env=_env(devices, cache_dir),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+    out = {"dir": d}
+    t0 = time.perf_counter()
+    for name, p in procs.items():
+        try:
+            stdout, stderr = p.communicate(timeout=max(1.0, SUBPROCESS_TIMEOUT - (time.perf_counter() - t0)))
+        except subprocess.TimeoutExpired:
+            for q in procs.values():
+                q.kill()
+            raise
+        out[name] = (p.returncode, stdout, stderr)
+    return out
+
+
+def _ok(run):
+    rc, stdout, stderr = run
+    assert rc == 0, f"exit code {rc}\nstdout:\n{stdout[-3000:]}\nstderr:\n{stderr[-5000:]}"
+
+
+def test_paper_tables_quick(runs):
+    _ok(runs["paper"])
+    d = runs["dir"]
+    report = json.loads((d / "paper_tables.json").read_text())
+    md = (d / "paper_tables.md").read_text()
+    assert report["quick"] is True
+    assert report["machine"]["cpu_count"] >= 1 and report["machine"]["jax"] == jax.__version__
+    assert report["machine"]["dtype"] == "float64"
+    rows = report["rows"]
+    assert {(r["scenario"], r["label"]) for r in rows} == {
+        (s, m) for s in ("sim1", "sim2", "tree") for m in ("Proposed (curve)", "1 point")
+    }
+    for r in rows:
+        assert r["status"] in sp.STATUS_NAMES.values()
+        assert 0 < r["iterations"] <= report["max_steps"]
+        assert r["per_iteration_s"] > 0 and r["rollout_median_s"] > 0
+        assert r["collided"] == (r["status"] == "collided")
+        if r["method"] == "curve":
+            assert r["reached"], r  # the paper's method reaches every paper goal
+        paper = report["paper_results"][r["scenario"]].get(
+            "curve" if r["method"] == "curve" else str(r["n_points"])
+        )
+        if r["scenario"] == "tree":
+            assert r["paper_iterations"] is None and paper is None
+        else:
+            assert [r["paper_iterations"], r["paper_time_s"]] == list(paper)
+    for key in (
+        "# The paper's Tables 2-4",
+        "Table 2.",
+        "Table 3.",
+        "Table 4.",
+        "not legible",
+        "## Where ours differ",
+        "start pose",
+        "CPUs",
+        f"jax {jax.__version__}",
+        "float64",
+        "## Compile times",
+    ):
+        assert key in md, key
+    for name in ("sim1", "sim2", "tree"):
+        assert (d / "figures" / f"paper_{name}_curve.png").stat().st_size > 10_000
+    assert all(os.path.exists(p) for p in report["figures"])
+
+
+def test_batch_sweep_quick(runs):
+    _ok(runs["sweep1"])
+    d = runs["dir"]
+    report = json.loads((d / "sweep1.json").read_text())
+    md = (d / "sweep1.md").read_text()
+    assert report["quick"] is True and report["devices"] == 1
+    assert report["n"] == 30 and report["chunks"] * report["chunk"] - report["padding"] == 30
+    assert [r["label"] for r in report["rows"]] == ["curve", "N=10"]
+    for r in report["rows"]:
+        rates = [
+            r[k]
+            for k in ("success_rate", "collision_rate", "stalled_rate", "max_steps_rate", "nonfinite_rate")
+        ]
+        assert all(0.0 <= x <= 1.0 for x in rates) and abs(sum(rates) - 1.0) < 1e-9, r
+        assert r["plan_per_step_s"] > 0 and r["check_per_step_s"] > 0 and r["compile_plan_s"] > 0
+        assert len(r["plan_chunk_times_s"]) == report["chunks"]
+    assert report["check_compile_s"] > 0
+    for key in ("| method | success | collided", "CPUs", f"jax {jax.__version__}", "float64", "QUICK MODE"):
+        assert key in md, key
+    assert (d / "sweep1.png").stat().st_size > 10_000
+
+
+def test_sharded_sweep_matches_single_device(runs):
+    _ok(runs["sweep1"])
+    _ok(runs["sweep2"])
+    d = runs["dir"]
+    assert json.loads((d / "sweep2.json").read_text())["devices"] == 2
+    one, two = np.load(d / "sweep1.npz"), np.load(d / "sweep2.npz")
+    assert sorted(one.files) == sorted(two.files)
+    for method in ("curve", "N=10"):
+        for key in ("status", "plan_status", "iterations"):
+            np.testing.assert_array_equal(
+                one[f"{method}/{key}"], two[f"{method}/{key}"], err_msg=f"{method}/{key}"
+            )
+        q1, q2 = one[f"{method}/q"], two[f"{method}/q"]
+        assert q1.shape == (30, 61, 3, 3) and np.all(np.isfinite(q1))
+        np.testing.assert_allclose(q2, q1, rtol=0, atol=1e-10, err_msg=method)
+
+
+# ----------------------------------------------------------------------------
+# random_scenarios
+
+
+def _leaves_equal(a, b):
+    la, lb = jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)
+    return jax.tree_util.tree_structure(a) == jax.tree_util.tree_structure(b) and all(
+        x.shape == y.shape and x.dtype == y.dtype and np.array_equal(x, y)
+        for x, y in zip(la, lb, strict=True)
+    )
+
+
+def test_random_scenarios_seeded_and_deterministic():
+    a = sp.random_scenarios(7, 12)
+    assert _leaves_equal(a, sp.random_scenarios(7, 12))
+    assert not np.array_equal(a.goal, sp.random_scenarios(8, 12).goal)
+    k = sp.random_scenarios(jax.random.PRNGKey(3), 4)
+    assert _leaves_equal(k, sp.random_scenarios(jax.random.PRNGKey(3), 4))
+    assert _leaves_equal(sp.random_scenarios(jax.random.key(3), 4), sp.random_scenarios(jax.random.key(3), 4))
+    assert not np.array_equal(k.goal, sp.random_scenarios(jax.random.PRNGKey(4), 4).goal)
+
+
+def test_random_scenarios_shapes_and_make_scenario_equality():
+    n = 9
+    suite = sp.random_scenarios(1, n)
+    assert suite.q0.shape == (n, 3, 3) and suite.goal.shape == (n, 3)
+    assert suite.curves.coeffs.shape == (n, 8, 3, 3) and suite.curves.u_range.shape == (n, 8, 2)
+    assert suite.curve_mask.shape == (n, 8) and suite.curve_mask.dtype == jnp.bool_
+    assert suite.q0.dtype == jnp.float64 and suite.goal.dtype == jnp.float64
+    counts = np.asarray(suite.curve_mask).sum(1)
+    assert counts.min() >= 1 and counts.max() <= 8
+    # masks are a prefix: real slots first
+    assert np.all(np.asarray(suite.curve_mask) == (np.arange(8)[None, :] < counts[:, None]))
+    # each entry is make_scenario of its own curves, padded to (8 slots, degree 2)
+    host = jax.tree_util.tree_map(np.asarray, suite)
+    rebuilt = []
+    for k in range(n):
+        curves = [
+            sp.PolynomialCurve(host.curves.coeffs[k, j], host.curves.u_range[k, j]) for j in range(counts[k])
+        ]
+        rebuilt.append(sp.make_scenario(host.goal[k], curves, curve_slots=8, degree=2))
+    assert _leaves_equal(suite, sp.stack_scenarios(rebuilt))
+    # other padded shapes, counts, degrees and dtypes
+    small = sp.random_scenarios(
+        2, 5, obstacles=(2, 3), degrees=(1,), curve_slots=4, degree=2, dtype=jnp.float32
+    )
+    assert small.curves.coeffs.shape == (5, 4, 3, 3) and small.curves.coeffs.dtype == jnp.float32
+    c = np.asarray(small.curve_mask).sum(1)
+    assert c.min() >= 2 and c.max() <= 3
+    assert np.all(np.asarray(small.curves.coeffs)[..., 2] == 0.0)  # degree 1 only: no u^2 term
+    one = sp.random_scenarios(2, 3, degrees=(2,), degree=2, obstacles=(1, 1))
+    assert np.all(np.abs(np.asarray(one.curves.coeffs)[:, 0, :, 2]).sum(-1) > 0)
+
+
+def test_random_scenarios_bad_input():
+    for kwargs in (
+        dict(n=0),
+        dict(n=3, obstacles=(0, 2)),
+        dict(n=3, obstacles=(3, 9)),
+        dict(n=3, degrees=(3,)),
+        dict(n=3, degrees=(2,), degree=1),
+        dict(n=3, curve_length=(0.0, 1.0)),
+    ):
+        with pytest.raises(ValueError):
+            sp.random_scenarios(0, **kwargs)
+    with pytest.raises(ValueError):
+        sp.random_scenarios("seed", 3)
+    with pytest.raises(ValueError):
+        sp.random_scenarios(-1, 3)
+
+
+def _tip_np(q):
+    """PCC tip position (paper §2.1) in plain NumPy: an independent oracle."""
+    R, P = np.eye(3), np.zeros(3)
+    for L, th, ph in q:
+        c, s, cp, sph = np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
+        Ri = np.array([[cp * c, -sph, cp * s], [sph * c, cp, sph * s], [-s, 0.0, c]])
+        r = L / th * (1 - c) if abs(th) > 1e-12 else 0.0
+        z = L / th * s if abs(th) > 1e-12 else L
+        P = P + R @ np.array([r * cp, r * sph, z])
+        R = R @ Ri
+    return P
+
+
+def test_random_scenarios_goals_reachable():
+    """An independent IK (NumPy kinematics + scipy least squares, L = 1, theta in [0, 1.6])
+    reaches every goal: the goals lie in the workspace the generator promises."""
+    suite = sp.random_scenarios(11, 12)
+    rng = np.random.default_rng(0)
+    start = np.array([0.0, 0.0, 3.0])
+    for g in np.asarray(suite.goal):
+        assert np.linalg.norm(g - start) >= 0.5 - 1e-12
+        best = np.inf
+        for _ in range(20):
+            x0 = np.concatenate([rng.uniform(0.0, 1.6, 3), rng.uniform(-np.pi, np.pi, 3)])
+            sol = optimize.least_squares(
+                lambda x, g=g: _tip_np(np.stack([np.ones(3), x[:3], x[3:]], 1)) - g,
+                x0,
+                bounds=([0.0] * 3 + [-4.0] * 3, [1.6] * 3 + [4.0] * 3),
+                xtol=1e-14,
+                ftol=1e-14,
+                gtol=1e-14,
+            )
+            best = min(best, np.linalg.norm(sol.fun))
+            if best < 1e-8:
+                break
+        assert best < 1e-8, (g, best)
+
+
+def _quadratic_point_distance(coeffs, p):
+    """Exact min over u in [0, 1] of |F(u) - p| for F(u) = k0 + k1 u + k2 u^2: the real
+    roots of the cubic d/du |F - p|^2 = 0 in [0, 1], and both ends."""
+    k0, k1, k2 = coeffs[:, 0] - p, coeffs[:, 1], coeffs[:, 2]
+    # |F|^2 = |k0|^2 + 2 k0.k1 u + (|k1|^2 + 2 k0.k2) u^2 + 2 k1.k2 u^3 + |k2|^2 u^4
+    deriv = [2 * k0 @ k1, 2 * (k1 @ k1 + 2 * k0 @ k2), 6 * k1 @ k2, 4 * k2 @ k2]
+    roots = np.polynomial.polynomial.polyroots(np.trim_zeros(np.asarray(deriv), "b")) if np.any(deriv) else []
+    us = [0.0, 1.0] + [r.real for r in np.atleast_1d(roots) if abs(r.imag) < 1e-9 and 0.0 <= r.real <= 1.0]
+    return min(np.linalg.norm(k0 + k1 * u + k2 * u * u) for u in us)
+
+
+def test_random_scenarios_block_the_path_with_clearance():
+    """Every real obstacle crosses the straight start-tip -> goal segment within path_offset,
+    perpendicular to it at its middle, at least start_clearance from the start arm and
+    goal_clearance from the goal."""
+    offset, clr_start, clr_goal = 0.1, 0.15, 0.15
+    suite = sp.random_scenarios(5, 40, path_offset=offset, start_clearance=clr_start, goal_clearance=clr_goal)
+    coeffs = np.asarray(suite.curves.coeffs)
+    mask = np.asarray(suite.curve_mask)
+    p0 = np.array([0.0, 0.0, 3.0])
+    u = np.linspace(0.0, 1.0, 20001)
+    for k, g in enumerate(np.asarray(suite.goal)):
+        e = (g - p0) / np.linalg.norm(g - p0)
+        for j in np.nonzero(mask[k])[0]:
+            C = coeffs[k, j]
+            pts = C[:, 0] + np.outer(u, C[:, 1]) + np.outer(u * u, C[:, 2])
+            # distance of the curve's middle to the straight path segment (exact point-segment)
+            mid = C[:, 0] + 0.5 * C[:, 1] + 0.25 * C[:, 2]
+            t = np.clip((mid - p0) @ (g - p0) / ((g - p0) @ (g - p0)), 0.0, 1.0)
+            assert np.linalg.norm(mid - (p0 + t * (g - p0))) <= offset + 1e-12
+            assert 0.3 - 1e-9 <= t <= 0.7 + 1e-9  # mid lies beside the middle part of the path
+            # it runs across the path: tangent at the middle perpendicular to it
+            tangent = C[:, 1] + C[:, 2]
+            assert abs(tangent @ e) <= 1e-9 * np.linalg.norm(tangent)
+            # clearance from the goal (exact) and from the straight start arm (dense samples,
+            # exact point-segment distances; upper bound within 1e-4 of the true distance)
+            assert _quadratic_point_distance(C, g) >= clr_goal - 1e-12
+            z = np.clip(pts[:, 2], 0.0, 3.0)
+            d_arm = np.min(np.sqrt(pts[:, 0] ** 2 + pts[:, 1] ** 2 + (pts[:, 2] - z) ** 2))
+            assert d_arm >= clr_start - 1e-9, (k, j, d_arm)
+
+
+def test_plot_benchmark_rejects_bad_input():
+    from softplan_jax.plotting import plot_benchmark
+
+    with pytest.raises(ValueError):
+        plot_benchmark(["curve", "N=1"], [1e-3, 0.0], [0.0, 0.5])
+    with pytest.raises(ValueError):
+        plot_benchmark(["curve", "N=1"], [1e-3], [0.0, 0.5])
+    import matplotlib.pyplot as plt
+
+    fig = plot_benchmark(
+        ["curve", "N=1", "N=10"], [3e-3, 1e-4, 2e-4], [0.0, 0.4, 0.1], success_rate=[0.8, 0.5, 0.7]
+    )
+    assert fig.axes[0].get_xscale() == "log"
+    plt.close(fig)

@@ -1,0 +1,197 @@
+"""The notebooks run top to bottom in a fresh Jupyter kernel, and their first
+cell is the Colab install cell, harmless anywhere else.
+
+The kernel is this interpreter (``sys.executable -m ipykernel_launcher``),
+described by a kernel spec written to a temporary directory, so that a user's
+own ``python3`` kernel spec (which may point to another Python) is never used.
+If no kernel can be started the tests FAIL: a notebook that was not run is not
+a notebook that works.
+
+These take minutes, nearly all of it XLA compilation inside the notebooks:
+on a 2-core CPU about 2.5 min for quickstart.ipynb and 5-13 min for
+tuning.ipynb (two compilations of the gradient of a whole rollout), the
+longer figure on a busy machine.
+"""
+
+import importlib.util
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import nbformat
+import pytest
+
+NOTEBOOK_DIR = Path(__file__).resolve().parent.parent / "notebooks"
+NOTEBOOKS = ["quickstart.ipynb", "tuning.ipynb"]
+CELL_TIMEOUT = 900  # seconds per cell; a compilation takes 15-150 s on a 2-core CPU
+KERNEL_START_TIMEOUT = 120
+
+
+def _read(name):
+    path = NOTEBOOK_DIR / name
+    assert path.is_file(), f"missing notebook {path}"
+    return nbformat.read(path, as_version=4)
+
+
+def _kernel_manager(spec_dir: Path):
+    """An AsyncKernelManager for a kernel spec running THIS interpreter."""
+    if importlib.util.find_spec("ipykernel") is None:
+        pytest.fail(f"ipykernel is not installed for {sys.executable}: pip install -e '.[dev]'")
+    from jupyter_client.kernelspec import KernelSpecManager
+    from jupyter_client.manager import AsyncKernelManager
+
+    kernel = spec_dir / "softplan-test-python"
+    kernel.mkdir(parents=True)
+    spec = {
+        "argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
+        "display_name": "softplan test kernel",
+        "language": "python",
+    }
+    (kernel / "kernel.json").write_text(json.dumps(spec))
+    ksm = KernelSpecManager(kernel_dirs=[str(spec_dir)])
+    return AsyncKernelManager(kernel_name="softplan-test-python", kernel_spec_manager=ksm)
+
+
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_notebook_runs_top_to_bottom(name, tmp_path):
+    from nbclient import NotebookClient
+    from nbclient.exceptions import CellExecutionError
+
+    nb = _read(name)
+    work = tmp_path / "cwd"
+    work.mkdir()
+    km = _kernel_manager(tmp_path / "kernels")
+    client = NotebookClient(
+        nb,
+        km=km,
+        timeout=CELL_TIMEOUT,
+        startup_timeout=KERNEL_START_TIMEOUT,
+        allow_errors=False,
+        record_timing=False,
+        resources={"metadata": {"path": str(work)}},
+    )
+    t0 = time.perf_counter()
+    try:
+        client.execute()
+    except CellExecutionError as err:
+        pytest.fail(f"{name}: a cell raised:\n{err}")
+    elapsed = time.perf_counter() - t0
+    print(f"\n{name}: executed in {elapsed:.0f} s")
+    for k, cell in enumerate(nb.cells):
+        if cell.cell_type != "code":
+            continue
+        assert cell.execution_count is not None, f"{name}: cell {k} was not executed"
+        errors = [o for o in cell.outputs if o.output_type == "error"]
+        assert not errors, f"{name}: cell {k} produced an error output: {errors[0].get('ename')}"
+    # The notebooks write only to temporary directories, never to the cwd.
+    assert not any(work.iterdir()), f"{name} left files in its working directory: {sorted(work.iterdir())}"
+
+
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_committed_notebook_has_outputs(name):
+    """Notebooks are committed executed (they read on GitHub), without errors."""
+    nb = _read(name)
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    assert code, f"{name} has no code cells"
+    for k, cell in enumerate(code):
+        assert cell.execution_count is not None, f"{name}: committed code cell {k} is not executed"
+        errors = [o for o in cell.outputs if o.output_type == "error"]
+        assert not errors, f"{name}: committed code cell {k} has an error output"
+    assert any(o.output_type in ("stream", "display_data", "execute_result") for c in code for o in c.outputs)
+
+
+def _install_cell(name):
+    nb = _read(name)
+    first = nb.cells[0]
+    assert first.cell_type == "code", f"{name}: the first cell must be the (code) install cell"
+    src = first.source
+    lines = [line for line in src.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    assert lines[0].startswith("REPO_URL = "), f"{name}: the install cell must start by defining REPO_URL"
+    for needle in ('"google.colab" in sys.modules', "pip", "install", "jax_enable_x64"):
+        assert needle in src, f"{name}: the install cell does not contain {needle!r}"
+    return src
+
+
+# Runs a cell's source in a fresh interpreter. An audit hook records every
+# process the cell starts; a pip command is refused (raises) so nothing is
+# ever installed by the test.
+_HARNESS = r"""
+import json, sys, types
+src, mode, out = sys.argv[1], sys.argv[2], sys.argv[3]
+launched = []
+
+class Refused(Exception):
+    pass
+
+def hook(event, args):
+    if event in ("subprocess.Popen", "os.system", "os.exec", "os.posix_spawn", "os.spawn"):
+        text = " ".join(map(str, args[1] if event == "subprocess.Popen" else args))
+        launched.append(text)
+        if "pip" in text:
+            raise Refused(text)
+
+if mode == "colab":
+    sys.modules["google.colab"] = types.ModuleType("google.colab")
+sys.addaudithook(hook)
+result = {"launched": launched, "error": None}
+try:
+    ns = {}
+    exec(compile(open(src).read(), "install-cell", "exec"), ns)
+    import jax.numpy as jnp
+    result["x64"] = str(jnp.zeros(()).dtype) == "float64"
+except BaseException as err:
+    result["error"] = f"{type(err).__name__}: {err}"
+with open(out, "w") as fh:
+    json.dump(result, fh)
+"""
+
+
+def _run_cell(src, mode, tmp_path):
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    cell = tmp_path / "cell.py"
+    cell.write_text(src)
+    harness = tmp_path / "harness.py"
+    harness.write_text(_HARNESS)
+    out = tmp_path / "result.json"
+    cwd = tmp_path / "cwd"
+    cwd.mkdir(exist_ok=True)
+    proc = subprocess.run(
+        [sys.executable, str(harness), str(cell), mode, str(out)],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 0 and out.exists(), f"harness failed:\n{proc.stdout}\n{proc.stderr}"
+    assert not any(cwd.iterdir()), f"the install cell wrote files: {sorted(cwd.iterdir())}"
+    return json.loads(out.read_text())
+
+
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_install_cell_is_harmless_outside_colab(name, tmp_path):
+    src = _install_cell(name)
+    result = _run_cell(src, "local", tmp_path)
+    assert result["error"] is None, f"{name}: the install cell failed outside Colab: {result['error']}"
+    launched = result["launched"]
+    assert launched == [], f"{name}: the install cell started processes outside Colab: {launched}"
+    assert result["x64"], f"{name}: the install cell did not enable float64"
+
+
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_install_cell_installs_from_repo_url_on_colab(name, tmp_path):
+    src = _install_cell(name)
+    # The unedited placeholder: a clear error, nothing installed.
+    result = _run_cell(src, "colab", tmp_path / "placeholder")
+    assert result["launched"] == [], result
+    assert result["error"] and "REPO_URL" in result["error"], result
+    # An edited URL: pip install of exactly that URL, with this interpreter.
+    url = "https://example.org/someone/softplan_jax"
+    edited = src.replace(src.splitlines()[0], f'REPO_URL = "{url}"', 1)
+    result = _run_cell(edited, "colab", tmp_path / "edited")
+    assert len(result["launched"]) == 1, result
+    cmd = result["launched"][0]
+    assert cmd.startswith(f"{sys.executable} -m pip install"), cmd
+    assert cmd.endswith(f"git+{url}"), cmd
+    assert result["error"] and result["error"].startswith("Refused"), result
