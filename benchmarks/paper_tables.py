@@ -200,7 +200,7 @@ def figures(scenarios, rows, out_dir):
                 f"iterations, min clearance {res.min_clearance:.3f}",
             )
             path = os.path.join(out_dir, f"paper_{name}_curve.png")
-            fig.savefig(path, dpi=110)
+            fig.savefig(path, dpi=110, bbox_inches="tight")
             plt.close(fig)
             written.append(path)
         hit = [r for r in own if r["method"] == "points" and r["collided"]]
@@ -214,7 +214,7 @@ def figures(scenarios, rows, out_dir):
                 f"(min true clearance {res.min_clearance:.3f})",
             )
             path = os.path.join(out_dir, f"paper_{name}_points{r['n_points']}_collided.png")
-            fig.savefig(path, dpi=110)
+            fig.savefig(path, dpi=110, bbox_inches="tight")
             plt.close(fig)
             written.append(path)
     return written

@@ -14,6 +14,13 @@ from .curves import curve_points as curve_points
 from .curves import fit_polynomial_curve as fit_polynomial_curve
 from .curves import line_segment as line_segment
 from .curves import stack_curves as stack_curves
+from .kinematics import backbone_points as backbone_points
+from .kinematics import point_jacobian as point_jacobian
+from .kinematics import segment_frames as segment_frames
+from .kinematics import segment_point as segment_point
+from .kinematics import segment_transform as segment_transform
+from .kinematics import tip_jacobian as tip_jacobian
+from .kinematics import tip_position as tip_position
 from .metrics import dense_trajectory_clearance as dense_trajectory_clearance
 from .metrics import true_closest as true_closest
 from .planner import STATUS_NAMES as STATUS_NAMES
@@ -37,13 +44,6 @@ from .scenarios import make_scenario as make_scenario
 from .scenarios import paper_scenario as paper_scenario
 from .scenarios import random_scenarios as random_scenarios
 from .scenarios import save_scenario as save_scenario
-from .kinematics import backbone_points as backbone_points
-from .kinematics import point_jacobian as point_jacobian
-from .kinematics import segment_frames as segment_frames
-from .kinematics import segment_point as segment_point
-from .kinematics import segment_transform as segment_transform
-from .kinematics import tip_jacobian as tip_jacobian
-from .kinematics import tip_position as tip_position
 
 try:
     __version__ = version("softplan_jax")

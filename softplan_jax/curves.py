@@ -18,7 +18,7 @@ scalar ``u``. ``radius`` is the obstacle's thickness, used for clearance only.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp

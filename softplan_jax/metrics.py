@@ -147,7 +147,7 @@ def between_steps(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenar
         )
     for k, pc in enumerate(scenario.parametric):
         j = m_c + m_p + k
-        at_j = lambda t: jax.tree_util.tree_map(lambda x: x[j], t)  # noqa: E731
+        at_j = lambda t, j=j: jax.tree_util.tree_map(lambda x: x[j], t)  # noqa: E731
         parts.append(from_both_ends(pc, pc, at_j(truth_a), at_j(truth_b))[None])
     found = jnp.concatenate(parts)
     D_min = jnp.minimum(found, jnp.minimum(truth_a.distance, truth_b.distance))
@@ -180,7 +180,7 @@ def dense_trajectory_clearance(qs, scenario, substeps: int = 20, arm_samples: in
         arm = jnp.concatenate([jnp.zeros((1, 3), arm.dtype), arm])
         dc = jax.vmap(lambda p: min_dist(arm, p))(curve_pts) - radius_c
         dp = jax.vmap(lambda p, m: min_dist(arm, p, m))(scenario.points, scenario.point_mask) - scenario.point_radius
-        dpar = [min_dist(arm, p) - pc.radius for p, pc in zip(par_pts, scenario.parametric)]
+        dpar = [min_dist(arm, p) - pc.radius for p, pc in zip(par_pts, scenario.parametric, strict=True)]
         out = jnp.concatenate([dc, dp, jnp.stack(dpar) if dpar else jnp.zeros((0,), dc.dtype)])
         return out - scenario.arm_radius
 

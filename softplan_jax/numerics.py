@@ -20,7 +20,6 @@ precision in value and in the first two derivatives:
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 
 __all__ = [

@@ -35,7 +35,6 @@ from .closest import (
     DEFAULT_OPTIONS,
     ClosestPoint,
     SolverOptions,
-    _closest_point_curve,
     _closest_point_to_points,
 )
 from .curves import curve_points

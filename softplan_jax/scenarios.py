@@ -282,7 +282,9 @@ def _num_array(value, path: str, shape=None):
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise _err(path, f"must be numbers, got {value!r}") from None
-    if shape is not None and (arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape, shape))):
+    if shape is not None and (
+        arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape, shape, strict=True))
+    ):
         want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise _err(path, f"must have shape {want}, got {arr.shape}")
     if not np.all(np.isfinite(arr)):

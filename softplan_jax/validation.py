@@ -7,9 +7,9 @@ i.e. not a tracer inside ``jit``/``vmap``/``grad``.
 
 from __future__ import annotations
 
-import numpy as np
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 
 def is_concrete(x) -> bool:

@@ -65,7 +65,7 @@ def test_scan_equals_python_loop(paper):
     opts_p = make_options("points", 10)
     r = rollout_jit(sc, gains, opts_p, 10)
     q = sc.q0
-    for k in range(10):
+    for _ in range(10):
         q = sp.planner_step(q, sc, gains, opts_p)
     np.testing.assert_allclose(np.asarray(r.q[10]), np.asarray(q), rtol=0, atol=1e-12)
 
