@@ -112,7 +112,9 @@ def test_collision_flag_agrees_with_dense_check_on_random_scenes():
         sc = sp.make_scenario(goal, [wire], curve_slots=5, degree=2)
         weak = sp.default_gains()._replace(eta=jnp.asarray(1e-5 * rng.uniform(0, 1) + 1e-9))
         r = sp.plan(sc, gains=weak, max_steps=120)
-        dense = np.asarray(sp.dense_trajectory_clearance(jnp.asarray(r.q), sc, substeps=20, arm_samples=150,
+        # Pad the trajectory to one length (a frozen arm does not move): one compilation for all scenes.
+        q_pad = np.concatenate([r.q, np.repeat(r.q[-1:], 121 - r.q.shape[0], axis=0)])
+        dense = np.asarray(sp.dense_trajectory_clearance(jnp.asarray(q_pad), sc, substeps=20, arm_samples=150,
                                                          curve_samples=3000))
         # Brute force can only over-estimate the clearance; 2e-3 covers its sampling error.
         if r.collided:
