@@ -86,8 +86,9 @@ def default_gains(dtype=None) -> Gains:
 
     The tip moves at most ``v_max * dt = 0.05`` per step; the attraction is
     linear within ``v_max / k_att = 0.25`` of the goal. The influence distance
-    ``d0 = 0.12`` is below the 0.3 at which Sim1's goal would sit inside the
-    line's field, and lets the arm approach the tree goal (0.08 from a branch).
+    ``d0 = 0.07`` is below the 0.080 between the tree goal and its nearest
+    branch, so the goal lies outside every obstacle's field (d0 = 0.1 stalls
+    the tree 0.03 short of its goal).
     """
     dtype = dtype or jnp.result_type(float)
     vals = dict(k_att=2.0, v_max=0.5, eta=1e-3, d0=0.07, rep_max=1.0, damping=0.05, dt=0.1)

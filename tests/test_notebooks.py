@@ -74,7 +74,7 @@ def test_notebook_runs_top_to_bottom(name, tmp_path):
     )
     t0 = time.perf_counter()
     try:
-        client.execute()
+        client.execute(cleanup_kc=True)  # shut the kernel down even though we own km
     except CellExecutionError as err:
         pytest.fail(f"{name}: a cell raised:\n{err}")
     elapsed = time.perf_counter() - t0
