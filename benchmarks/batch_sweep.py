@@ -45,33 +45,37 @@ import os
 import sys
 import time
 
+import numpy as np
+
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 DEFAULT_METHODS = "curve,1,5,10,20,50,100,200"
-QUICK = dict(n=30, chunk=16, max_steps=60, methods="curve,10")
+QUICK = dict(n=30, chunk=16, max_steps=60, methods="curve,10", check_buckets=2)
 
 
 def parse_args(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument(
-        "--n", type=int, default=None, help="number of random scenarios (default 10000; quick 30)"
-    )
+    ap.add_argument("--n", type=int, default=None, help="number of random scenarios (default 10000; quick 30)")
     ap.add_argument(
         "--chunk",
         type=int,
         default=None,
-        help="scenarios per vmapped call (default 500; quick 16); rounded up to a multiple of "
-        "the device count",
+        help="scenarios per vmapped call (default 500; quick 16); rounded up to a multiple of the device count",
     )
-    ap.add_argument(
-        "--max-steps", type=int, default=None, help="planner steps per rollout (default 200; quick 60)"
-    )
+    ap.add_argument("--max-steps", type=int, default=None, help="planner steps per rollout (default 200; quick 60)")
     ap.add_argument(
         "--methods",
         default=None,
         help=f"comma list of 'curve' and point counts N (default {DEFAULT_METHODS}; quick curve,10)",
     )
     ap.add_argument("--seed", type=int, default=0, help="seed of random_scenarios (default 0)")
+    ap.add_argument(
+        "--check-buckets",
+        type=int,
+        default=None,
+        help="time lengths the collision checks are compiled for (default 4; quick 2; 1 = always the full "
+        "rollout): a group of finished rollouts is checked only up to its longest run",
+    )
     ap.add_argument("--float32", action="store_true", help="float32 throughout (default float64)")
     ap.add_argument("--quick", action="store_true", help="30 scenarios, curve and N=10, 60 steps (< ~90 s)")
     ap.add_argument(
@@ -98,10 +102,10 @@ def parse_args(argv=None):
     args = ap.parse_args(argv)
     for key, val in QUICK.items():
         if getattr(args, key) is None:
-            default = dict(n=10000, chunk=500, max_steps=200, methods=DEFAULT_METHODS)[key]
+            default = dict(n=10000, chunk=500, max_steps=200, methods=DEFAULT_METHODS, check_buckets=4)[key]
             setattr(args, key, val if args.quick else default)
-    if args.n < 1 or args.chunk < 1 or args.max_steps < 1:
-        ap.error("--n, --chunk and --max-steps must be >= 1")
+    if args.n < 1 or args.chunk < 1 or args.max_steps < 1 or args.check_buckets < 1:
+        ap.error("--n, --chunk, --max-steps and --check-buckets must be >= 1")
     try:
         args.method_list = [m if m == "curve" else int(m) for m in args.methods.split(",")]
     except ValueError:
@@ -109,6 +113,37 @@ def parse_args(argv=None):
     if any(m != "curve" and m < 1 for m in args.method_list):
         ap.error("--methods: N must be >= 1")
     return args
+
+
+def check_lengths(scan_steps: int, buckets: int) -> list[int]:
+    """The time lengths the checks are compiled for: ``buckets`` evenly spaced
+    lengths up to ``scan_steps`` (the last is the full rollout)."""
+    buckets = max(1, min(int(buckets), scan_steps))
+    return sorted({math.ceil(scan_steps * k / buckets) for k in range(1, buckets + 1)})
+
+
+def check_groups(iterations, chunk: int, lengths):
+    """Group scenarios for ``apply_collision_checks``: sorted by iterations, cut into
+    groups of ``chunk``, each checked over the shortest length in ``lengths`` that
+    holds its longest rollout (``iterations + 1`` entries).
+
+    Exact: the check only looks at the steps up to a rollout's ``iterations``
+    (the rest is frozen: a finished rollout repeats its last state), so cutting
+    the time axis after them changes no status, iteration count, clearance or
+    configuration; it only skips the frozen tail's closest-point solves.
+
+    Returns a list of (indices (chunk,), length).
+    """
+    iterations = np.asarray(iterations)
+    if iterations.size % chunk:
+        raise ValueError(f"{iterations.size} scenarios are not a multiple of the chunk {chunk}")
+    order = np.argsort(iterations, kind="stable")
+    groups = []
+    for a in range(0, order.size, chunk):
+        idx = order[a : a + chunk]
+        need = int(iterations[idx].max()) + 1
+        groups.append((idx, min(L for L in lengths if L >= need)))
+    return groups
 
 
 def method_label(m) -> str:
@@ -125,7 +160,6 @@ def main(argv=None) -> dict:
 
     jax.config.update("jax_enable_x64", not args.float32)
     import jax.numpy as jnp
-    import numpy as np
     from _common import (
         FIGURES_DIR,
         RESULTS_DIR,
@@ -195,7 +229,20 @@ def main(argv=None) -> dict:
     check_jit = per_shard(
         lambda r, s: jax.vmap(lambda r1, s1: apply_collision_checks(r1, s1, check_opts))(r, s), (batch, batch)
     )
-    check_exe, check_compile = None, None
+    lengths = check_lengths(scan_steps, args.check_buckets)
+    check_exes, check_compile = {}, {}
+
+    def check_exe_for(length, r_shapes, sc):
+        """The compiled check for rollouts cut to ``length`` time steps (one compile per length)."""
+        if length not in check_exes:
+            shapes = jax.tree_util.tree_map(
+                lambda x: jax.ShapeDtypeStruct(
+                    (x.shape[0], length, *x.shape[2:]) if x.ndim >= 2 else x.shape, x.dtype, sharding=batch_sharding
+                ),
+                r_shapes,
+            )
+            check_exes[length], check_compile[length] = compile_timed(check_jit, shapes, sc)
+        return check_exes[length]
 
     rows, dump = [], {}
     for method in args.method_list:
@@ -206,41 +253,48 @@ def main(argv=None) -> dict:
             else make_options("points", method, check_collisions=False)
         )
         log(f"{label}: compiling the planning-only batch rollout ...")
-        plan_jit = per_shard(
-            lambda s, g, opts=opts: jax.vmap(lambda s1: rollout(s1, g, opts, T))(s), (batch, shared)
-        )
+        plan_jit = per_shard(lambda s, g, opts=opts: jax.vmap(lambda s1: rollout(s1, g, opts, T))(s), (batch, shared))
         plan_exe, plan_compile = compile_timed(plan_jit, chunks[0], gains)
-        if check_exe is None:
-            log("compiling apply_collision_checks (vmapped; shared by every method) ...")
-            shapes = jax.eval_shape(plan_jit, chunks[0], gains)
-            shapes = jax.tree_util.tree_map(
-                lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=batch_sharding), shapes
-            )
-            check_exe, check_compile = compile_timed(check_jit, shapes, chunks[0])
-        plan_times, check_times, parts = [], [], []
-        bar = ProgressBar(n_chunks, label=f"{label:>6s}")
+        r_shapes = jax.eval_shape(plan_jit, chunks[0], gains)
+        bar = ProgressBar(2 * n_chunks, label=f"{label:>6s}")
+        # 1. Plan, chunk by chunk.
+        plan_times, planned = [], []
         for sc in chunks:
             r, dt = timed(plan_exe, sc, gains)
             plan_times.append(dt)
-            rc, dt = timed(check_exe, r, sc)
+            planned.append(jax.tree_util.tree_map(np.asarray, r))
+            bar.update(1, f"plan {fmt_s(dt)}")
+        planned = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *planned)
+        # 2. Check, in groups of similar length (see check_groups).
+        check_times, check_steps = [], 0
+        res = dict(
+            status=np.empty(n_pad, planned.status.dtype),
+            iterations=np.empty(n_pad, planned.iterations.dtype),
+            min_clearance=np.empty(n_pad, planned.min_clearance.dtype),
+            final_error=np.empty(n_pad, planned.final_error.dtype),
+        )
+        if args.dump:
+            res["q"] = np.empty_like(planned.q)
+        for idx, length in check_groups(planned.iterations, chunk, lengths):
+            exe = check_exe_for(length, r_shapes, chunks[0])
+            cut = jax.tree_util.tree_map(lambda x, idx=idx, L=length: x[idx][:, :L] if x.ndim >= 2 else x[idx], planned)
+            sc = jax.tree_util.tree_map(lambda x, idx=idx: x[idx], padded)
+            cut, sc = jax.device_put((cut, sc), batch_sharding)
+            rc, dt = timed(exe, cut, sc)
             check_times.append(dt)
-            keep = dict(
-                status=rc.status,
-                iterations=rc.iterations,
-                min_clearance=rc.min_clearance,
-                final_error=rc.final_error,
-                plan_status=r.status,
-            )
+            check_steps += chunk * length
+            for k in ("status", "iterations", "min_clearance", "final_error"):
+                res[k][idx] = np.asarray(getattr(rc, k))
             if args.dump:
-                keep["q"] = rc.q
-            parts.append({k: np.asarray(v) for k, v in keep.items()})
-            bar.update(1, f"plan {fmt_s(plan_times[-1])}, check {fmt_s(check_times[-1])}")
-        res = {k: np.concatenate([p[k] for p in parts])[: args.n] for k in parts[0]}
+                q = np.asarray(rc.q)  # frozen after the end: repeat the last entry up to T + 1
+                res["q"][idx] = np.concatenate([q, np.repeat(q[:, -1:], scan_steps - length, axis=1)], axis=1)
+            bar.update(1, f"check {length} steps: {fmt_s(dt)}")
+        res = {k: v[: args.n] for k, v in res.items()}
+        res["plan_status"] = planned.status[: args.n]
         status = res["status"]
         success = status == Status.REACHED
         collided = status == Status.COLLIDED
         per_plan = [t / (chunk * scan_steps) for t in plan_times]
-        per_check = [t / (chunk * scan_steps) for t in check_times]
         row = dict(
             method="curve" if method == "curve" else "points",
             n_points=None if method == "curve" else method,
@@ -259,10 +313,11 @@ def main(argv=None) -> dict:
             },
             min_clearance_median=float(np.median(res["min_clearance"])),
             plan_per_step_s=float(np.median(per_plan)),
-            check_per_step_s=float(np.median(per_check)),
             plan_total_s=float(sum(plan_times)),
-            check_total_s=float(sum(check_times)),
             plan_chunk_times_s=plan_times,
+            check_total_s=float(sum(check_times)),
+            check_per_step_s=float(sum(check_times) / check_steps),
+            check_steps_fraction=check_steps / (n_pad * scan_steps),
             check_chunk_times_s=check_times,
             compile_plan_s=plan_compile,
         )
@@ -270,7 +325,8 @@ def main(argv=None) -> dict:
         log(
             f"{label}: success {100 * row['success_rate']:.1f}%, "
             f"collided {100 * row['collision_rate']:.1f}%, "
-            f"per scenario-step {fmt_s(row['plan_per_step_s'])} (check {fmt_s(row['check_per_step_s'])})"
+            f"per scenario-step {fmt_s(row['plan_per_step_s'])} (check {fmt_s(row['check_per_step_s'])} per "
+            f"checked step, {100 * row['check_steps_fraction']:.0f}% of the steps checked)"
         )
         if args.dump:
             for k, v in res.items():
@@ -288,7 +344,8 @@ def main(argv=None) -> dict:
         devices=n_dev,
         methods=[method_label(m) for m in args.method_list],
         generation_s=gen_s,
-        check_compile_s=check_compile,
+        check_lengths=lengths,
+        check_compile_s={str(k): v for k, v in sorted(check_compile.items())},
         machine=machine,
         rows=rows,
         obstacle_count_histogram={int(k): int((n_obstacles == k).sum()) for k in np.unique(n_obstacles)},
@@ -350,18 +407,21 @@ def markdown(report: dict) -> str:
         f"from the statistics), batch axis sharded over {report['devices']} device(s); max_steps "
         f"{report['max_steps']} ({report['scan_steps']} scan steps); gains `default_gains()`; contact "
         f"tolerance {report['contact_tolerance']:.2g}",
-        f"- compile: `apply_collision_checks` (vmapped, shared) {fmt_s(report['check_compile_s'])}; each "
-        "method's planning rollout in the table. Compile is excluded from every per-step figure.",
+        "- compile: `apply_collision_checks` (vmapped, shared by every method) for time lengths "
+        + ", ".join(f"{k}: {fmt_s(v)}" for k, v in report["check_compile_s"].items())
+        + "; each method's planning rollout in the table. Compile is excluded from every per-step figure.",
         "",
-        "Per scenario-step = median over chunks of (chunk wall time) / (chunk size x scan steps), "
-        "`block_until_ready`; *plan* is the planning-only batched rollout, *check* the vmapped "
-        "`apply_collision_checks` on its output. Success = reached the goal without collision; collided = "
-        "true clearance <= contact tolerance at a step or between two steps; *unnoticed* = planning-only "
-        'rollouts that "reached" the goal through a collision. Mean iterations over successes.',
+        "*plan / scenario-step* = median over chunks of (chunk wall time) / (chunk size x scan steps) of the "
+        "planning-only batched rollout, `block_until_ready`. *check*: the vmapped `apply_collision_checks` on "
+        "its output; finished rollouts are grouped by length and checked only up to their last step (exact: "
+        "the tail is frozen), so its figure is per CHECKED scenario-step, with the fraction of the scan's "
+        "steps that were checked. Success = reached the goal without collision; collided = true clearance "
+        "<= contact tolerance at a step or between two steps; *unnoticed* = planning-only rollouts that "
+        '"reached" the goal through a collision. Mean iterations over successes.',
         "",
         "| method | success | collided | stalled | max steps | mean its (success) | unnoticed "
-        "| plan / scenario-step | x curve | check / scenario-step | plan compile |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| plan / scenario-step | x curve | check / checked step | steps checked | plan compile |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     curve = next((r for r in report["rows"] if r["method"] == "curve"), None)
     for r in report["rows"]:
@@ -371,7 +431,8 @@ def markdown(report: dict) -> str:
             f"| {r['label']} | {100 * r['success_rate']:.1f}% | {100 * r['collision_rate']:.1f}% "
             f"| {100 * r['stalled_rate']:.1f}% | {100 * r['max_steps_rate']:.1f}% | {its} "
             f"| {r['unnoticed_collisions']} | {fmt_s(r['plan_per_step_s'])} | {ratio} "
-            f"| {fmt_s(r['check_per_step_s'])} | {fmt_s(r['compile_plan_s'])} |"
+            f"| {fmt_s(r['check_per_step_s'])} | {100 * r['check_steps_fraction']:.0f}% "
+            f"| {fmt_s(r['compile_plan_s'])} |"
         )
     counts = sorted(report["obstacle_count_histogram"])
     lines += [

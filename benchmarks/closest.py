@@ -104,12 +104,13 @@ GRID_FIELDS = ("grid_s", "grid_u")
 def default_candidates_spec() -> str:
     """The default candidate list, made from the SolverOptions defaults read at run time.
 
-    Cheaper settings one knob at a time (iterations x 1/2 and x 3/4, one start
-    fewer, one edge start fewer, the grid x 3/4, any other integer field
-    halved), and one dearer setting (every knob up by half, starts + 1). The
-    full run then adds the combination of the cheapest zero-miss changes
-    (``combined_candidate``). Each candidate costs ~7 compiles (one per arm size
-    n, the helix, the two timed functions): 1-2 min on 2 shared CPUs.
+    For the default solver (``method="reduced"``): cheaper settings one knob at
+    a time (Newton iterations in u x 1/2 and x 3/4, one start fewer, the grid x
+    3/4, the profile's polishing steps halved), one dearer setting (every knob
+    up by half), and the 2-D ``method=grid`` solver with its own defaults as the
+    reference. The full run then adds the combination of the cheapest zero-miss
+    changes (``combined_candidate``). Each candidate costs ~7 compiles (one per
+    arm size n, the helix, the two timed functions): 1-2 min on 2 shared CPUs.
     """
     d = {k: v for k, v in _option_defaults().items() if isinstance(v, int) and not isinstance(v, bool)}
     items = ["default"]
@@ -118,19 +119,24 @@ def default_candidates_spec() -> str:
         if kw and all(v >= 1 for v in kw.values()):
             items.append(",".join(f"{k}={v}" for k, v in kw.items()))
 
-    if "iterations" in d:
-        add(iterations=max(1, d["iterations"] // 2))
-        add(iterations=max(1, (3 * d["iterations"]) // 4))
-    for k in ("starts", "edge_starts"):
-        if k in d:
-            add(**{k: d[k] - 1})
-    grid = {k: max(3, (3 * d[k]) // 4) for k in GRID_FIELDS if k in d}
-    add(**grid)
-    for k, v in d.items():
-        if k not in ("iterations", "starts", "edge_starts", *GRID_FIELDS) and v > 1:
-            add(**{k: v // 2})
-    dear = {k: v + max(1, v // 2) for k, v in d.items()}
-    add(**dear)
+    if _option_defaults().get("method", "grid") == "reduced":
+        its, starts = "reduced_iterations", "reduced_starts"
+        knobs = (its, starts, *GRID_FIELDS, "projection_iterations")
+    else:
+        its, starts = "iterations", "starts"
+        knobs = tuple(d)
+    add(**{its: max(1, d[its] // 2)})
+    add(**{its: max(1, (3 * d[its]) // 4)})
+    add(**{starts: d[starts] - 1})
+    if "edge_starts" in knobs:
+        add(edge_starts=d["edge_starts"] - 1)
+    add(**{k: max(3, (3 * d[k]) // 4) for k in GRID_FIELDS})
+    for k in knobs:
+        if k not in (its, starts, "edge_starts", *GRID_FIELDS) and d[k] > 1:
+            add(**{k: d[k] // 2})
+    add(**{k: d[k] + max(1, d[k] // 2) for k in knobs})
+    if _option_defaults().get("method") == "reduced":
+        items.append("method=grid")
     return "; ".join(items)
 
 
@@ -644,6 +650,8 @@ def combined_candidate(rows) -> tuple[str, SolverOptions] | None:
 
 def _work(opts: dict):
     """Newton iterations per segment-curve pair, if the fields that give it exist."""
+    if opts.get("method") == "reduced":
+        return 2 * opts["reduced_starts"] * opts["reduced_iterations"]
     if all(k in opts for k in ("starts", "edge_starts", "iterations")):
         return (opts["starts"] + 4 * opts["edge_starts"]) * opts["iterations"]
     return None

@@ -70,13 +70,31 @@ class TuningResult(NamedTuple):
       gains: the tuned Gains.
       losses: (steps + 1,) loss before each update and after the last.
       history: list of Gains after each update.
-      compile_seconds: time to compile the loss-and-gradient function.
+      compile_seconds: time to compile the loss-and-gradient function (0 when
+        an earlier call with the same shapes had compiled it).
     """
 
     gains: Gains
     losses: np.ndarray
     history: list
     compile_seconds: float
+
+
+def _to_gains(params, fixed):
+    """Gains from log-parameters ``params`` (tuned) and ``fixed`` values (the rest)."""
+    return Gains(**{k: (jnp.exp(params[k]) if k in params else v) for k, v in fixed.items()})
+
+
+@partial(jax.jit, static_argnames=("options", "max_steps"))
+def _value_and_grad(params, fixed, scenarios, weights, options, max_steps):
+    """Loss and gradient in the log-gains; module level so that scenes, starting
+    gains and weights are arguments: one compilation per padded shape, reused
+    by every later :func:`tune_gains` call."""
+    return jax.value_and_grad(lambda p: batch_loss(_to_gains(p, fixed), scenarios, options, max_steps, weights))(params)
+
+
+# AOT-compiled _value_and_grad, keyed by argument structure, shapes, dtypes and statics.
+_COMPILED: dict = {}
 
 
 def tune_gains(scenarios: Scenario, gains: Gains | None = None, *, steps: int = 50,
@@ -115,20 +133,27 @@ def tune_gains(scenarios: Scenario, gains: Gains | None = None, *, steps: int = 
     params = {k: jnp.log(fixed[k]) for k in tune}
 
     def to_gains(p):
-        return Gains(**{k: (jnp.exp(p[k]) if k in p else v) for k, v in fixed.items()})
+        return _to_gains(p, fixed)
 
-    @partial(jax.jit)
+    args = (params, fixed, scenarios, weights)
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    key = (treedef, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves), opts, int(max_steps))
+    compiled = _COMPILED.get(key)
+    compile_s = 0.0
+    if compiled is None:
+        t0 = time.perf_counter()
+        compiled = _value_and_grad.lower(*args, options=opts, max_steps=int(max_steps)).compile()
+        compile_s = time.perf_counter() - t0
+        _COMPILED[key] = compiled
+
     def value_and_grad(p):
-        return jax.value_and_grad(lambda p: batch_loss(to_gains(p), scenarios, opts, int(max_steps), weights))(p)
+        return compiled(p, fixed, scenarios, weights)
 
     opt = optimizer or optax.adam(learning_rate)
     state = opt.init(params)
-    t0 = time.perf_counter()
-    compiled = value_and_grad.lower(params).compile()
-    compile_s = time.perf_counter() - t0
     losses, history = [], []
     for it in range(int(steps)):
-        loss, grad = compiled(params)
+        loss, grad = value_and_grad(params)
         if not np.isfinite(float(loss)) or not all(np.all(np.isfinite(np.asarray(v))) for v in grad.values()):
             raise FloatingPointError(f"non-finite loss or gradient at update {it}: loss = {float(loss)}")
         updates, state = opt.update(grad, state, params)
@@ -138,5 +163,5 @@ def tune_gains(scenarios: Scenario, gains: Gains | None = None, *, steps: int = 
         if progress:
             shown = " ".join(f"{k}={float(jnp.exp(params[k])):.4g}" for k in tune)
             print(f"[tune {it + 1:4d}/{steps}] loss {float(loss):.5f}  {shown}", file=sys.stderr, flush=True)
-    losses.append(float(compiled(params)[0]))
+    losses.append(float(value_and_grad(params)[0]))
     return TuningResult(to_gains(params), np.asarray(losses), history, compile_s)

@@ -148,9 +148,7 @@ def test_paper_tables_quick(runs):
         assert r["collided"] == (r["status"] == "collided")
         if r["method"] == "curve":
             assert r["reached"], r  # the paper's method reaches every paper goal
-        paper = report["paper_results"][r["scenario"]].get(
-            "curve" if r["method"] == "curve" else str(r["n_points"])
-        )
+        paper = report["paper_results"][r["scenario"]].get("curve" if r["method"] == "curve" else str(r["n_points"]))
         if r["scenario"] == "tree":
             assert r["paper_iterations"] is None and paper is None
         else:
@@ -183,10 +181,7 @@ def test_batch_sweep_quick(runs):
     assert report["n"] == 30 and report["chunks"] * report["chunk"] - report["padding"] == 30
     assert [r["label"] for r in report["rows"]] == ["curve", "N=10"]
     for r in report["rows"]:
-        rates = [
-            r[k]
-            for k in ("success_rate", "collision_rate", "stalled_rate", "max_steps_rate", "nonfinite_rate")
-        ]
+        rates = [r[k] for k in ("success_rate", "collision_rate", "stalled_rate", "max_steps_rate", "nonfinite_rate")]
         assert all(0.0 <= x <= 1.0 for x in rates) and abs(sum(rates) - 1.0) < 1e-9, r
         assert r["plan_per_step_s"] > 0 and r["check_per_step_s"] > 0 and r["compile_plan_s"] > 0
         assert len(r["plan_chunk_times_s"]) == report["chunks"]
@@ -205,9 +200,7 @@ def test_sharded_sweep_matches_single_device(runs):
     assert sorted(one.files) == sorted(two.files)
     for method in ("curve", "N=10"):
         for key in ("status", "plan_status", "iterations"):
-            np.testing.assert_array_equal(
-                one[f"{method}/{key}"], two[f"{method}/{key}"], err_msg=f"{method}/{key}"
-            )
+            np.testing.assert_array_equal(one[f"{method}/{key}"], two[f"{method}/{key}"], err_msg=f"{method}/{key}")
         q1, q2 = one[f"{method}/q"], two[f"{method}/q"]
         assert q1.shape == (30, 61, 3, 3) and np.all(np.isfinite(q1))
         np.testing.assert_allclose(q2, q1, rtol=0, atol=1e-10, err_msg=method)
@@ -220,8 +213,7 @@ def test_sharded_sweep_matches_single_device(runs):
 def _leaves_equal(a, b):
     la, lb = jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)
     return jax.tree_util.tree_structure(a) == jax.tree_util.tree_structure(b) and all(
-        x.shape == y.shape and x.dtype == y.dtype and np.array_equal(x, y)
-        for x, y in zip(la, lb, strict=True)
+        x.shape == y.shape and x.dtype == y.dtype and np.array_equal(x, y) for x, y in zip(la, lb, strict=True)
     )
 
 
@@ -250,15 +242,11 @@ def test_random_scenarios_shapes_and_make_scenario_equality():
     host = jax.tree_util.tree_map(np.asarray, suite)
     rebuilt = []
     for k in range(n):
-        curves = [
-            sp.PolynomialCurve(host.curves.coeffs[k, j], host.curves.u_range[k, j]) for j in range(counts[k])
-        ]
+        curves = [sp.PolynomialCurve(host.curves.coeffs[k, j], host.curves.u_range[k, j]) for j in range(counts[k])]
         rebuilt.append(sp.make_scenario(host.goal[k], curves, curve_slots=8, degree=2))
     assert _leaves_equal(suite, sp.stack_scenarios(rebuilt))
     # other padded shapes, counts, degrees and dtypes
-    small = sp.random_scenarios(
-        2, 5, obstacles=(2, 3), degrees=(1,), curve_slots=4, degree=2, dtype=jnp.float32
-    )
+    small = sp.random_scenarios(2, 5, obstacles=(2, 3), degrees=(1,), curve_slots=4, degree=2, dtype=jnp.float32)
     assert small.curves.coeffs.shape == (5, 4, 3, 3) and small.curves.coeffs.dtype == jnp.float32
     c = np.asarray(small.curve_mask).sum(1)
     assert c.min() >= 2 and c.max() <= 3
@@ -373,8 +361,31 @@ def test_plot_benchmark_rejects_bad_input():
         plot_benchmark(["curve", "N=1"], [1e-3], [0.0, 0.5])
     import matplotlib.pyplot as plt
 
-    fig = plot_benchmark(
-        ["curve", "N=1", "N=10"], [3e-3, 1e-4, 2e-4], [0.0, 0.4, 0.1], success_rate=[0.8, 0.5, 0.7]
-    )
+    fig = plot_benchmark(["curve", "N=1", "N=10"], [3e-3, 1e-4, 2e-4], [0.0, 0.4, 0.1], success_rate=[0.8, 0.5, 0.7])
     assert fig.axes[0].get_xscale() == "log"
     plt.close(fig)
+
+
+def test_sweep_check_groups_cover_every_scenario_once():
+    """batch_sweep's grouping of rollouts for the (time-cut) collision checks: every
+    scenario exactly once, each group long enough for its longest rollout, and the
+    shortest such length."""
+    sys.path.insert(0, BENCH)
+    import batch_sweep as bs
+
+    assert bs.check_lengths(61, 2) == [31, 61]
+    assert bs.check_lengths(201, 4) == [51, 101, 151, 201]
+    assert bs.check_lengths(201, 1) == [201]
+    assert bs.check_lengths(3, 10) == [1, 2, 3]
+    rng = np.random.default_rng(0)
+    its = rng.integers(0, 201, 48)
+    lengths = bs.check_lengths(201, 4)
+    groups = bs.check_groups(its, 8, lengths)
+    idx = np.concatenate([g for g, _ in groups])
+    assert sorted(idx.tolist()) == list(range(48))
+    for g, length in groups:
+        assert g.size == 8 and length in lengths
+        need = its[g].max() + 1
+        assert length >= need and all(L < need for L in lengths if L < length)
+    with pytest.raises(ValueError):
+        bs.check_groups(its[:7], 8, lengths)

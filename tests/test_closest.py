@@ -12,6 +12,7 @@ points must be F_R(s) and F_o(u) at the returned parameters with
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import multiprocessing
 import os
@@ -26,6 +27,7 @@ import pytest
 from helpers import assert_allclose, assert_finite, closest_per_obstacle, unpack_stacked
 
 import softplan_jax as sp
+from softplan_jax.closest import SolverOptions
 
 TOL = 1e-9
 N_RANDOM = 470  # generic random cases; other families are added below
@@ -487,7 +489,7 @@ def run_pairwise(qs, coeffs, u_ranges, dtype=jnp.float64, fn=_pairwise):
     return np.concatenate(outs)[:B]
 
 
-def run_cases(cases, dtype=jnp.float64):
+def run_cases(cases, dtype=jnp.float64, fn=_pairwise):
     out = [None] * len(cases)
     by_n = {}
     for k, c in enumerate(cases):
@@ -498,6 +500,7 @@ def run_cases(cases, dtype=jnp.float64):
             [cases[k].coeffs for k in idx],
             [cases[k].u_range for k in idx],
             dtype,
+            fn,
         )
         for j, k in enumerate(idx):
             out[k] = res[j]
@@ -699,6 +702,33 @@ def test_distance_matches_oracle(which):
     assert not misses, _report(
         misses, f"{which}: |distance - oracle| > {TOL} in {len(misses)}/{len(cases)} cases"
     )
+
+
+# The solver's hardest cases met while it was developed (each missed by an
+# earlier version): (q, coeffs, u_range, oracle distance).
+HARD_CASES = [
+    (np.array(c["q"]), np.array(c["coeffs"]), tuple(c["u_range"]), c["oracle_distance"])
+    for c in json.load(open(os.path.join(os.path.dirname(__file__), "data", "hard_closest_cases.json")))
+]
+
+GRID = SolverOptions(method="grid")
+_pairwise_grid = jax.jit(jax.vmap(lambda q, c: sp.closest_point(q, c, GRID)))
+
+
+@pytest.mark.parametrize("options", [SolverOptions(), GRID], ids=["reduced", "grid"])
+def test_known_hard_cases(options):
+    for q, coeffs, u_range, d_oracle in HARD_CASES:
+        r = sp.closest_point(jnp.asarray(q), sp.PolynomialCurve(coeffs, u_range), options)
+        assert abs(float(r.distance) - d_oracle) <= TOL, (q, float(r.distance), d_oracle)
+
+
+def test_grid_method_matches_oracle():
+    """The alternative 2-D solver (method="grid") on the main and paper suites."""
+    for which, cases in (("main", CASES), ("paper", PAPER_CASES)):
+        lib = run_cases(cases, fn=_pairwise_grid)
+        errs = [abs(float(r["distance"]) - o.distance) for r, o in zip(lib, oracle_results(which), strict=True)]
+        bad = [k for k, e in enumerate(errs) if not e <= TOL]
+        assert not bad, (which, len(bad), [cases[k].describe() for k in bad[:3]])
 
 
 @pytest.mark.parametrize("which", WHICH)
@@ -944,3 +974,28 @@ def test_curve_points_feed_n_point_method():
         float(r.distance)
         >= oracle.closest_distance(q, oracle.OPoly(PAPER_OBSTACLES["sim1"][0], -2, 2)) - 1e-12
     )
+
+
+def test_point_distance_matches_dense_sampling():
+    """sp.point_distance (closed-form point-to-arc) against the oracle's arm
+    sampled at 20,001 points per segment plus a golden-section polish."""
+    rng = np.random.default_rng(11)
+    from scipy.optimize import minimize_scalar
+
+    s_dense = np.linspace(0.0, 1.0, 20001)
+    for n in (1, 3):
+        for _ in range(15):
+            q = random_q(rng, n)
+            pts = rng.normal(size=(6, 3)) * rng.choice([0.3, 1.0, 3.0])
+            pts[0] = oracle.segment_point(q, n - 1, 0.5) + 1e-4 * rng.normal(size=3)  # nearly on the arm
+            lib = np.asarray(sp.point_distance(jnp.asarray(q), jnp.asarray(pts)))
+            for k, p in enumerate(pts):
+                best = np.inf
+                for i in range(n):
+                    d = np.linalg.norm(oracle.segment_points(q, i, s_dense) - p, axis=1)
+                    j = int(np.argmin(d))
+                    lo, hi = s_dense[max(j - 1, 0)], s_dense[min(j + 1, len(s_dense) - 1)]
+                    res = minimize_scalar(lambda s, i=i, q=q, p=p: np.linalg.norm(oracle.segment_point(q, i, s) - p),
+                                          bounds=(lo, hi), method="bounded", options=dict(xatol=1e-13))
+                    best = min(best, d[j], res.fun)
+                assert abs(lib[k] - best) <= 1e-9, (q, p, lib[k], best)
