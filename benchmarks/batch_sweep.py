@@ -26,8 +26,10 @@ The batch axis is sharded over all devices: a ``Mesh`` over ``jax.devices()``,
 ``NamedSharding(mesh, PartitionSpec("batch"))``, ``jax.device_put`` of each
 chunk (the batch is padded to a multiple of the chunk, and the chunk to a
 multiple of the device count, by repeating the last scenario; padding is
-dropped from every statistic); ``jax.shard_map`` runs the vmapped rollout and
-checks on each device's shard with no cross-device communication. On a CPU, ``--host-devices K`` (or
+dropped from every statistic); ``jax.shard_map`` runs the vmapped planning
+rollout on each device's shard with no cross-device communication. The
+collision checks (step 2) run on one device: sharded, they hung on a 2-device
+CPU in our runs (a known issue, see the comment at ``check_jit``). On a CPU, ``--host-devices K`` (or
 ``XLA_FLAGS=--xla_force_host_platform_device_count=K``) splits the host into K
 devices so that the shards run on K cores.
 
@@ -226,9 +228,12 @@ def main(argv=None) -> dict:
         # check_vma=False: the library's scans start from constant (unvarying) carries.
         return jax.jit(jax.shard_map(fn, mesh=mesh, in_specs=in_specs, out_specs=batch, check_vma=False))
 
-    check_jit = per_shard(
-        lambda r, s: jax.vmap(lambda r1, s1: apply_collision_checks(r1, s1, check_opts))(r, s), (batch, batch)
-    )
+    # The collision checks run on ONE device (plain jit, inputs on jax.devices()[0]): on a
+    # 2-device CPU (--xla_force_host_platform_device_count=2) the shard_map'ed check of
+    # device_put inputs hung in XLA's runtime in our runs (block_until_ready never
+    # returned; the sharded planning rollouts, the expensive part, do not). Known issue.
+    check_jit = jax.jit(lambda r, s: jax.vmap(lambda r1, s1: apply_collision_checks(r1, s1, check_opts))(r, s))
+    check_device = jax.sharding.SingleDeviceSharding(devices[0])
     lengths = check_lengths(scan_steps, args.check_buckets)
     check_exes, check_compile = {}, {}
 
@@ -237,11 +242,11 @@ def main(argv=None) -> dict:
         if length not in check_exes:
             shapes = jax.tree_util.tree_map(
                 lambda x: jax.ShapeDtypeStruct(
-                    (x.shape[0], length, *x.shape[2:]) if x.ndim >= 2 else x.shape, x.dtype, sharding=batch_sharding
+                    (x.shape[0], length, *x.shape[2:]) if x.ndim >= 2 else x.shape, x.dtype, sharding=check_device
                 ),
                 r_shapes,
             )
-            check_exes[length], check_compile[length] = compile_timed(check_jit, shapes, sc)
+            check_exes[length], check_compile[length] = compile_timed(check_jit, shapes, jax.device_put(sc, check_device))
         return check_exes[length]
 
     rows, dump = [], {}
@@ -279,7 +284,7 @@ def main(argv=None) -> dict:
             exe = check_exe_for(length, r_shapes, chunks[0])
             cut = jax.tree_util.tree_map(lambda x, idx=idx, L=length: x[idx][:, :L] if x.ndim >= 2 else x[idx], planned)
             sc = jax.tree_util.tree_map(lambda x, idx=idx: x[idx], padded)
-            cut, sc = jax.device_put((cut, sc), batch_sharding)
+            cut, sc = jax.device_put((cut, sc), check_device)
             rc, dt = timed(exe, cut, sc)
             check_times.append(dt)
             check_steps += chunk * length

@@ -1,6 +1,7 @@
-"""Regenerate every benchmark result: the NumPy baseline, the paper's tables and the
-batched sweep, one after the other (each in its own process, so that each sets
-jax's precision and devices itself).
+"""Regenerate every benchmark result: the closest-point benchmark and solver sweep,
+the NumPy baseline, the paper's tables, the speed targets and the batched sweep,
+one after the other (each in its own process, so that each sets jax's precision
+and devices itself).
 
     python benchmarks/run_all.py                 # everything, as in benchmarks/README.md
     python benchmarks/run_all.py --quick         # smoke run, written to benchmarks/results/quick/
@@ -27,7 +28,7 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--skip",
         default="",
-        help="comma list of scripts to skip: numpy_baseline, paper_tables, batch_sweep",
+        help="comma list of scripts to skip: closest, numpy_baseline, paper_tables, speed_targets, batch_sweep",
     )
     ap.add_argument("sweep_args", nargs="*", help="further batch_sweep.py arguments (after --)")
     args = ap.parse_args(argv)
@@ -35,8 +36,10 @@ def main(argv=None) -> int:
     quick = ["--quick"] if args.quick else []
     quick_dir = os.path.join(HERE, "results", "quick")
     runs = [
+        ("closest", quick),
         ("numpy_baseline", quick + (["--out", os.path.join(quick_dir, "numpy_baseline")] if args.quick else [])),
         ("paper_tables", quick),
+        ("speed_targets", quick),
         ("batch_sweep", quick + (["--n", str(args.sweep_n)] if args.sweep_n else []) + args.sweep_args),
     ]
     times = {}

@@ -489,17 +489,44 @@ def status_name(code) -> str:
 # Entry points.
 
 
+def _strong_gains(gains: Gains, dtype) -> Gains:
+    """Gains as arrays of the scenario's dtype, never weakly typed: a gain given as
+    a Python float or ``jnp.asarray(0.1)`` (weak) would otherwise compile anew."""
+    return Gains(*(jnp.asarray(v, dtype) for v in gains))
+
+
 @partial(jax.jit, static_argnames=("options", "max_steps"))
-def rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
-    """:func:`rollout` under ``jit`` (options and max_steps static)."""
+def _rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
     return rollout(scenario, gains, options, max_steps)
 
 
 @partial(jax.jit, static_argnames=("options", "max_steps"))
+def _rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
+    return jax.vmap(lambda sc: rollout(sc, gains, options, max_steps))(scenarios)
+
+
+def rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
+    """:func:`rollout` under ``jit`` (options and max_steps static). One
+    compilation per padded scenario shape, dtype, options and max_steps; new
+    goals, obstacles or gain values reuse it. ``rollout_jit.lower(...)`` lowers
+    ahead of time; ``rollout_jit._cache_size()`` counts compilations."""
+    return _rollout_jit(scenario, _strong_gains(gains, scenario.q0.dtype), options, max_steps)
+
+
 def rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
     """:func:`rollout` vmapped over a batch of scenarios of one padded shape
-    (every leaf of ``scenarios`` has a leading batch axis; gains shared)."""
-    return jax.vmap(lambda sc: rollout(sc, gains, options, max_steps))(scenarios)
+    (every leaf of ``scenarios`` has a leading batch axis; gains shared), jitted."""
+    return _rollout_batch(scenarios, _strong_gains(gains, scenarios.q0.dtype), options, max_steps)
+
+
+rollout_jit.lower = lambda scenario, gains, options, max_steps: _rollout_jit.lower(
+    scenario, _strong_gains(gains, scenario.q0.dtype), options, max_steps
+)
+rollout_jit._cache_size = _rollout_jit._cache_size
+rollout_batch.lower = lambda scenarios, gains, options, max_steps: _rollout_batch.lower(
+    scenarios, _strong_gains(gains, scenarios.q0.dtype), options, max_steps
+)
+rollout_batch._cache_size = _rollout_batch._cache_size
 
 
 class PlanResult(NamedTuple):

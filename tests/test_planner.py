@@ -176,6 +176,8 @@ def test_same_padded_shape_does_not_recompile(paper):
         rollout_jit(paper[name], gains, opts, 200)
     moved = paper["tree"]._replace(goal=paper["tree"].goal + 0.1)
     rollout_jit(moved, gains._replace(eta=gains.eta * 2), opts, 200)
+    # Gains given as a Python float or a weakly typed array do not recompile either.
+    rollout_jit(moved, gains._replace(eta=2e-3, d0=jnp.asarray(0.08)), opts, 200)
     assert rollout_jit._cache_size() == before
 
 

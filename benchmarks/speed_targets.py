@@ -1,0 +1,208 @@
+"""The speed targets of the benchmarks issue, each measured as a ratio or rate in ONE run.
+
+On the paper's tree scenario (five curves, three segments), float64 and float32:
+
+1. curve planner step / 10-point planner step (target <= 1): planning-only
+   rollouts (``check_collisions=False``), compiled ahead, time per scan step;
+2. NumPy/SciPy baseline step (``benchmarks/numpy_baseline.py``, the method as
+   a MATLAB user would port it) / our step, single rollout (target >= 10,000)
+   and batched per scenario-step (target >= 50,000);
+3. batched throughput, curve method: scenario-steps per second (target >= 200,000);
+4. compile time of a rollout (target <= 10 s), reported apart from run time;
+   and the number of compilations across scenes of one padded shape (target 0
+   after the first; counted with ``rollout_jit._cache_size()``);
+5. gradient of a 200-step rollout loss (``tuning.rollout_loss``) / the
+   rollout (target <= 5).
+
+Every figure is a median of repeats of a compiled call with
+``block_until_ready``; compile time is never in a run time. Writes
+``benchmarks/results/speed_targets.{md,json}``.
+
+    python benchmarks/speed_targets.py            # ~5 min on 2 CPUs
+    python benchmarks/speed_targets.py --quick    # ~1.5 min: fewer repeats, smaller batch, no float32
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _common import RESULTS_DIR, finish_machine, fmt_s, log, machine_info, machine_lines, write_results  # noqa: E402
+
+import softplan_jax as sp  # noqa: E402
+from softplan_jax.planner import make_options, rollout, rollout_jit  # noqa: E402
+from softplan_jax.tuning import rollout_loss  # noqa: E402
+
+
+def median_run(fn, *args, repeats):
+    jax.block_until_ready(fn(*args))
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn(*args))
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts))
+
+
+def compiled(fn, *args, **static):
+    t0 = time.perf_counter()
+    c = jax.jit(fn, static_argnames=tuple(static)).lower(*args, **static).compile()
+    return c, time.perf_counter() - t0
+
+
+def batch_of(scenario, size, seed=0):
+    """``size`` copies of the scenario with goals moved by up to 2 cm (one padded shape)."""
+    rng = np.random.default_rng(seed)
+    goals = np.asarray(scenario.goal) + rng.uniform(-0.02, 0.02, (size, 3))
+    return sp.stack_scenarios([scenario._replace(goal=jnp.asarray(g, scenario.goal.dtype)) for g in goals])
+
+
+def measure(dtype, steps, batch_size, repeats):
+    sc = sp.paper_scenario("tree", dtype=dtype)
+    g = sp.default_gains(dtype)
+    out = {}
+    plan_only = {"curve": make_options("curve", check_collisions=False),
+                 "points10": make_options("points", 10, check_collisions=False)}
+    for name, o in plan_only.items():
+        c, ct = compiled(rollout, sc, g, options=o, max_steps=steps)
+        t = median_run(c, sc, g, repeats=repeats)
+        out[f"{name}_step_s"] = t / (steps + 1)
+        out[f"{name}_compile_s"] = ct
+        log(f"  [{jnp.dtype(dtype).name}] {name}: compile {ct:.1f} s, {fmt_s(t / (steps + 1))} per step")
+    # The checked rollout (true clearance + between-steps collision checks), as sp.plan runs it.
+    c, ct = compiled(rollout, sc, g, options=make_options("curve"), max_steps=steps)
+    out["curve_checked_step_s"] = median_run(c, sc, g, repeats=repeats) / (steps + 1)
+    out["curve_checked_compile_s"] = ct
+    log(f"  checked rollout: compile {ct:.1f} s, {fmt_s(out['curve_checked_step_s'])} per step")
+    # Batched, curve method, planning only.
+    batch = batch_of(sc, batch_size)
+    vm = lambda b, g, options, max_steps: jax.vmap(lambda s: rollout(s, g, options, max_steps))(b)  # noqa: E731
+    c, ct = compiled(vm, batch, g, options=plan_only["curve"], max_steps=steps)
+    t = median_run(c, batch, g, repeats=max(2, repeats // 2))
+    out["batch_size"] = batch_size
+    out["batch_compile_s"] = ct
+    out["batch_scenario_step_s"] = t / (batch_size * (steps + 1))
+    log(f"  batch of {batch_size}: compile {ct:.1f} s, {fmt_s(out['batch_scenario_step_s'])} per scenario-step")
+    # Gradient of a rollout loss vs the rollout itself (same options, same length).
+    grad_opts = make_options("curve", goal_tolerance=1e-9, stall_window=10**6)
+    loss = lambda g, sc, options, max_steps: rollout_loss(g, sc, options, max_steps)  # noqa: E731
+    c_f, ct_f = compiled(loss, g, sc, options=grad_opts, max_steps=steps)
+    c_g, ct_g = compiled(jax.grad(loss), g, sc, options=grad_opts, max_steps=steps)
+    t_f = median_run(c_f, g, sc, repeats=repeats)
+    t_g = median_run(c_g, g, sc, repeats=repeats)
+    out.update(loss_s=t_f, grad_s=t_g, loss_compile_s=ct_f, grad_compile_s=ct_g)
+    log(f"  loss {fmt_s(t_f)} (compile {ct_f:.1f} s), grad {fmt_s(t_g)} (compile {ct_g:.1f} s)")
+    return out
+
+
+def count_recompiles(steps):
+    """Compilations of rollout_jit across scenes of one padded shape (after the first)."""
+    opts = make_options("curve")
+    scenes = [sp.paper_scenario(n, curve_slots=5, degree=2) for n in ("sim1", "sim2", "tree")]
+    rollout_jit(scenes[0], sp.default_gains(), opts, steps)
+    before = rollout_jit._cache_size()
+    for s in scenes[1:]:
+        rollout_jit(s, sp.default_gains()._replace(eta=jnp.asarray(2e-3)), opts, steps)
+    return rollout_jit._cache_size() - before
+
+
+def numpy_step_time(steps_timed):
+    """Median time of the NumPy/SciPy baseline's planner step on the tree (curve method)."""
+    import numpy_baseline as nb
+
+    sc = sp.paper_scenario("tree")
+    sc_np = nb.to_numpy_scenario(sc)
+    prep = nb._prepare(sc_np, "curve", 10, "kdtree")
+    g = nb.numpy_gains()
+    q = np.asarray(sc.q0, dtype=np.float64)
+    ts = []
+    for _ in range(steps_timed):
+        t0 = time.perf_counter()
+        q = nb.numpy_step(q, prep, g)[0]
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="fewer repeats, batch 16, float64 only")
+    ap.add_argument("--steps", type=int, default=200, help="rollout length (default 200)")
+    ap.add_argument("--batch", type=int, default=None, help="batch size (default 256; quick 16)")
+    ap.add_argument("--out", default=None,
+                    help="output prefix (default benchmarks/results/speed_targets; quick: results/quick/...)")
+    args = ap.parse_args(argv)
+    if args.steps < 1 or (args.batch is not None and args.batch < 1):
+        ap.error("--steps and --batch must be >= 1")
+    if args.out is None:
+        args.out = os.path.join(RESULTS_DIR, "quick" if args.quick else "", "speed_targets")
+    batch = args.batch or (16 if args.quick else 256)
+    repeats = 3 if args.quick else 7
+    machine = machine_info("float64 and float32")
+    t_start = time.perf_counter()
+    log("NumPy/SciPy baseline step (tree, curve method) ...")
+    numpy_s = numpy_step_time(3 if args.quick else 8)
+    log(f"  {fmt_s(numpy_s)} per step")
+    results = {}
+    for dtype in (jnp.float64,) if args.quick else (jnp.float64, jnp.float32):
+        log(f"{jnp.dtype(dtype).name}:")
+        results[jnp.dtype(dtype).name] = measure(dtype, args.steps, batch, repeats)
+    recompiles = count_recompiles(args.steps)
+    finish_machine(machine)
+    rows = []
+    for name, r in results.items():
+        rows += [
+            (name, "curve step / 10-point step", "<= 1", r["curve_step_s"] / r["points10_step_s"], "x"),
+            (name, "NumPy step / our step, single rollout", ">= 10,000", numpy_s / r["curve_step_s"], "x"),
+            (name, "NumPy step / our step, batched per scenario-step", ">= 50,000",
+             numpy_s / r["batch_scenario_step_s"], "x"),
+            (name, "batched throughput, curve method", ">= 200,000", 1.0 / r["batch_scenario_step_s"],
+             "scenario-steps/s"),
+            (name, "compile time of a rollout (planning only)", "<= 10 s", r["curve_compile_s"], "s"),
+            (name, "compile time of a rollout (with collision checks)", "<= 10 s", r["curve_checked_compile_s"], "s"),
+            (name, f"gradient of a {args.steps}-step rollout loss / the rollout", "<= 5", r["grad_s"] / r["loss_s"],
+             "x"),
+        ]
+    met = {
+        "<= 1": lambda v: v <= 1, ">= 10,000": lambda v: v >= 1e4, ">= 50,000": lambda v: v >= 5e4,
+        ">= 200,000": lambda v: v >= 2e5, "<= 10 s": lambda v: v <= 10, "<= 5": lambda v: v <= 5,
+    }
+    lines = [
+        "# Speed targets (benchmarks issue, item 4)",
+        "",
+        f"- generated by `python benchmarks/speed_targets.py{' --quick' if args.quick else ''}` in "
+        f"{time.perf_counter() - t_start:.0f} s; tree scenario, {args.steps}-step rollouts, batch {batch}",
+        *machine_lines(machine),
+        f"- NumPy/SciPy baseline step (tree, curve method, `benchmarks/numpy_baseline.py`): {fmt_s(numpy_s)}",
+        f"- recompilations of `rollout_jit` across three scenes of one padded shape: **{recompiles}** (target 0)",
+        "",
+        "| dtype | quantity | target | measured | met |",
+        "|---|---|---|---|---|",
+    ]
+    for dt, what, target, value, unit in rows:
+        shown = f"{value:.3g} {unit}" if unit != "x" else f"{value:.3g}x"
+        lines.append(f"| {dt} | {what} | {target} | {shown} | {'yes' if met[target](value) else '**no**'} |")
+    lines += ["", "Raw figures (seconds):", ""]
+    for dt, r in results.items():
+        lines.append(f"- {dt}: " + ", ".join(f"{k} {v:.4g}" for k, v in r.items()))
+    md = "\n".join(lines) + "\n"
+    report = dict(machine=machine, steps=args.steps, batch=batch, numpy_step_s=numpy_s, results=results,
+                  recompiles=recompiles,
+                  targets=[dict(dtype=a, quantity=b, target=c, value=d, unit=e, met=bool(met[c](d)))
+                           for a, b, c, d, e in rows])
+    write_results(args.out, report, md)
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
