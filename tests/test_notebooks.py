@@ -7,7 +7,8 @@ own ``python3`` kernel spec (which may point to another Python) is never used.
 If no kernel can be started the tests FAIL: a notebook that was not run is not
 a notebook that works.
 
-These take minutes, nearly all of it XLA compilation inside the notebooks:
+Executing the notebooks is opt-in (``SOFTPLAN_TEST_NOTEBOOKS=1``; the other
+tests here always run). It takes minutes, nearly all of it XLA compilation inside the notebooks:
 on a 2-core CPU about 2.5 min for quickstart.ipynb and 5-13 min for
 tuning.ipynb (two compilations of the gradient of a whole rollout), the
 longer figure on a busy machine.
@@ -15,6 +16,7 @@ longer figure on a busy machine.
 
 import importlib.util
 import json
+import os
 import subprocess
 import sys
 import time
@@ -54,6 +56,13 @@ def _kernel_manager(spec_dir: Path):
     return AsyncKernelManager(kernel_name="softplan-test-python", kernel_spec_manager=ksm)
 
 
+# Running both notebooks costs 6-15 min of a 2-core CPU (two compilations of the
+# gradient of a whole rollout), too much for every CI run: opt in with
+# SOFTPLAN_TEST_NOTEBOOKS=1 (the skip is reported by -ra; it is not a pass).
+RUN_NOTEBOOKS = os.environ.get("SOFTPLAN_TEST_NOTEBOOKS", "0") == "1"
+
+
+@pytest.mark.skipif(not RUN_NOTEBOOKS, reason="notebook execution is opt-in: set SOFTPLAN_TEST_NOTEBOOKS=1")
 @pytest.mark.parametrize("name", NOTEBOOKS)
 def test_notebook_runs_top_to_bottom(name, tmp_path):
     from nbclient import NotebookClient
