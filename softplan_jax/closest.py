@@ -435,8 +435,9 @@ def _reduced_newton(seg: _Segment, curve, u0, s0, f0, iterations: int):
     the Schur complement of the 2x2 Hessian of eqs. 13-14,
     ``c - b^2 / a``; for s* at an end (paper eqs. 17-18) ``c`` itself. A
     non-positive curvature gives a gradient step of the trust radius. A step is
-    accepted only if it lowers g; the radius then doubles on a full step,
-    otherwise it shrinks fourfold. Every iterate lies in [u_min, u_max].
+    accepted only if it lowers g (the radius doubles if the step had been cut
+    to it); a rejected step shrinks the radius fourfold. Every iterate lies in
+    [u_min, u_max].
     """
     dtype = u0.dtype
     lo, hi = curve.u_range[0], curve.u_range[1]

@@ -137,7 +137,9 @@ def tune_gains(scenarios: Scenario, gains: Gains | None = None, *, steps: int = 
 
     args = (params, fixed, scenarios, weights)
     leaves, treedef = jax.tree_util.tree_flatten(args)
-    key = (treedef, tuple((jnp.shape(x), jnp.result_type(x)) for x in leaves), opts, int(max_steps))
+    # Weak typing is part of the key: a Python float and a float64 array compile differently.
+    key = (treedef, tuple((jnp.shape(x), jnp.result_type(x), getattr(x, "weak_type", isinstance(x, float)))
+                          for x in leaves), opts, int(max_steps))
     compiled = _COMPILED.get(key)
     compile_s = 0.0
     if compiled is None:

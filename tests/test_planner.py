@@ -280,3 +280,18 @@ def test_post_hoc_collision_checks_equal_in_scan_checks():
         np.testing.assert_allclose(float(post.min_clearance), float(checked.min_clearance), atol=1e-12)
         if eta == 1e-12:
             assert bool(checked.collided)
+
+
+def test_tune_gains_lowers_the_loss_and_compiles_once():
+    from softplan_jax.tuning import tune_gains
+
+    sc = sp.paper_scenario("sim1")
+    first = tune_gains(sc, steps=2, max_steps=15, progress=False)
+    assert first.compile_seconds > 0
+    assert np.all(np.isfinite(first.losses)) and first.losses[-1] < first.losses[0], first.losses
+    assert all(float(getattr(first.gains, k)) > 0 for k in sp.Gains._fields)
+    # Same shapes, another goal: the compiled loss-and-gradient is reused.
+    again = tune_gains(sc._replace(goal=sc.goal + 0.01), steps=1, max_steps=15, progress=False)
+    assert again.compile_seconds == 0.0
+    with pytest.raises(ValueError, match="tune must name"):
+        tune_gains(sc, tune=("nope",), progress=False)
