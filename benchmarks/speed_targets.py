@@ -37,7 +37,16 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _common import RESULTS_DIR, finish_machine, fmt_s, log, machine_info, machine_lines, write_results  # noqa: E402
+from _common import (  # noqa: E402
+    RESULTS_DIR,
+    finish_machine,
+    fmt_s,
+    log,
+    machine_info,
+    machine_lines,
+    median_time,
+    write_results,
+)
 
 import softplan_jax as sp  # noqa: E402
 from softplan_jax.planner import make_options, rollout, rollout_jit  # noqa: E402
@@ -45,13 +54,9 @@ from softplan_jax.tuning import rollout_loss  # noqa: E402
 
 
 def median_run(fn, *args, repeats):
+    """Median seconds of ``repeats`` blocked calls after one warm-up call (``_common.median_time``)."""
     jax.block_until_ready(fn(*args))
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        ts.append(time.perf_counter() - t0)
-    return float(np.median(ts))
+    return float(median_time(fn, *args, repeats=repeats)[1])
 
 
 def compiled(fn, *args, **static):
