@@ -15,6 +15,7 @@ from .curves import fit_polynomial_curve as fit_polynomial_curve
 from .curves import line_segment as line_segment
 from .curves import stack_curves as stack_curves
 from .kinematics import backbone_points as backbone_points
+from .kinematics import motion_bound as motion_bound
 from .kinematics import point_jacobian as point_jacobian
 from .kinematics import segment_frames as segment_frames
 from .kinematics import segment_point as segment_point
@@ -44,6 +45,7 @@ from .scenarios import make_scenario as make_scenario
 from .scenarios import paper_scenario as paper_scenario
 from .scenarios import random_scenarios as random_scenarios
 from .scenarios import save_scenario as save_scenario
+from .scenarios import scenario_warnings as scenario_warnings
 
 try:
     __version__ = version("softplan_jax")

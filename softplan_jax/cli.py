@@ -87,10 +87,16 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--method", choices=("curve", "points"), default="curve",
                      help="curve: exact closest points (the paper's method); points: each curve "
                      "modelled by N points (default: curve)")
-    run.add_argument("--n-points", type=int, default=10, metavar="N",
+    run.add_argument("--n-points", type=int, default=None, metavar="N",
                      help="N of the N-point model, >= 1 (method points only; default 10)")
-    run.add_argument("--max-steps", type=int, default=300, metavar="N",
-                     help="most planner steps, >= 1 (default 300)")
+    run.add_argument("--step", choices=("safe", "plain"), default="safe",
+                     help="safe: the clearance-bounded step, no step can pass through an obstacle the "
+                     "planner models exactly (default); plain: the paper's step")
+    run.add_argument("--escapes", type=int, default=None, metavar="K",
+                     help="random-walk escapes from local minima, >= 0 (default: the planner's)")
+    run.add_argument("--seed", type=int, default=0, help="seed of the escapes' random walks (default 0)")
+    run.add_argument("--max-steps", type=int, default=600, metavar="N",
+                     help="most planner steps, >= 1 (default 600)")
     run.add_argument("--goal-tolerance", type=float, default=None, metavar="TOL",
                      help="reached when |goal - tip| < TOL (default: the planner's, 0.01)")
     run.add_argument("--repulsion", choices=("khatib", "exponential"), default="khatib",
@@ -151,6 +157,12 @@ def _check_plot_format(path: str) -> None:
 
 
 def _check_run_args(args, paper_names) -> None:
+    if args.n_points is not None and args.method == "curve":
+        _warn("--n-points applies to --method points only; the curve method ignores it")
+    if args.n_points is None:
+        args.n_points = 10
+    if args.escapes is not None and args.escapes < 0:
+        raise InputError(f"--escapes must be >= 0, got {args.escapes}")
     if args.n_points < 1:
         raise InputError(f"--n-points must be >= 1, got {args.n_points}")
     if args.max_steps < 1:
@@ -189,13 +201,24 @@ def _check_run_args(args, paper_names) -> None:
 # Commands.
 
 
+def _warn(msg: str) -> None:
+    print(f"softplan: warning: {msg}", file=sys.stderr, flush=True)
+
+
 def _load(args, dtype):
+    import warnings
+
     from .scenarios import load_scenario, paper_scenario
 
     if args.scenario in _paper_names():
         return paper_scenario(args.scenario, dtype=dtype), args.scenario
     try:
-        return load_scenario(args.scenario, dtype=dtype), args.scenario
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            scenario = load_scenario(args.scenario, dtype=dtype)
+        for w in caught:
+            _warn(str(w.message))
+        return scenario, args.scenario
     except OSError as err:  # unreadable file, permission denied, ...
         raise InputError(f"cannot read scenario file {args.scenario}: {err.strerror or err}") from None
     except UnicodeDecodeError:
@@ -231,7 +254,9 @@ def _cmd_run(args) -> int:
     dtype = jnp.float32 if args.float32 else jnp.float64
     try:
         scenario, label = _load(args, dtype)
-        extra = {"repulsion": args.repulsion}
+        extra = {"repulsion": args.repulsion, "step": args.step}
+        if args.escapes is not None:
+            extra["escapes"] = args.escapes
         if args.goal_tolerance is not None:
             extra["goal_tolerance"] = args.goal_tolerance
         options = make_options(args.method, args.n_points, **extra)
@@ -247,7 +272,7 @@ def _cmd_run(args) -> int:
     compiled = rollout_jit.lower(scenario, gains, options, max_steps).compile()
     compile_time = time.perf_counter() - t0
     t0 = time.perf_counter()
-    rollout = jax.block_until_ready(compiled(scenario, gains))
+    rollout = jax.block_until_ready(compiled(scenario, gains, jax.random.PRNGKey(args.seed)))
     run_time = time.perf_counter() - t0
     result = result_from_rollout(rollout, scenario)
 
@@ -256,6 +281,8 @@ def _cmd_run(args) -> int:
         "method": args.method,
         "n_points": args.n_points if args.method == "points" else None,
         "repulsion": args.repulsion,
+        "step": args.step,
+        "escapes": int(rollout.escapes),
         "dtype": str(jnp.dtype(scenario.q0.dtype)),
         "status": result.status,
         "iterations": result.iterations,
@@ -321,6 +348,8 @@ def _text_summary(s: dict) -> str:
         ("scenario", s["scenario"]),
         ("method", method),
         ("repulsion", s["repulsion"]),
+        ("step", ("safe (clearance-bounded)" if s["step"] == "safe" else "plain (the paper's)")
+         + f", {s['escapes']} escape(s) used"),
         ("dtype", s["dtype"]),
         ("status", s["status"]),
         ("iterations", f"{s['iterations']} (max steps {s['max_steps']})"),

@@ -33,6 +33,9 @@ from .validation import (
     is_concrete,
 )
 
+# Samples of a ParametricCurve checked for finite values at construction.
+_FINITE_CHECK_SAMPLES = 257
+
 __all__ = [
     "PolynomialCurve",
     "ParametricCurve",
@@ -161,8 +164,16 @@ class ParametricCurve:
         if not jnp.issubdtype(out.dtype, jnp.floating):
             raise ValueError(f"fn(u) must return floating values; got dtype {out.dtype}")
         if is_concrete(u_range):
-            mid = fn(0.5 * (u_range[0] + u_range[1]))
-            check_finite(mid, "fn(u) at the middle of u_range")
+            # A sampled check: a curve that is NaN or infinite somewhere in its range would make
+            # every distance to it NaN (and a NaN clearance is never "clear").
+            u = jnp.linspace(u_range[0], u_range[1], _FINITE_CHECK_SAMPLES, dtype=u_range.dtype)
+            pts = np.asarray(jax.vmap(fn)(u))
+            bad = ~np.all(np.isfinite(pts), axis=-1)
+            if bad.any():
+                raise ValueError(
+                    f"fn(u) is not finite inside u_range at u = {float(u[np.argmax(bad)]):.6g} "
+                    f"({int(bad.sum())} of {_FINITE_CHECK_SAMPLES} samples); restrict u_range to where the curve is defined"
+                )
         self.fn = fn
         self.u_range = u_range
         self.radius = radius.astype(u_range.dtype)
@@ -203,6 +214,9 @@ def line_segment(a, b, radius=0.0) -> PolynomialCurve:
         raise ValueError(f"line_segment endpoints must have shape (3,); got {a.shape} and {b.shape}")
     check_finite(a, "a")
     check_finite(b, "b")
+    if is_concrete(a) and is_concrete(b) and np.array_equal(np.asarray(a), np.asarray(b)):
+        raise ValueError(f"line_segment: a and b are the same point {np.asarray(a).tolist()}; a segment needs length > 0 "
+                         "(use a point obstacle, an (1, 3) array, for a single point)")
     return PolynomialCurve(jnp.stack([a, b - a], axis=1), jnp.array([0.0, 1.0], dtype=a.dtype), radius)
 
 

@@ -31,6 +31,7 @@ __all__ = [
     "point_jacobian",
     "tip_jacobian",
     "backbone_points",
+    "motion_bound",
 ]
 
 
@@ -147,6 +148,25 @@ def _backbone_points(q, points_per_segment: int):
     return pts.reshape(-1, 3)
 
 
+def _motion_bounds(q_a, dq):
+    """Per-segment bound (n,) on how far any point of segments 0..i moves
+    during the straight-line motion ``q(t) = q_a + t dq``, t in [0, 1].
+
+    See :func:`motion_bound` for the derivation. Pure; differentiable almost
+    everywhere; one cumulative sum over the (static) segment count.
+    """
+    L_bar = jnp.maximum(q_a[:, 0], q_a[:, 0] + dq[:, 0])  # L_j(t) <= L_bar_j on the whole motion
+    dL, dtheta, dphi = jnp.abs(dq[:, 0]), jnp.abs(dq[:, 1]), jnp.abs(dq[:, 2])
+    # S[k] = L_bar_0 + ... + L_bar_k: backbone length from the arm base to the tip of segment k.
+    S = jnp.cumsum(L_bar)
+    S_before = S - L_bar  # backbone length from the arm base to the base of segment k
+    # For a point up to the tip of segment i, summed over j <= i:
+    #   |dL_j| * 1 + |dtheta_j| * (L_bar_j / 2 + (S_i - S_j)) + |dphi_j| * (S_i - S_before_j)
+    # = sum_j (|dL_j| + |dtheta_j| (L_bar_j / 2 - S_j) - |dphi_j| S_before_j) + S_i sum_j (|dtheta_j| + |dphi_j|).
+    own = jnp.cumsum(dL + dtheta * (0.5 * L_bar - S) - dphi * S_before)
+    return own + S * jnp.cumsum(dtheta + dphi)
+
+
 # ----------------------------------------------------------------------------
 # Public, validated entry points: validation on the host, then a jitted core.
 
@@ -156,6 +176,7 @@ _point_jacobian_jit = jax.jit(_point_jacobian)
 _tip_jacobian_jit = jax.jit(_tip_jacobian)
 _backbone_points_jit = jax.jit(_backbone_points, static_argnums=1)
 _frames_jit = jax.jit(_frames)
+_motion_bounds_jit = jax.jit(_motion_bounds)
 
 
 def segment_transform(q_i):
@@ -224,6 +245,60 @@ def point_jacobian(q, i, s):
 def tip_jacobian(q):
     """``J_e``: Jacobian of the tip position, (3, 3n), by ``jax.jacfwd``."""
     return _tip_jacobian_jit(check_configuration(q))
+
+
+def motion_bound(q_a, q_b):
+    """A sound bound on how far any arm point moves between two configurations.
+
+    The motion is the planner's Euler step, the straight line
+    ``q(t) = q_a + t (q_b - q_a)``, t in [0, 1] (DESIGN.md: the motion between
+    two steps). For every segment i the bound holds for every point
+    ``P_si(q(t))``, s in [0, 1], and every t: ``|P_si(q(t)) - P_si(q_a)| <= bound[i]``.
+    It is the conservative-advancement bound of continuous collision detection
+    for articulated bodies (Schwarzer, Saha & Latombe 2005; Redon et al. 2005),
+    derived here for the PCC chain of paper §2.1.
+
+    Derivation. Write ``dq_j = (dL_j, dtheta_j, dphi_j)`` and let
+    ``Lbar_j = max(L_j(0), L_j(1))`` bound L_j on the whole motion (it is linear
+    in t). A point x on segment i at fraction s moves with
+    ``dx/dt = sum_{j <= i} (dx/dq_j) dq_j``, and each partial derivative is
+    bounded uniformly in the configuration:
+
+    * ``dphi_j``: ``R_j = Rz(phi_j) Ry(theta_j)`` and ``P_j = Rz(phi_j) p(theta_j)``,
+      so phi_j turns segment j and everything after it rigidly about the z axis
+      of segment j's base frame, through its base point: ``|dx/dphi_j|`` is the
+      distance of x from that axis, at most the backbone length from the base of
+      segment j to x, ``<= Lbar_j + ... + Lbar_i``.
+    * ``dtheta_j``: in its bending plane segment j's point at fraction s is
+      ``L s v(theta s)`` with ``v(a) = (1 - cos a, sin a) / a = (1/a) int_0^a
+      (sin t, cos t) dt``, the mean unit tangent. ``v'(a) = (1/a^2) int_0^a
+      (e(a) - e(t)) dt`` with ``|e(a) - e(t)| <= a - t``, so ``|v'| <= 1/2`` and a
+      point of segment j moves by at most ``L_j s^2 / 2 <= Lbar_j / 2`` per unit
+      theta_j. A point after segment j also turns with ``Ry(theta_j)`` at unit
+      rate about an axis through segment j's tip: ``|dx/dtheta_j| <= Lbar_j / 2 +
+      Lbar_{j+1} + ... + Lbar_i``.
+    * ``dL_j``: the point of segment j is ``L s v(theta s)`` with ``|v| <= 1``,
+      and the orientations do not depend on L: ``|dx/dL_j| <= 1``.
+
+    Integrating ``|dx/dt|`` over t gives ``|x(t) - x(0)| <= sum_{j<=i} |dL_j| +
+    |dtheta_j| (Lbar_j / 2 + Lbar_{j+1} + ... + Lbar_i) + |dphi_j| (Lbar_j + ... + Lbar_i)``.
+    The bound grows along the chain, so ``bound[-1]`` bounds the whole arm. If
+    the clearance to every obstacle at q_a exceeds ``bound[-1]``, no point of the
+    arm can reach an obstacle anywhere on the motion. Length clipping does not
+    break this: the planner clips q_b first and then moves on the straight line.
+
+    Args:
+      q_a: (n, 3) configuration at the start of the motion.
+      q_b: (n, 3) configuration at its end.
+
+    Returns:
+      (n,) ``bound[i]``: no point of segments 0..i moves farther than this.
+    """
+    q_a = check_configuration(q_a)
+    q_b = check_configuration(q_b)
+    if q_a.shape != q_b.shape:
+        raise ValueError(f"q_a and q_b must have the same shape; got {q_a.shape} and {q_b.shape}")
+    return _motion_bounds_jit(q_a, q_b - q_a)
 
 
 def backbone_points(q, points_per_segment: int = 10):

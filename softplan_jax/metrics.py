@@ -34,7 +34,7 @@ from .closest import (
     _point_set_closest,
 )
 from .kinematics import _backbone_points, _segment_point
-from .numerics import safe_norm
+from .numerics import get_epsilon, safe_norm
 
 __all__ = ["true_closest", "between_steps", "dense_trajectory_clearance"]
 
@@ -91,10 +91,14 @@ def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
         r = residual(x)
         J = jax.jacfwd(residual)(x)  # (3, 3): d r / d(tau, s, u)
         H = J.T @ J
-        H = H + (1e-10 * jnp.trace(H) + jnp.finfo(dtype).tiny) * jnp.eye(3, dtype=dtype)
+        # Levenberg-Marquardt damping relative to the dtype (1e-10 vanishes in float32, where a
+        # rank-deficient H, e.g. a straight arm's base point, then solved to NaN).
+        H = H + (get_epsilon(dtype) * jnp.trace(H) + jnp.finfo(dtype).tiny) * jnp.eye(3, dtype=dtype)
         step = -jnp.linalg.solve(H, J.T @ r)
+        step = jnp.where(jnp.all(jnp.isfinite(step)), step, 0.0)  # never a NaN candidate
         cands = jnp.clip(x[None, :] + ts[:, None] * step[None, :], lo, hi)
         f = jax.vmap(lambda c: jnp.sum(residual(c) ** 2))(cands)
+        f = jnp.where(jnp.isnan(f), jnp.inf, f)
         return cands[jnp.argmin(f)]
 
     x = jax.lax.fori_loop(0, iterations, body, jnp.clip(x0, lo, hi))

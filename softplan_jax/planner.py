@@ -15,6 +15,24 @@ for obstacle j; ``J^+`` is the damped least-squares pseudo-inverse.
   segment, Jacobian at the arm sample nearest the obstacle).
 Point-set obstacles always use the N-point method.
 
+Step size. ``PlanOptions.step = "safe"`` (the default) is the clearance-bounded
+step: the Euler step ``q -> q + dt qdot`` is scaled by ``alpha`` in [0, 1] so
+that :func:`softplan_jax.kinematics.motion_bound` -- a sound bound on how far
+ANY arm point can move during the whole step -- stays below
+``safe_fraction * (clearance - floor)``, with the clearance of the planner's own
+obstacle model (for the curve method the exact distance). Since no arm point
+can move farther than the clearance, no step of the curve method can pass
+through an obstacle (conservative advancement). ``step = "plain"`` is the
+paper's step, unscaled (the paper tables use it).
+
+Escapes (``PlanOptions.escapes``). A stall (no progress towards the goal for
+``stall_window`` steps) is a local minimum of the potential field. While
+escapes remain, the planner then takes ``escape_steps`` random-walk steps
+(Barraquand & Latombe 1991): the attraction ``F_e`` is replaced by a tip
+velocity of speed ``v_max`` in a random direction, the repulsion and the safe
+step stay on; then the field takes over again. The PRNG key is in the scan's
+carry, so a rollout stays one ``lax.scan`` and is reproducible from its key.
+
 Rollouts (:func:`rollout`) run a fixed number of steps with ``lax.scan``; a
 finished rollout is frozen. Each step records q, the tip and the TRUE clearance
 to every obstacle (the real curve or point set, whatever model the planner
@@ -38,7 +56,7 @@ from .closest import (
     _closest_point_to_points,
 )
 from .curves import curve_points
-from .kinematics import _points_jacobians, _tip_position
+from .kinematics import _motion_bounds, _points_jacobians, _tip_position
 from .metrics import between_steps, empty_closest, true_closest
 from .numerics import damped_pinv, safe_norm
 from .scenarios import Scenario
@@ -133,8 +151,11 @@ class PlanOptions(NamedTuple):
       repulsion: "khatib" or "exponential".
       goal_tolerance: reached when |V_e| < goal_tolerance.
       stall_window: stalled after this many steps without improving the best
-        |V_e| by more than stall_tolerance.
-      stall_tolerance: see stall_window.
+        |V_e| by more than stall_tolerance (then an escape starts while any
+        is left; else the rollout ends "stalled").
+      stall_tolerance: see stall_window. The defaults (30 steps, 0.02) call
+        creeping along an obstacle at under ~1e-3 per step a stall: it would
+        not reach the goal within the step budget (benchmarks/safe_step.py).
       check_collisions: compute the true clearance and the between-step
         check inside the rollout (default). False gives a planning-only
         rollout (clearance records NaN, never "collided"), for timing the
@@ -144,6 +165,14 @@ class PlanOptions(NamedTuple):
         solver reaches only to rounding). The rollout uses
         ``max(contact_tolerance, 10 sqrt(eps))``: 1e-6 in float64, 3.5e-3 in float32.
       solver: SolverOptions of the exact closest-point solver.
+      step: "safe" (default): the clearance-bounded step (see the module
+        docstring); "plain": the paper's step ``q + dt qdot`` (paper eq. 9).
+      safe_fraction: the safe step keeps the motion bound of every step below
+        this fraction of ``(clearance - floor)``, in (0, 1]; floor is twice the
+        contact tolerance, so the clearance never falls to the contact tolerance.
+      escapes: random-walk escapes from stalls allowed per rollout (0: none;
+        a stall then ends the rollout, as in the paper).
+      escape_steps: steps of one random walk.
     """
 
     method: str = "curve"
@@ -151,11 +180,15 @@ class PlanOptions(NamedTuple):
     points_per_segment: int = 10
     repulsion: str = "khatib"
     goal_tolerance: float = 1e-2
-    stall_window: int = 60
-    stall_tolerance: float = 1e-4
+    stall_window: int = 30
+    stall_tolerance: float = 0.02
     check_collisions: bool = True
     contact_tolerance: float = 1e-6
     solver: SolverOptions = DEFAULT_OPTIONS
+    step: str = "safe"
+    safe_fraction: float = 0.8
+    escapes: int = 20
+    escape_steps: int = 15
 
 
 class Status:
@@ -187,6 +220,14 @@ def check_options(options: PlanOptions) -> PlanOptions:
         raise ValueError(f"contact_tolerance must be >= 0, got {options.contact_tolerance}")
     if int(options.stall_window) < 1:
         raise ValueError(f"stall_window must be >= 1, got {options.stall_window}")
+    if options.step not in ("safe", "plain"):
+        raise ValueError(f"unknown step {options.step!r}; choose 'safe' (clearance-bounded) or 'plain' (the paper's)")
+    if not 0 < float(options.safe_fraction) <= 1:
+        raise ValueError(f"safe_fraction must be in (0, 1], got {options.safe_fraction}")
+    if int(options.escapes) < 0:
+        raise ValueError(f"escapes must be >= 0, got {options.escapes}")
+    if int(options.escape_steps) < 1:
+        raise ValueError(f"escape_steps must be >= 1, got {options.escape_steps}")
     return options
 
 
@@ -244,8 +285,13 @@ def _obstacle_radius_and_mask(scenario: Scenario):
     return radius, mask
 
 
-def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions):
-    """Paper eq. (9): qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj)."""
+def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk_velocity=None):
+    """Paper eq. (9): qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj).
+
+    ``walk_velocity`` (3,), if given, replaces F_e (an escape's random walk).
+    Returns ``(qdot (n, 3), clearance (m,))``: the clearance of the planner's
+    own obstacle model (exact for the curve method), +inf for padding slots.
+    """
     n = q.shape[0]
     V_e = scenario.goal - _tip_position(q)
     cps = _planner_closest(q, scenario, truth, options)
@@ -259,14 +305,52 @@ def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: Pla
     clearance = cps.distance - scenario.arm_radius - radius
     F_s = jax.vmap(lambda v, d: repulsion(v, d, gains, options.repulsion))(V_s, clearance)
     F_s = jnp.where(mask[:, None], F_s, 0.0)
+    F_e = attraction(V_e, gains) if walk_velocity is None else walk_velocity
     # Paper eq. (9).
-    qdot = pinvs[0] @ attraction(V_e, gains) - jnp.einsum("kij,kj->i", pinvs[1:], F_s)
-    return qdot.reshape(n, 3)
+    qdot = pinvs[0] @ F_e - jnp.einsum("kij,kj->i", pinvs[1:], F_s)
+    return qdot.reshape(n, 3), jnp.where(mask, clearance, jnp.inf)
 
 
 def _apply_step(q, qdot, scenario: Scenario, gains: Gains):
     q_next = q + gains.dt * qdot
     return q_next.at[:, 0].set(jnp.clip(q_next[:, 0], scenario.L_min, scenario.L_max))
+
+
+def _contact(options: PlanOptions, dtype) -> float:
+    return max(float(options.contact_tolerance), 10.0 * float(np.sqrt(np.finfo(dtype).eps)))
+
+
+def _step_scale(q, q_next, clearance, options: PlanOptions):
+    """The safe step's scale alpha in [0, 1] for the motion q -> q_next.
+
+    ``motion_bound(q, q + alpha (q_next - q)) <= alpha * motion_bound(q, q_next)``
+    (the bound is linear in dq for a fixed length bound, and Lbar of the full
+    step bounds every shorter one), so alpha = min(1, f (c - floor) / bound)
+    keeps every arm point, at every instant of the step, closer to its start
+    than ``f (c - floor)``: the clearance stays above ``floor`` (conservative
+    advancement). ``c`` is the smallest clearance of the planner's model; no
+    obstacle (c = inf) gives alpha = 1; NaN propagates (and ends the rollout).
+    """
+    floor = 2.0 * _contact(options, q.dtype)
+    c = jnp.min(clearance, initial=jnp.inf)
+    allowed = options.safe_fraction * jnp.maximum(c - floor, 0.0)
+    bound = _motion_bounds(q, q_next - q)[-1]
+    # Double-where: a zero bound (no motion) gives alpha = 1 and no 0/0 in either mode.
+    moving = bound > 0
+    bound_safe = jnp.where(moving, bound, 1.0)
+    alpha = jnp.where(moving, jnp.minimum(1.0, allowed / bound_safe), 1.0)
+    return jnp.where(jnp.isnan(c), jnp.nan, alpha)
+
+
+def _next_q(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk_velocity=None):
+    """One planner step from q: ``(q_next, alpha)`` (alpha = 1 for the plain step)."""
+    qdot, clearance = _qdot(q, scenario, gains, truth, options, walk_velocity)
+    q_next = _apply_step(q, qdot, scenario, gains)
+    if options.step == "plain":
+        return q_next, jnp.ones((), q.dtype)
+    alpha = _step_scale(q, q_next, clearance, options)
+    # q and q_next lie in the length box, so every point of the segment between them does too.
+    return q + alpha * (q_next - q), alpha
 
 
 @partial(jax.jit, static_argnames=("options",))
@@ -280,13 +364,15 @@ def planner_step(q, scenario: Scenario, gains: Gains, options: PlanOptions = Pla
       options: PlanOptions (static).
 
     Returns:
-      (n, 3) next configuration ``q + dt qdot`` with lengths clipped to limits.
+      (n, 3) next configuration: ``q + dt qdot`` with lengths clipped to their
+      limits (``options.step = "plain"``), scaled down by the clearance-bounded
+      step where it could reach an obstacle (``"safe"``, the default).
     """
     truth = true_closest(q, scenario, options.solver) if options.method == "curve" else None
     if truth is None:
         # The points method never uses the exact solver: a placeholder of the right shape.
         truth = _placeholder_truth(q, scenario)
-    return _apply_step(q, _qdot(q, scenario, gains, truth, options), scenario, gains)
+    return _next_q(q, scenario, gains, truth, options)[0]
 
 
 def _placeholder_truth(q, scenario: Scenario) -> ClosestPoint:
@@ -315,6 +401,9 @@ class Rollout(NamedTuple):
       reached, collided: () bool.
       min_clearance: () minimum over time, obstacles and between-step motion.
       final_error: () |goal - tip| at the end.
+      step_scale: (T+1,) the safe step's alpha for the step from q_k (1 for the
+        plain step; 0 where no step was taken).
+      escapes: () int, random-walk escapes started.
     """
 
     q: jax.Array
@@ -327,6 +416,8 @@ class Rollout(NamedTuple):
     collided: jax.Array
     min_clearance: jax.Array
     final_error: jax.Array
+    step_scale: jax.Array
+    escapes: jax.Array
 
 
 class _Carry(NamedTuple):
@@ -338,9 +429,13 @@ class _Carry(NamedTuple):
     iterations: jax.Array
     best_error: jax.Array
     since_best: jax.Array
+    key: jax.Array  # PRNG key of the escapes
+    escapes: jax.Array  # escapes started so far
+    walk_left: jax.Array  # steps left in the current random walk (0: following the field)
+    walk_velocity: jax.Array  # (3,) tip velocity of the current walk
 
 
-def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
+def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, key=None) -> Rollout:
     """Roll the planner out for ``max_steps`` steps with ``lax.scan`` (pure;
     wrap in jit/vmap/grad as needed; :func:`softplan_jax.plan` is the jitted
     entry point).
@@ -348,23 +443,33 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
     Scan iteration k (k = 0..max_steps) looks at q_k: exact closest pairs to
     every obstacle (shared by the clearance record and, for the curve method,
     by the planner), the true clearance at q_k and during the motion from
-    q_{k-1}; then the status; then, while running, the step to q_{k+1}.
+    q_{k-1}; then the status; then, while running, the step to q_{k+1}
+    (clearance-bounded for ``options.step = "safe"``).
 
-    Status: reached (|V_e| < goal_tolerance), collided (true clearance <= the
-    contact tolerance at a step or during the motion between two steps; this
-    wins over reached),
-    stalled (the best |V_e| did not improve by stall_tolerance over
-    stall_window steps), non-finite (a step gave NaN/inf: the last finite
-    configuration is kept), else max_steps. Once finished, the state is frozen.
+    Status: non-finite (a clearance or a step is NaN/inf: the last finite
+    configuration is kept; a NaN clearance never counts as clear), collided
+    (true clearance <= the contact tolerance at a step or during the motion
+    between two steps; this wins over reached), reached (|V_e| <
+    goal_tolerance), stalled (the best |V_e| did not improve by
+    stall_tolerance over stall_window steps, and no escape is left; while one
+    is, a random walk of ``escape_steps`` steps starts instead), else
+    max_steps. Once finished, the state is frozen.
+
+    Args:
+      scenario, gains, options, max_steps: as :func:`softplan_jax.plan`.
+      key: PRNG key of the escapes' random walks (default ``PRNGKey(0)``).
     """
     radius, mask = _obstacle_radius_and_mask(scenario)
     q0 = scenario.q0
-    contact = _contact(options, q0.dtype)
+    dtype = q0.dtype
+    contact = _contact(options, dtype)
+    key = jax.random.PRNGKey(0) if key is None else key
 
     def clearance_of(truth):
         return jnp.where(mask, truth.distance - scenario.arm_radius - radius, jnp.inf)
 
     check = options.check_collisions
+    walks = options.escapes > 0
 
     def body(carry: _Carry, k):
         q = carry.q
@@ -376,25 +481,52 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
             c = clearance_of(truth)
             cb = between_steps(carry.q_prev, q, carry.truth_prev, truth, scenario, scenario.arm_radius + radius)
             cb = jnp.where(carry.first | ~mask, c, cb)
+            nan_clearance = jnp.any(jnp.isnan(c)) | jnp.any(jnp.isnan(cb))
+            hit = jnp.any(c <= contact) | jnp.any(cb <= contact)
         else:
-            c = cb = jnp.full(mask.shape, jnp.nan, q.dtype)
+            c = cb = jnp.full(mask.shape, jnp.nan, dtype)
+            nan_clearance = hit = jnp.zeros((), bool)
         err = safe_norm(scenario.goal - _tip_position(q))
         improved = err < carry.best_error - options.stall_tolerance
-        since = jnp.where(improved | carry.first, 0, carry.since_best + 1)
+        walking = carry.walk_left > 0
+        since = jnp.where(improved | carry.first | walking, 0, carry.since_best + 1)
         running = carry.status == Status.RUNNING
+        stalled = since >= options.stall_window
+        # A stall with an escape left starts a random walk instead of ending the rollout.
+        escape = stalled & (carry.escapes < options.escapes)
         judged = jnp.where(
-            check & (jnp.any(c <= contact) | jnp.any(cb <= contact)),
-            Status.COLLIDED,
+            nan_clearance,
+            Status.NONFINITE,
             jnp.where(
-                err < options.goal_tolerance,
-                Status.REACHED,
-                jnp.where(since >= options.stall_window, Status.STALLED, Status.RUNNING),
+                hit,
+                Status.COLLIDED,
+                jnp.where(
+                    err < options.goal_tolerance,
+                    Status.REACHED,
+                    jnp.where(stalled & ~escape, Status.STALLED, Status.RUNNING),
+                ),
             ),
         )
         status = jnp.where(running, judged, carry.status)
         # The step to q_{k+1}, taken only while running (and not past max_steps).
         stepping = (status == Status.RUNNING) & (k < max_steps)
-        q_next = _apply_step(q, _qdot(q, scenario, gains, truth, options), scenario, gains)
+        key, walk_velocity, walk_left, escapes = carry.key, carry.walk_velocity, carry.walk_left, carry.escapes
+        if walks:
+            start = stepping & escape
+            key, sub = jax.random.split(key)
+            direction = jax.random.normal(sub, (3,), dtype)
+            direction = direction / jnp.maximum(safe_norm(direction), jnp.finfo(dtype).tiny)
+            walk_velocity = jnp.where(start, gains.v_max * direction, walk_velocity)
+            walk_left = jnp.where(start, options.escape_steps, walk_left)
+            escapes = escapes + start.astype(jnp.int32)
+            since = jnp.where(start, 0, since)
+            q_field, alpha_field = _next_q(q, scenario, gains, truth, options)
+            q_walk, alpha_walk = _next_q(q, scenario, gains, truth, options, walk_velocity)
+            in_walk = walk_left > 0
+            q_next = jnp.where(in_walk, q_walk, q_field)
+            alpha = jnp.where(in_walk, alpha_walk, alpha_field)
+        else:
+            q_next, alpha = _next_q(q, scenario, gains, truth, options)
         finite = jnp.all(jnp.isfinite(q_next))
         status = jnp.where(stepping & ~finite, Status.NONFINITE, status).astype(jnp.int32)
         moved = stepping & finite
@@ -407,8 +539,12 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
             iterations=carry.iterations + moved.astype(jnp.int32),
             best_error=jnp.minimum(err, carry.best_error),
             since_best=since,
+            key=key,
+            escapes=escapes,
+            walk_left=jnp.where(moved, jnp.maximum(walk_left - 1, 0), walk_left).astype(jnp.int32),
+            walk_velocity=walk_velocity,
         )
-        return new, (q, _tip_position(q), c, cb)
+        return new, (q, _tip_position(q), c, cb, jnp.where(moved, alpha, 0.0).astype(dtype))
 
     truth_dummy = _placeholder_truth(q0, scenario)
     carry0 = _Carry(
@@ -418,10 +554,14 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         first=jnp.ones((), bool),
         status=jnp.asarray(Status.RUNNING, jnp.int32),
         iterations=jnp.zeros((), jnp.int32),
-        best_error=jnp.asarray(jnp.inf, q0.dtype),
+        best_error=jnp.asarray(jnp.inf, dtype),
         since_best=jnp.zeros((), jnp.int32),
+        key=key,
+        escapes=jnp.zeros((), jnp.int32),
+        walk_left=jnp.zeros((), jnp.int32),
+        walk_velocity=jnp.zeros((3,), dtype),
     )
-    final, (qs, tips, cs, cbs) = jax.lax.scan(body, carry0, jnp.arange(max_steps + 1))
+    final, (qs, tips, cs, cbs, alphas) = jax.lax.scan(body, carry0, jnp.arange(max_steps + 1))
     status = jnp.where(final.status == Status.RUNNING, Status.MAX_STEPS, final.status)
     return Rollout(
         q=qs,
@@ -434,11 +574,9 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         collided=status == Status.COLLIDED,
         min_clearance=jnp.minimum(jnp.min(cs, initial=jnp.inf), jnp.min(cbs, initial=jnp.inf)),
         final_error=safe_norm(scenario.goal - tips[-1]),
+        step_scale=alphas,
+        escapes=final.escapes,
     )
-
-
-def _contact(options: PlanOptions, dtype) -> float:
-    return max(float(options.contact_tolerance), 10.0 * float(np.sqrt(np.finfo(dtype).eps)))
 
 
 def apply_collision_checks(r: Rollout, scenario: Scenario, options: PlanOptions) -> Rollout:
@@ -449,7 +587,8 @@ def apply_collision_checks(r: Rollout, scenario: Scenario, options: PlanOptions)
     depend on the checks until the first collision, after which the checked
     rollout freezes, so the trajectory is cut and frozen at the first step
     whose clearance (at the step, or during the motion to it) is at or below
-    the contact tolerance. Pure; vmap it over a batch.
+    the contact tolerance, or NaN (status non-finite: a NaN clearance never
+    counts as clear). Pure; vmap it over a batch.
     """
     radius, mask = _obstacle_radius_and_mask(scenario)
     contact = _contact(options, scenario.q0.dtype)
@@ -462,7 +601,8 @@ def apply_collision_checks(r: Rollout, scenario: Scenario, options: PlanOptions)
     )
     cb = jnp.concatenate([c[:1], jnp.where(mask, cb, jnp.inf)])
     steps = jnp.arange(r.q.shape[0])
-    hit = (jnp.any(c <= contact, axis=1) | jnp.any(cb <= contact, axis=1)) & (steps <= r.iterations)
+    nan = jnp.any(jnp.isnan(c), axis=1) | jnp.any(jnp.isnan(cb), axis=1)
+    hit = (jnp.any(c <= contact, axis=1) | jnp.any(cb <= contact, axis=1) | nan) & (steps <= r.iterations)
     first = jnp.argmax(hit)
     collided = jnp.any(hit)
     end = jnp.where(collided, first, r.iterations)
@@ -471,9 +611,12 @@ def apply_collision_checks(r: Rollout, scenario: Scenario, options: PlanOptions)
     tip = jnp.where(keep[:, None], r.tip, r.tip[end])
     c = jnp.where(keep[:, None], c, c[end])
     cb = jnp.where(keep[:, None], cb, c[end])
-    status = jnp.where(collided, Status.COLLIDED, r.status).astype(r.status.dtype)
+    status = jnp.where(collided, jnp.where(nan[first], Status.NONFINITE, Status.COLLIDED), r.status)
+    status = status.astype(r.status.dtype)
+    step_scale = jnp.where(steps < end, r.step_scale, 0.0)
     return r._replace(
         q=q, tip=tip, clearance=c, between=cb, status=status, iterations=end.astype(r.iterations.dtype),
+        step_scale=step_scale,
         reached=status == Status.REACHED, collided=status == Status.COLLIDED,
         min_clearance=jnp.minimum(jnp.min(c, initial=jnp.inf), jnp.min(cb, initial=jnp.inf)),
         final_error=safe_norm(scenario.goal - tip[-1]),
@@ -495,36 +638,53 @@ def _strong_gains(gains: Gains, dtype) -> Gains:
     return Gains(*(jnp.asarray(v, dtype) for v in gains))
 
 
-@partial(jax.jit, static_argnames=("options", "max_steps"))
-def _rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
-    return rollout(scenario, gains, options, max_steps)
+def _key(seed):
+    """A PRNG key from an int seed (or a key, returned as it is)."""
+    if seed is None:
+        seed = 0
+    if isinstance(seed, (int, np.integer)):
+        return jax.random.PRNGKey(int(seed))
+    return seed
 
 
 @partial(jax.jit, static_argnames=("options", "max_steps"))
-def _rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
-    return jax.vmap(lambda sc: rollout(sc, gains, options, max_steps))(scenarios)
+def _rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, key) -> Rollout:
+    return rollout(scenario, gains, options, max_steps, key)
 
 
-def rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
+@partial(jax.jit, static_argnames=("options", "max_steps"))
+def _rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, keys) -> Rollout:
+    return jax.vmap(lambda sc, k: rollout(sc, gains, options, max_steps, k))(scenarios, keys)
+
+
+def _batch_keys(seed, batch: int):
+    return jax.random.split(_key(seed), batch)
+
+
+def rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0) -> Rollout:
     """:func:`rollout` under ``jit`` (options and max_steps static). One
     compilation per padded scenario shape, dtype, options and max_steps; new
-    goals, obstacles or gain values reuse it. ``rollout_jit.lower(...)`` lowers
-    ahead of time; ``rollout_jit._cache_size()`` counts compilations."""
-    return _rollout_jit(scenario, _strong_gains(gains, scenario.q0.dtype), options, max_steps)
+    goals, obstacles, gain values or seeds reuse it. ``seed``: an int or a PRNG
+    key for the escapes. ``rollout_jit.lower(...)`` lowers ahead of time;
+    ``rollout_jit._cache_size()`` counts compilations."""
+    return _rollout_jit(scenario, _strong_gains(gains, scenario.q0.dtype), options, max_steps, _key(seed))
 
 
-def rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int) -> Rollout:
+def rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0) -> Rollout:
     """:func:`rollout` vmapped over a batch of scenarios of one padded shape
-    (every leaf of ``scenarios`` has a leading batch axis; gains shared), jitted."""
-    return _rollout_batch(scenarios, _strong_gains(gains, scenarios.q0.dtype), options, max_steps)
+    (every leaf of ``scenarios`` has a leading batch axis; gains shared), jitted.
+    Scenario b's escapes use ``jax.random.split(key(seed), B)[b]``."""
+    keys = _batch_keys(seed, scenarios.q0.shape[0])
+    return _rollout_batch(scenarios, _strong_gains(gains, scenarios.q0.dtype), options, max_steps, keys)
 
 
-rollout_jit.lower = lambda scenario, gains, options, max_steps: _rollout_jit.lower(
-    scenario, _strong_gains(gains, scenario.q0.dtype), options, max_steps
+rollout_jit.lower = lambda scenario, gains, options, max_steps, seed=0: _rollout_jit.lower(
+    scenario, _strong_gains(gains, scenario.q0.dtype), options, max_steps, _key(seed)
 )
 rollout_jit._cache_size = _rollout_jit._cache_size
-rollout_batch.lower = lambda scenarios, gains, options, max_steps: _rollout_batch.lower(
-    scenarios, _strong_gains(gains, scenarios.q0.dtype), options, max_steps
+rollout_batch.lower = lambda scenarios, gains, options, max_steps, seed=0: _rollout_batch.lower(
+    scenarios, _strong_gains(gains, scenarios.q0.dtype), options, max_steps,
+    _batch_keys(seed, scenarios.q0.shape[0]),
 )
 rollout_batch._cache_size = _rollout_batch._cache_size
 
@@ -577,7 +737,7 @@ def check_gains(gains: Gains | None, dtype) -> Gains:
 
 
 def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
-         max_steps: int = 300, **options) -> PlanResult:
+         max_steps: int = 600, seed=0, **options) -> PlanResult:
     """Plan a path for one scenario (jitted rollout; compiles once per padded
     scenario shape, method and option set).
 
@@ -589,8 +749,9 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
       n_points: N of the N-point model (method "points").
       gains: :class:`Gains`; default :func:`default_gains`.
       max_steps: the most planner steps.
-      **options: further :class:`PlanOptions` fields (goal_tolerance,
-        repulsion, stall_window, solver, ...).
+      seed: int seed (or PRNG key) of the escapes' random walks.
+      **options: further :class:`PlanOptions` fields (step, safe_fraction,
+        escapes, goal_tolerance, repulsion, stall_window, solver, ...).
 
     Returns:
       :class:`PlanResult`.
@@ -603,7 +764,7 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
         raise ValueError(f"max_steps must be >= 1, got {max_steps}")
     opts = make_options(method, n_points, **options)
     g = check_gains(gains, scenario.q0.dtype)
-    r = rollout_jit(scenario, g, opts, int(max_steps))
+    r = rollout_jit(scenario, g, opts, int(max_steps), seed)
     return result_from_rollout(r, scenario)
 
 
@@ -642,7 +803,7 @@ def stack_scenarios(scenarios) -> Scenario:
 
 
 def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
-               max_steps: int = 300, **options) -> Rollout:
+               max_steps: int = 600, seed=0, **options) -> Rollout:
     """Plan a batch of scenarios in one vmapped, jitted call.
 
     Args:
@@ -659,4 +820,4 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
         raise ValueError(f"max_steps must be >= 1, got {max_steps}")
     opts = make_options(method, n_points, **options)
     g = check_gains(gains, scenarios.q0.dtype)
-    return rollout_batch(scenarios, g, opts, int(max_steps))
+    return rollout_batch(scenarios, g, opts, int(max_steps), seed)

@@ -20,6 +20,7 @@ import json
 import math
 import os
 import tempfile
+import warnings
 from typing import NamedTuple
 
 import jax
@@ -41,6 +42,7 @@ __all__ = [
     "scenario_from_dict",
     "scenario_to_dict",
     "obstacle_count",
+    "scenario_warnings",
 ]
 
 
@@ -179,7 +181,7 @@ def make_scenario(
     arm_radius = as_float_array(arm_radius, "arm_radius")
     if arm_radius.shape != () or not bool(jnp.isfinite(arm_radius)) or float(arm_radius) < 0:
         raise ValueError(f"arm_radius must be a finite scalar >= 0; got {arm_radius}")
-    return Scenario(
+    scenario = Scenario(
         q0=q0,
         goal=goal.astype(dtype),
         curves=curves.astype(dtype),
@@ -192,6 +194,53 @@ def make_scenario(
         L_min=L_min,
         L_max=L_max,
     )
+    for msg in scenario_warnings(scenario):
+        warnings.warn(msg, UserWarning, stacklevel=2)
+    return scenario
+
+
+# Curve samples of the goal check in scenario_warnings (a warning, not a proof: a
+# goal within the sample spacing of a curve counts as on it).
+_GOAL_CHECK_SAMPLES = 2049
+
+
+def scenario_warnings(scenario: Scenario) -> list[str]:
+    """Sanity checks of one (unbatched) scenario that are not errors: the goal
+    on or inside an obstacle (its radius plus the arm's), or farther from the
+    base than the arm reaches with every length at its limit L_max.
+
+    Returns the messages (empty when all is well); :func:`make_scenario` and
+    :func:`load_scenario` issue them as ``UserWarning`` and the CLI prints them.
+    """
+    from .curves import curve_points
+
+    out = []
+    goal = np.asarray(scenario.goal, np.float64)
+    arm_r = float(scenario.arm_radius)
+    # Distance sampled on the curves minus half the sample spacing: never larger than the true one.
+    hits = []
+    m_c = scenario.curves.coeffs.shape[0]
+    curves = [(k, jax.tree_util.tree_map(lambda x, k=k: x[k], scenario.curves)) for k in range(m_c)
+              if bool(scenario.curve_mask[k])]
+    curves += [(m_c + scenario.points.shape[0] + k, pc) for k, pc in enumerate(scenario.parametric)]
+    for k, c in curves:
+        pts = np.asarray(curve_points(c, _GOAL_CHECK_SAMPLES), np.float64)
+        spacing = float(np.max(np.linalg.norm(np.diff(pts, axis=0), axis=-1)))
+        d = float(np.min(np.linalg.norm(pts - goal, axis=-1))) - 0.5 * spacing
+        if d <= float(c.radius) + arm_r:
+            hits.append(k)
+    for k in range(scenario.points.shape[0]):
+        pts = np.asarray(scenario.points[k], np.float64)[np.asarray(scenario.point_mask[k])]
+        if pts.size and np.min(np.linalg.norm(pts - goal, axis=-1)) <= float(scenario.point_radius[k]) + arm_r:
+            hits.append(m_c + k)
+    if hits:
+        out.append(f"the goal {goal.tolist()} lies on or inside obstacle(s) {hits} (within the obstacle's "
+                   "radius plus the arm's): it cannot be reached without contact")
+    reach = float(np.sum(np.asarray(scenario.L_max, np.float64)))
+    if np.isfinite(reach) and np.linalg.norm(goal) > reach:
+        out.append(f"the goal is {np.linalg.norm(goal):.4g} from the arm's base, farther than the arm reaches "
+                   f"with every length at L_max ({reach:.4g}): it cannot be reached")
+    return out
 
 
 # ----------------------------------------------------------------------------

@@ -75,6 +75,8 @@ def check_fraction(s):
     if s.ndim != 0:
         raise ValueError(f"s must be a scalar fraction of the segment, got shape {s.shape}")
     check_finite(s, "s")
+    if is_concrete(s) and not 0.0 <= float(s) <= 1.0:
+        raise ValueError(f"s is a fraction of the segment and must lie in [0, 1]; got {float(s)}")
     return s
 
 

@@ -1,0 +1,248 @@
+"""The clearance-bounded (safe) step and the escapes, measured on the random suite.
+
+For each planner variant (``--variants``) and obstacle model (``--methods``),
+every scene of ``random_scenarios(seed, n)`` is planned with a planning-only
+rollout (``rollout_batch``, ``check_collisions=False``) and then checked with
+``apply_collision_checks``: the exact clearance to the REAL curves at every
+step and the between-step search over the motion (the rollout is cut at the
+first contact, as a checked rollout would be). Reported per variant and
+model: reached / collided / stalled / max-steps / non-finite rates with 95 %
+Wilson intervals, iterations over successes, escapes used, and the safe
+step's scale. Per-scene records (scene x variant x model -> status,
+iterations, min clearance) go to the JSON file.
+
+Variants:
+
+* ``plain``: the paper's step (``step="plain"``, no escapes);
+* ``safe``: the clearance-bounded step, no escapes;
+* ``default``: the library's defaults (safe step and escapes).
+
+``--dense K`` re-checks the first K scenes of every curve-method variant with
+the brute-force :func:`softplan_jax.dense_trajectory_clearance` (dense
+interpolation in q, dense sampling of arm and curves, minus the sampling error
+bound), independent of the closest-point solver.
+
+Usage::
+
+    python benchmarks/safe_step.py --seed 0 --n 256            # training seed
+    python benchmarks/safe_step.py --seed 1 --n 1000 --float32 # held out, float32
+
+Writes ``benchmarks/results/safe_step_<dtype>_seed<seed>_n<n>.{md,json}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+VARIANTS = {
+    "plain": dict(step="plain", escapes=0),
+    "safe": dict(step="safe", escapes=0),
+    "default": dict(),
+}
+STATUSES = ("reached", "collided", "stalled", "max_steps", "non_finite")
+
+
+def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """95 % Wilson score interval of a rate k / n (Wilson 1927)."""
+    if n == 0:
+        return (float("nan"), float("nan"))
+    p = k / n
+    den = 1 + z * z / n
+    mid = (p + z * z / (2 * n)) / den
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    return (max(0.0, mid - half), min(1.0, mid + half))
+
+
+def fmt_rate(k: int, n: int) -> str:
+    lo, hi = wilson(k, n)
+    return f"{k} ({100 * k / n:.1f} % [{100 * lo:.1f}, {100 * hi:.1f}])"
+
+
+def parse_args(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seed", type=int, default=0, help="seed of random_scenarios (default 0: the training seed)")
+    ap.add_argument("--n", type=int, default=256, help="number of scenes (default 256)")
+    ap.add_argument("--chunk", type=int, default=128, help="scenes per vmapped call (default 128)")
+    ap.add_argument("--max-steps", type=int, default=300, help="planner steps (default 300, as plan)")
+    ap.add_argument("--variants", default="plain,safe,default", help="comma list of plain, safe, default")
+    ap.add_argument("--methods", default="curve", help="comma list of 'curve' and point counts N (default curve)")
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="override a PlanOptions field of every variant (e.g. safe_fraction=0.3)")
+    ap.add_argument("--dense", type=int, default=0, help="brute-force re-check of the first K scenes (curve)")
+    ap.add_argument("--float32", action="store_true", help="float32 (default float64)")
+    ap.add_argument("--out", default=None, help="output prefix (default benchmarks/results/safe_step_...)")
+    args = ap.parse_args(argv)
+    args.variant_list = args.variants.split(",")
+    for v in args.variant_list:
+        if v not in VARIANTS:
+            ap.error(f"--variants: unknown variant {v!r}; choose from {sorted(VARIANTS)}")
+    try:
+        args.method_list = [m if m == "curve" else int(m) for m in args.methods.split(",")]
+    except ValueError:
+        ap.error(f"--methods: use 'curve' and integers, got {args.methods!r}")
+    args.overrides = {}
+    for item in args.set:
+        field, _, value = item.partition("=")
+        try:
+            args.overrides[field] = json.loads(value)
+        except json.JSONDecodeError:
+            args.overrides[field] = value
+    if args.n < 1 or args.chunk < 1 or args.max_steps < 1:
+        ap.error("--n, --chunk and --max-steps must be >= 1")
+    return args
+
+
+def main(argv=None) -> dict:
+    args = parse_args(argv)
+    import jax
+
+    if not args.float32:
+        jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp
+
+    import softplan_jax as sp
+    from _common import RESULTS_DIR, finish_machine, log, machine_info, machine_lines
+    from softplan_jax.planner import apply_collision_checks, make_options, rollout_batch, status_name
+
+    dtype = jnp.float32 if args.float32 else jnp.float64
+    dname = "float32" if args.float32 else "float64"
+    machine = machine_info(dname)
+    t_all = time.perf_counter()
+    log(f"safe_step: random_scenarios({args.seed}, {args.n}) in {dname} ...")
+    suite = sp.random_scenarios(args.seed, args.n, dtype=dtype)
+    n = args.n
+    chunk = min(args.chunk, n)
+    pad = (-n) % chunk
+    take = np.concatenate([np.arange(n), np.full(pad, n - 1)])
+    gains = sp.default_gains(dtype)
+    check = jax.jit(jax.vmap(apply_collision_checks, in_axes=(0, 0, None)), static_argnums=2)
+
+    records: dict[str, dict] = {}
+    summary = []
+    for variant in args.variant_list:
+        for method in args.method_list:
+            label = f"{variant}/{'curve' if method == 'curve' else f'N={method}'}"
+            kw = dict(VARIANTS[variant], **args.overrides)
+            opts = make_options("curve" if method == "curve" else "points", 10 if method == "curve" else method,
+                                check_collisions=False, **kw)
+            status, iters, minc, escapes, alphas = [], [], [], [], []
+            t0 = time.perf_counter()
+            for c0 in range(0, n + pad, chunk):
+                idx = take[c0: c0 + chunk]
+                batch = jax.tree_util.tree_map(lambda x, idx=idx: x[idx], suite)
+                r = rollout_batch(batch, gains, opts, args.max_steps, seed=args.seed * 100003 + c0)
+                r = jax.block_until_ready(check(r, batch, opts))
+                status.append(np.asarray(r.status))
+                iters.append(np.asarray(r.iterations))
+                minc.append(np.asarray(r.min_clearance))
+                escapes.append(np.asarray(r.escapes))
+                steps = np.arange(r.q.shape[1])[None, :] < np.asarray(r.iterations)[:, None]
+                a = np.asarray(r.step_scale)
+                alphas.append(np.where(steps, a, np.nan))
+                log(f"  {label}: {min(c0 + chunk, n)}/{n} scenes, {time.perf_counter() - t0:.0f} s")
+            status = np.concatenate(status)[:n]
+            iters = np.concatenate(iters)[:n]
+            minc = np.concatenate(minc)[:n]
+            escapes = np.concatenate(escapes)[:n]
+            alphas = np.concatenate(alphas)[:n]
+            names = [status_name(s) for s in status]
+            counts = {s: int(sum(x == s for x in names)) for s in STATUSES}
+            reached = np.array([x == "reached" for x in names])
+            row = dict(
+                label=label, variant=variant, method=str(method), n=n, counts=counts,
+                intervals={s: wilson(counts[s], n) for s in STATUSES},
+                mean_iterations_reached=float(iters[reached].mean()) if reached.any() else None,
+                scenes_with_escapes=int((escapes > 0).sum()),
+                reached_after_escape=int(((escapes > 0) & reached).sum()),
+                min_clearance=float(np.nanmin(minc)),
+                nan_min_clearance=int(np.isnan(minc).sum()),
+                step_scale_below_1=float(np.nanmean(alphas < 1)) if np.isfinite(alphas).any() else None,
+                collided_scenes=[int(i) for i in np.nonzero([x == "collided" for x in names])[0]],
+                seconds=time.perf_counter() - t0,
+                options={k: v for k, v in opts._asdict().items() if k != "solver"},
+            )
+            summary.append(row)
+            records[label] = dict(status=names, iterations=iters.tolist(),
+                                  min_clearance=[None if not np.isfinite(x) else float(x) for x in minc],
+                                  escapes=escapes.tolist())
+            log(f"  {label}: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+
+    dense = []
+    if args.dense:
+        k = min(args.dense, n)
+        log(f"safe_step: brute-force re-check of {k} scenes per curve variant ...")
+        dense_fn = jax.jit(lambda qs, sc: sp.dense_trajectory_clearance(qs, sc, substeps=8, arm_samples=40,
+                                                                         curve_samples=400))
+        for variant in args.variant_list:
+            opts = make_options("curve", **dict(VARIANTS[variant], **args.overrides))
+            worst = np.inf
+            for i in range(k):
+                sc = jax.tree_util.tree_map(lambda x, i=i: x[i], suite)
+                res = sp.plan(sc, gains=gains, max_steps=args.max_steps, seed=args.seed * 100003 + i,
+                              **opts._asdict())
+                if res.q.shape[0] < 2:
+                    continue
+                c = np.asarray(dense_fn(jnp.asarray(res.q), sc))
+                # Sampling error: half the arm spacing (segment length <= max L / 40) plus half the curve spacing.
+                lmax = float(np.max(res.q[:, :, 0]))
+                pts = np.asarray(sp.curve_points(sc.curves, 400))
+                h_c = float(np.max(np.linalg.norm(np.diff(pts, axis=-2), axis=-1)))
+                worst = min(worst, float(np.min(c)) - 0.5 * (lmax / 40 + h_c))
+            dense.append(dict(variant=variant, scenes=k, worst_lower_bound=worst))
+            log(f"  {variant}: brute-force lower bound on the clearance over {k} scenes: {worst:.4g}")
+
+    total = time.perf_counter() - t_all
+    finish_machine(machine)
+    lines = [f"# Safe step and escapes on random_scenarios({args.seed}, {n}), {dname}", ""]
+    lines += machine_lines(machine)
+    lines += [
+        f"- command: `python benchmarks/safe_step.py {' '.join(argv if argv is not None else sys.argv[1:])}`",
+        f"- {args.max_steps} steps, default gains; total time {total:.0f} s (compile included)",
+        "- collisions: `apply_collision_checks` (exact clearance at every step, between-step search over the "
+        "motion) against the real curves, whatever model the planner used",
+        "- rates: count (% [95 % Wilson interval])",
+        "",
+        "| variant / model | reached | collided | stalled | max steps | non-finite | mean iter. (reached) "
+        "| escapes used | steps scaled < 1 |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in summary:
+        c = r["counts"]
+        it = f"{r['mean_iterations_reached']:.1f}" if r["mean_iterations_reached"] is not None else "—"
+        sb = f"{100 * r['step_scale_below_1']:.1f} %" if r["step_scale_below_1"] is not None else "—"
+        lines.append(
+            f"| {r['label']} | {fmt_rate(c['reached'], n)} | {fmt_rate(c['collided'], n)} | "
+            f"{fmt_rate(c['stalled'], n)} | {fmt_rate(c['max_steps'], n)} | {fmt_rate(c['non_finite'], n)} | "
+            f"{it} | {r['scenes_with_escapes']} scenes ({r['reached_after_escape']} then reached) | {sb} |"
+        )
+    lines.append("")
+    for r in summary:
+        if r["collided_scenes"]:
+            lines.append(f"- {r['label']} collided in scenes {r['collided_scenes']}")
+    for d in dense:
+        lines.append(f"- brute-force re-check ({d['variant']}, first {d['scenes']} scenes, substeps 8, "
+                     f"40 arm / 400 curve samples, minus the sampling error): smallest lower bound on the "
+                     f"clearance {d['worst_lower_bound']:.4g}")
+    report = "\n".join(lines) + "\n"
+    out = args.out or os.path.join(RESULTS_DIR, f"safe_step_{dname}_seed{args.seed}_n{n}")
+    os.makedirs(os.path.dirname(out), exist_ok=True)
+    with open(out + ".md", "w", encoding="utf-8") as fh:
+        fh.write(report)
+    with open(out + ".json", "w", encoding="utf-8") as fh:
+        json.dump(dict(machine=machine, args={k: v for k, v in vars(args).items()}, summary=summary,
+                       dense=dense, records=records, seconds=total), fh, indent=1, default=str)
+    print(report)
+    return dict(summary=summary, dense=dense)
+
+
+if __name__ == "__main__":
+    main()
