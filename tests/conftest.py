@@ -1,5 +1,5 @@
 """pytest configuration: float64 everywhere (strict dtype promotion on request)
-and jax's persistent compilation cache (``jax_cache.py``).
+and jax's persistent compilation cache (``session.py``).
 
 x64 must be switched on before any array is created, i.e. at import time of
 this conftest (pytest imports it before the test modules). Tests marked
@@ -30,12 +30,12 @@ jax.config.update("jax_enable_x64", True)
 if os.environ.get("SOFTPLAN_TEST_STRICT", "0") == "1":
     jax.config.update("jax_numpy_dtype_promotion", "strict")
 
-# `import helpers` / `import jax_cache` from tests/; `import oracle` /
+# `import helpers` / `import session` from tests/; `import oracle` /
 # `import closest_cases` (the independent reference and the closest-point case
 # corpus, shared with the benchmarks) and the benchmark scripts from benchmarks/.
 sys.path.insert(0, os.path.join(os.path.dirname(TESTS), "benchmarks"))
 sys.path.insert(0, TESTS)
 
-import jax_cache  # noqa: E402
+import session  # noqa: E402
 
-jax_cache.enable()
+session.enable()

@@ -32,8 +32,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from jax_cache import jax_cache_env
 from scipy import optimize
+from session import subprocess_env
 
 import softplan_jax as sp
 
@@ -43,10 +43,10 @@ SUBPROCESS_TIMEOUT = 1200  # seconds; generous for a loaded 2-core machine
 
 
 def _env(devices: int | None):
-    env = dict(os.environ)
-    # The suite's persistent XLA compilation cache, shared by these runs across
-    # test sessions (compilation dominates the quick runs; a rerun reuses it).
-    env.update(jax_cache_env())
+    # This checkout's softplan_jax, and the suite's persistent XLA compilation
+    # cache, shared by these runs across test sessions (compilation dominates
+    # the quick runs; a rerun reuses it).
+    env = subprocess_env()
     flags = [f for f in env.get("XLA_FLAGS", "").split() if "xla_force_host_platform_device_count" not in f]
     if devices:
         flags.append(f"--xla_force_host_platform_device_count={devices}")

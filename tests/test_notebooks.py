@@ -12,7 +12,7 @@ code cell tagged ``parameters`` (the sizes a Colab user can enlarge), and the
 test executes a copy whose parameter cell is replaced by ``SMALL[name]`` (the
 same names, smaller values). The committed notebooks keep their full-size
 outputs. Nearly all of the time is XLA compilation inside the kernel, which
-shares the suite's persistent compilation cache (``jax_cache.py``), so a rerun
+shares the suite's persistent compilation cache (``session.py``), so a rerun
 is much faster than the first run (minutes on a 2-core CPU, most of it the two
 compilations of the gradient of a whole rollout in tuning.ipynb).
 """
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import nbformat
 import pytest
-from jax_cache import jax_cache_env
+from session import subprocess_env
 
 NOTEBOOK_DIR = Path(__file__).resolve().parent.parent / "notebooks"
 NOTEBOOKS = ["quickstart.ipynb", "tuning.ipynb"]
@@ -60,7 +60,8 @@ def _kernel_manager(spec_dir: Path):
         "argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
         "display_name": "softplan test kernel",
         "language": "python",
-        "env": jax_cache_env(),  # the suite's persistent compilation cache
+        # this checkout's softplan_jax and the suite's persistent compilation cache
+        "env": {k: v for k, v in subprocess_env().items() if k == "PYTHONPATH" or k.startswith("JAX_")},
     }
     (kernel / "kernel.json").write_text(json.dumps(spec))
     ksm = KernelSpecManager(kernel_dirs=[str(spec_dir)])
@@ -195,6 +196,7 @@ def _run_cell(src, mode, tmp_path):
     proc = subprocess.run(
         [sys.executable, str(harness), str(cell), mode, str(out)],
         cwd=cwd,
+        env=subprocess_env(),  # this checkout's softplan_jax
         capture_output=True,
         text=True,
         timeout=300,

@@ -1,4 +1,10 @@
-"""jax's persistent compilation cache for the test session and its subprocesses.
+"""Settings of the test session that its subprocesses share.
+
+* The checkout under test: :func:`subprocess_env` puts this repository first on
+  ``PYTHONPATH``, so that a benchmark script, a notebook kernel or ``python -m
+  softplan_jax.cli`` started by a test imports the same ``softplan_jax`` as the
+  tests (not another installed copy).
+* jax's persistent compilation cache, below.
 
 Compiled programs are kept on disk between sessions, every program however
 small or quick to compile: in ``$SOFTPLAN_CACHE_DIR/jax`` or ``.cache/jax`` at
@@ -35,6 +41,15 @@ def jax_cache_env() -> dict:
         "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
         "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0",
     }
+
+
+def subprocess_env(base=None) -> dict:
+    """``base`` (default ``os.environ``) with the checkout first on PYTHONPATH and :func:`jax_cache_env`."""
+    env = dict(os.environ if base is None else base)
+    path = [REPO] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p]
+    env["PYTHONPATH"] = os.pathsep.join(path)
+    env.update(jax_cache_env())
+    return env
 
 
 def enable() -> str | None:
