@@ -284,7 +284,6 @@ PAPER_OBSTACLES = {
 }
 
 
-
 def paper_configs(rng, count):
     out = []
     for k in range(count):
@@ -306,8 +305,6 @@ def build_cases():
     out += [make_boundary_case(rng) for _ in range(140)]
     out += [make_long_case(rng) for _ in range(60)]
     return out
-
-
 
 
 @cache
@@ -359,13 +356,9 @@ def _isolated(o, q, curve, gap=2e-3):
     return True
 
 
-
-
-def _select_gradient_cases(answer):
-    """Draw random n = 3 cases until 8 have a unique, not too close minimum.
-
-    ``answer(case)`` gives the oracle's full answer (with its candidates).
-    Returns [(case, accepted?) for every draw].
+def _select_gradient_cases(accept):
+    """Draw random n = 3 cases until 8 are accepted (``accept(case) -> bool``:
+    a unique minimum at least 0.05 away). Returns [(case, accepted?) for every draw].
     """
     rng = np.random.default_rng(4242)
     draws, accepted = [], 0
@@ -375,7 +368,7 @@ def _select_gradient_cases(answer):
             case.q[:, 1] = np.where(rng.random(3) < 0.7, 0.0, case.q[:, 1])
             if accepted == 7:
                 case.q[:, 1] = 0.0
-        ok = answer(case)
+        ok = accept(case)
         draws.append((case, ok))
         accepted += ok
     return draws
@@ -537,8 +530,9 @@ def _compute(jobs, workers: int):
 
 def oracle_answers(which: str, subset=None) -> list:
     """The oracle's :class:`Answer` for every case of family ``which`` (or for
-    the cases ``subset``, all of that family), from the disk cache; missing
-    answers are computed (see the module docstring) and added to it.
+    the cases ``subset``, all of that family; "grad" holds the gradient cases),
+    from the disk cache; missing answers are computed (see the module
+    docstring) and added to it.
     """
     todo = list(cases(which) if subset is None else subset)
     path = _cache_path(which, _source_hash())
