@@ -22,14 +22,15 @@ Two parts, one run, one report (``benchmarks/results/closest.md`` and ``.json``;
    times.
 
 2. Accuracy sweep over ``SolverOptions`` candidates on the test suite's cases
-   (``tests/test_closest.py``: the ~1000 main cases, the paper obstacles and the
-   helix), against its independent NumPy/SciPy oracle (``tests/oracle.py``),
-   both imported from ``tests/``, not copied. A miss is |distance - oracle| >
-   1e-9 (the suite's bar; NaN is a miss). Each candidate also gets its
-   single-query and batch times (float64), next to the 10-point method's timed
-   in the same loop. The oracle's answers are cached in
-   ``benchmarks/results/closest_oracle_cache.npz`` (keyed by the case data and
-   the oracle's source), so reruns skip the slow part.
+   (``benchmarks/closest_cases.py``: the ~1000 main cases, the paper obstacles
+   and the helix), against the independent NumPy/SciPy oracle
+   (``benchmarks/oracle.py``); ``tests/test_closest.py`` uses the same two
+   modules. A miss is |distance - oracle| > 1e-9 (the suite's bar; NaN is a
+   miss). Each candidate also gets its single-query and batch times (float64),
+   next to the 10-point method's timed in the same loop. The oracle's answers
+   are cached on disk by ``closest_cases`` (in ``.cache/oracle/``, keyed by the
+   case data and the oracle's source, shared with the tests), so reruns skip
+   the slow part.
 
 The fields of ``SolverOptions`` are read at run time (``SolverOptions._fields``
 and its defaults); a candidate is written as overrides of the defaults,
@@ -48,42 +49,26 @@ Progress goes to stderr; the markdown report is printed to stdout at the end.
 
 from __future__ import annotations
 
+import argparse
+import hashlib
+import inspect
+import json
 import os
+import platform
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
 
-# The oracle calls scipy.optimize thousands of times on tiny problems: one BLAS
-# thread (as tests/conftest.py). Must be set before numpy is imported.
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
-# tests/test_closest.py starts an oracle process pool on import unless told not
-# to; this script runs (and caches) the oracle itself.
-os.environ["SOFTPLAN_TEST_ORACLE_WORKERS"] = "0"
-
-import argparse  # noqa: E402
-import hashlib  # noqa: E402
-import inspect  # noqa: E402
-import json  # noqa: E402
-import platform  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from concurrent.futures import ThreadPoolExecutor  # noqa: E402
-
-import jax  # noqa: E402
-
-jax.config.update("jax_enable_x64", True)
-
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax
+import jax.numpy as jnp
+import numpy as np
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS_DIR = os.path.join(REPO, "benchmarks", "results")
-# The repo root for softplan_jax, tests/ for the suite's modules (test_closest
-# imports `oracle` and `helpers` as top-level modules, as under pytest).
-sys.path.insert(0, REPO)
-sys.path.insert(0, os.path.join(REPO, "tests"))
+# benchmarks/ for the case corpus and the oracle (as when run as a script).
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-import oracle  # noqa: E402
-import test_closest as tc  # noqa: E402
+import closest_cases as cc  # noqa: E402
 
 import softplan_jax as sp  # noqa: E402
 from softplan_jax.closest import (  # noqa: E402
@@ -93,8 +78,8 @@ from softplan_jax.closest import (  # noqa: E402
 )
 from softplan_jax.curves import PolynomialCurve, curve_points  # noqa: E402
 
-TOL = tc.TOL  # the suite's bar, 1e-9
-ORACLE_CACHE = os.path.join(RESULTS_DIR, "closest_oracle_cache.npz")
+TOL = cc.TOL  # the suite's bar, 1e-9
+CHUNK = 64  # cases per library call (as tests/test_closest.py): one compiled shape per n
 ARM_SAMPLES = 10  # points per segment of the N-point method (paper Table 1)
 
 # The grid fields, scaled together (paper §2.3 starts come from the grid).
@@ -276,7 +261,7 @@ def _batched(fn, shared_obstacle: bool, n_obstacle_args: int):
 def sim2_curve() -> PolynomialCurve:
     """The paper's Sim2 parabola X = 0.5, Y = u, Z = 5u^2, u in [-2, 2], padded to degree 3
     (as ``stack_curves`` pads a scene), so it shares its compiled shape with the cubics."""
-    coeffs, u_range = tc.PAPER_OBSTACLES["sim2"]
+    coeffs, u_range = cc.PAPER_OBSTACLES["sim2"]
     padded = np.zeros((3, 4))
     padded[:, : coeffs.shape[1]] = coeffs
     return PolynomialCurve(jnp.asarray(padded), jnp.asarray(u_range))
@@ -292,7 +277,7 @@ def random_cubics(rng, count: int) -> PolynomialCurve:
 
 def random_qs(rng, count: int, n: int = 3) -> np.ndarray:
     """count configurations from the test suite's generator (theta = 0, tiny, large ...)."""
-    return np.stack([tc.random_q(rng, n) for _ in range(count)])
+    return np.stack([cc.random_q(rng, n) for _ in range(count)])
 
 
 def _points_of(curve, N: int, batched: bool):
@@ -363,84 +348,63 @@ def speed_table(options: SolverOptions, batch: int, repeats: dict, quick: bool, 
 
 
 def case_sets(quick: bool) -> dict:
-    """which -> list of tc.Case (the helix cases carry only q and the helix's u_range).
+    """which -> list of closest_cases.Case (the helix cases carry only q and the helix's u_range).
 
     quick: a few n = 3 cases (one compiled shape), no helix.
     """
-    sets = {w: tc._cases(w) for w in ("main", "paper", "helix")}
+    sets = {w: list(cc.cases(w)) for w in ("main", "paper", "helix")}
     if quick:
         main3 = [c for c in sets["main"] if c.q.shape[0] == 3]
         sets = {"main": main3[::10], "paper": sets["paper"][::10]}
     return sets
 
 
-def _oracle_source_hash() -> str:
-    return hashlib.sha256(inspect.getsource(oracle).encode()).hexdigest()[:16]
-
-
-def _case_key(which: str, case) -> str:
-    h = hashlib.sha256(which.encode())
-    for a in (case.q, case.coeffs, np.asarray(case.u_range)):
-        h.update(np.ascontiguousarray(a, np.float64).tobytes())
-    return h.hexdigest()[:24]
-
-
-def oracle_distances(sets: dict, path: str = ORACLE_CACHE) -> tuple[dict, dict]:
-    """which -> (len,) oracle distances; reads and extends the cache file.
-
-    The cache maps a hash of each case's data to the oracle's distance and is
-    ignored as a whole when tests/oracle.py's source has changed.
-    Returns (distances, info on cache hits and the oracle's time).
-    """
-    src = _oracle_source_hash()
-    cache = {}
-    if os.path.exists(path):
-        with np.load(path) as z:
-            if str(z["oracle_source"]) == src:
-                cache = dict(zip(z["keys"].tolist(), z["distance"].tolist(), strict=True))
-            else:
-                _log("  tests/oracle.py changed since the cache was written: cache ignored")
-    t0, computed = time.perf_counter(), 0
-    out = {}
-    for which, cases in sets.items():
-        dist = np.empty(len(cases))
-        for k, c in enumerate(cases):
-            key = _case_key(which, c)
-            if key not in cache:
-                cache[key] = oracle.closest_point(c.q, tc._ocurve(which, c)).distance
-                computed += 1
-                if computed % 100 == 0:
-                    _log(f"  oracle: {computed} cases computed ({time.perf_counter() - t0:.0f} s)")
-            dist[k] = cache[key]
-        out[which] = dist
-    if computed:
-        os.makedirs(os.path.dirname(path), exist_ok=True)
-        keys = sorted(cache)
-        np.savez(
-            path,
-            keys=np.array(keys),
-            distance=np.array([cache[k] for k in keys]),
-            oracle_source=np.array(src),
-        )
+def oracle_distances(sets: dict) -> tuple[dict, dict]:
+    """which -> (len,) oracle distances, from closest_cases' on-disk cache
+    (computed there on a first run). Returns (distances, info on the oracle's time)."""
+    t0 = time.perf_counter()
+    out = {which: cc.oracle_distances(which, cases) for which, cases in sets.items()}
     info = dict(
-        cached=sum(len(v) for v in out.values()) - computed,
-        computed=computed,
+        cases=sum(len(v) for v in out.values()),
         oracle_s=time.perf_counter() - t0,
-        cache_file=os.path.relpath(path, REPO),
+        cache_dir=os.path.relpath(cc.cache_dir(), REPO),
     )
     return out, info
 
 
+def _helix_fn(u):
+    """closest_cases' helix (oracle.helix: radius 1, pitch 0.2), in jax."""
+    return jnp.stack([jnp.cos(u), jnp.sin(u), 0.2 * u])
+
+
+def run_pairwise(qs, coeffs, u_ranges, fn):
+    """Library on case k = (qs[k], curve k), all qs of one n, in chunks of CHUNK
+    (the last padded by repeating its last case), degree padded to 3.
+    Returns one dict of numpy fields per case."""
+    qs = np.asarray(qs)
+    B = len(qs)
+    out = []
+    for start in range(0, B, CHUNK):
+        idx = list(range(start, min(start + CHUNK, B)))
+        idx += [idx[-1]] * (CHUNK - len(idx))
+        curves = [sp.PolynomialCurve(np.asarray(coeffs[k]), np.asarray(u_ranges[k])) for k in idx]
+        stacked, _ = sp.stack_curves(curves, degree=3)
+        res = fn(jnp.asarray(qs[idx]), stacked)
+        res = {f: np.asarray(getattr(res, f)) for f in res._fields}
+        out += [{f: v[j] for f, v in res.items()} for j in range(CHUNK)]
+    return out[:B]
+
+
 def _stacked_spec(n: int):
-    """Abstract (q, stacked curves) of one ``tc.run_pairwise`` chunk: CHUNK cases, degree 3."""
+    """Abstract (q, stacked curves) of one ``run_pairwise`` chunk: CHUNK cases, degree 3."""
     f64 = jnp.float64
-    q = jax.ShapeDtypeStruct((tc.CHUNK, n, 3), f64)
+    q = jax.ShapeDtypeStruct((CHUNK, n, 3), f64)
     curve = PolynomialCurve.tree_unflatten(
         None,
         [
-            jax.ShapeDtypeStruct((tc.CHUNK, 3, 4), f64),
-            jax.ShapeDtypeStruct((tc.CHUNK, 2), f64),
-            jax.ShapeDtypeStruct((tc.CHUNK,), f64),
+            jax.ShapeDtypeStruct((CHUNK, 3, 4), f64),
+            jax.ShapeDtypeStruct((CHUNK, 2), f64),
+            jax.ShapeDtypeStruct((CHUNK,), f64),
         ],
     )
     return q, curve
@@ -452,7 +416,7 @@ def compile_candidate(options: SolverOptions, sets: dict, timed: dict) -> tuple[
     Compiling dominates the sweep (XLA compiles outside the GIL, so two threads
     use both CPUs). The accuracy functions are ``sp.closest_point(q, curve,
     options)`` vmapped as the suite runs them: over (q, curve) for the
-    ``tc.run_pairwise`` chunks (CHUNK cases, degree padded to 3: one compiled
+    ``run_pairwise`` chunks (CHUNK cases, degree padded to 3: one compiled
     shape per n), over q for the helix. ``timed``: name -> (tag, fn, args) of
     the timed functions, compiled too unless ``compile_once`` has them already.
     Returns (name -> compiled, wall seconds spent compiling); the names are the
@@ -481,7 +445,7 @@ def compile_candidate(options: SolverOptions, sets: dict, timed: dict) -> tuple[
 
 
 def _helix_args(cases):
-    return jnp.asarray(np.stack([c.q for c in cases])), sp.ParametricCurve(tc._helix_fn, tc.HELIX_RANGE)
+    return jnp.asarray(np.stack([c.q for c in cases])), sp.ParametricCurve(_helix_fn, cc.HELIX_RANGE)
 
 
 def library_results(sets: dict, compiled: dict) -> dict:
@@ -497,7 +461,7 @@ def library_results(sets: dict, compiled: dict) -> dict:
         for k, c in enumerate(cases):
             by_n.setdefault(c.q.shape[0], []).append(k)
         for n, idx in by_n.items():
-            res = tc.run_pairwise(
+            res = run_pairwise(
                 [cases[k].q for k in idx],
                 [cases[k].coeffs for k in idx],
                 [cases[k].u_range for k in idx],
@@ -799,10 +763,10 @@ def _markdown(report: dict) -> str:
         "",
         "## 2. Accuracy sweep over SolverOptions candidates (float64)",
         "",
-        "Cases from `tests/test_closest.py`: "
+        "Cases from `benchmarks/closest_cases.py` (as `tests/test_closest.py`): "
         + ", ".join(f"{k} {v}" for k, v in n_sets.items())
-        + f"; reference `tests/oracle.py` ({o['cached']} answers from `{o['cache_file']}`, "
-        f"{o['computed']} computed in {o['oracle_s']:.0f} s). Miss: |distance - oracle| > {TOL:g} (or NaN); "
+        + f"; reference `benchmarks/oracle.py` ({o['cases']} answers via `closest_cases`, cached in "
+        f"`{o['cache_dir']}`: {o['oracle_s']:.0f} s). Miss: |distance - oracle| > {TOL:g} (or NaN); "
         "the library runs as the suite runs it (`sp.closest_point(q, curve, options)` vmapped, "
         "`run_pairwise`). *not conv.*: the winning solve's `converged` flag is False. *Newton its*: "
         "(starts + 4 edge_starts) x iterations per segment-curve pair. Single: one query, Sim2; batch: "
@@ -892,6 +856,9 @@ def main(argv=None) -> dict:
         "(quick: closest_quick, so that a quick run never overwrites the full report)",
     )
     args = ap.parse_args(argv)
+    # float64 for the accuracy sweep and the float64 rows (the float32 rows cast
+    # their inputs). Set here, not at import: importing this module changes nothing.
+    jax.config.update("jax_enable_x64", True)
     quick = args.quick
     out = args.out or os.path.join(RESULTS_DIR, "closest_quick" if quick else "closest")
     t_start = time.perf_counter()
@@ -926,8 +893,7 @@ def main(argv=None) -> dict:
     oracle_d, oracle_info = oracle_distances(sets)
     report["accuracy"] = dict(sets={k: len(v) for k, v in sets.items()}, oracle=oracle_info)
     _log(
-        f"  oracle: {oracle_info['cached']} cached, {oracle_info['computed']} computed "
-        f"({oracle_info['oracle_s']:.0f} s)"
+        f"  oracle: {oracle_info['cases']} answers ({oracle_info['oracle_s']:.0f} s)"
     )
     report["n_point"] = n_point_errors(sets, oracle_d)
     _log(f"  {len(candidates)} candidates ...")

@@ -40,6 +40,11 @@ Run ``python benchmarks/numpy_baseline.py`` (full, < 10 min) or ``--quick``
 (< 1 min on an idle machine): it checks NumPy-vs-JAX trajectory agreement on
 the paper's scenarios and times both planners on the tree scenario, writing
 ``benchmarks/results/numpy_baseline.md`` and ``.json``.
+
+Importing this module changes no jax setting: :func:`main` switches float64
+on (``jax_enable_x64``); an in-process caller (the tests, ``paper_tables``)
+does so itself before creating arrays, as both sides must run in float64 to
+agree.
 """
 
 from __future__ import annotations
@@ -54,16 +59,13 @@ import time
 from typing import NamedTuple
 
 import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy
+from scipy import optimize, spatial
 
-jax.config.update("jax_enable_x64", True)
-
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-import scipy  # noqa: E402
-from scipy import optimize, spatial  # noqa: E402
-
-import softplan_jax as sp  # noqa: E402
-from softplan_jax.planner import make_options, planner_step, rollout_jit  # noqa: E402
+import softplan_jax as sp
+from softplan_jax.planner import make_options, planner_step, rollout_jit
 
 __all__ = [
     "NumpyScenario",
@@ -1059,6 +1061,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default=os.path.join(RESULTS_DIR, "numpy_baseline"),
                     help="output path prefix (.md and .json are appended)")
     args = ap.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)  # both planners in float64
     quick = args.quick
     t_start = time.perf_counter()
     report = dict(mode="quick" if quick else "full", machine=_machine(), agreement=[], speed=[], notes=[],

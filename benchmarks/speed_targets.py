@@ -30,11 +30,8 @@ import sys
 import time
 
 import jax
-
-jax.config.update("jax_enable_x64", True)
-
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _common import (  # noqa: E402
@@ -146,6 +143,7 @@ def main(argv=None):
     ap.add_argument("--out", default=None,
                     help="output prefix (default benchmarks/results/speed_targets; quick: results/quick/...)")
     args = ap.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)  # float64 (set here: importing changes nothing)
     if args.steps < 1 or (args.batch is not None and args.batch < 1):
         ap.error("--steps and --batch must be >= 1")
     if args.out is None:

@@ -4,13 +4,24 @@
 
     softplan run SCENARIO [--method curve|points] [--n-points N] [--max-steps N]
                           [--goal-tolerance TOL] [--repulsion khatib|exponential]
-                          [--plot PNG] [--gif GIF] [--json] [--float32] [--require-reached]
+                          [--plot PNG] [--gif GIF] [--out FILE.json|FILE.npz [--force]]
+                          [--json] [--float32] [--require-reached]
     softplan scenarios [--json]
     softplan export NAME PATH [--force]
 
 SCENARIO is a paper scenario name (``sim1``, ``sim2``, ``tree``) or the path of
 a JSON scenario file (a file literally named like a paper scenario: write
 ``./sim1``).
+
+``run --out FILE`` saves the whole trajectory: ``q`` (iterations + 1, n, 3),
+``tip`` (iterations + 1, 3) and ``clearance`` (iterations + 1, obstacles), the
+true clearance to every obstacle at every step, start first, plus the status,
+iterations and the run's metadata (format ``softplan-trajectory/1``, see
+:func:`trajectory_record`). The format follows the extension: ``.json`` (arrays
+as nested lists, non-finite numbers as null) or ``.npz`` (``numpy.load``; one
+array per field, strings and numbers as 0-d arrays, no pickles). Any other
+extension is bad input. An existing FILE is never replaced unless ``--force``
+is given (then the summary says it was overwritten).
 
 Exit codes: 0 success (for ``run``: planning finished, whatever its status —
 reached, stalled, collided or max_steps; the status is in the summary);
@@ -103,6 +114,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="repulsion gain function (default: khatib)")
     run.add_argument("--plot", metavar="PATH", help="write the snapshot figure (PNG, PDF, SVG, ...)")
     run.add_argument("--gif", metavar="PATH", help="write an animated GIF of the motion (needs pillow)")
+    run.add_argument("--out", metavar="FILE",
+                     help="save the trajectory (q, tip, clearance per step, status, iterations, metadata) "
+                     "as JSON (FILE.json) or NumPy (FILE.npz), chosen by the extension")
+    run.add_argument("--force", action="store_true", help="let --out replace an existing FILE")
     run.add_argument("--json", action="store_true", help="print the summary as JSON")
     run.add_argument("--float32", action="store_true",
                      help="plan in float32 (default float64)")
@@ -195,6 +210,98 @@ def _check_run_args(args, paper_names) -> None:
             import PIL  # noqa: F401
         except ImportError:
             raise InputError("--gif needs pillow: pip install pillow") from None
+    if args.out is not None:
+        outputs = [p for p in (args.plot, args.gif) if p is not None]
+        if any(os.path.abspath(args.out) == os.path.abspath(p) for p in outputs):
+            raise InputError("--out names the same file as --plot or --gif")
+        _check_output_path(args.out, "--out", inputs)
+        ext = os.path.splitext(args.out)[1].lower()
+        if ext not in TRAJECTORY_FORMATS:
+            raise InputError(
+                f"--out: unknown extension {ext or '(none)'!r} in {args.out!r}; use .json or .npz"
+            )
+        if os.path.exists(args.out) and not args.force:
+            raise InputError(f"--out: {args.out} exists; pass --force to overwrite it")
+    elif args.force:
+        raise InputError("--force only applies to --out")
+
+
+# ----------------------------------------------------------------------------
+# The trajectory file of ``run --out``.
+
+TRAJECTORY_FORMAT = "softplan-trajectory/1"
+TRAJECTORY_FORMATS = (".json", ".npz")
+
+
+def trajectory_record(result, scenario, summary: dict) -> dict:
+    """The content of a ``run --out`` file: arrays and metadata of one run.
+
+    Args:
+      result: the run's PlanResult (trimmed to the steps taken).
+      scenario: the planned Scenario (for the goal).
+      summary: the run's summary (scenario label, method, options, times).
+
+    Returns:
+      dict with ``q`` (T, n, 3), ``tip`` (T, 3), ``clearance`` (T, m) (float
+      arrays, T = iterations + 1, m = the scenario's obstacles, the true
+      clearance at every step), ``goal`` (3,), and the scalars ``format``,
+      ``status``, ``iterations``, ``reached``, ``collided``, ``min_clearance``,
+      ``final_error`` and the summary's metadata (``scenario``, ``method``,
+      ``n_points``, ``repulsion``, ``dtype``, ``max_steps``,
+      ``goal_tolerance``, ``compile_time_s``, ``run_time_s``), plus
+      ``softplan_jax_version``.
+    """
+    import numpy as np
+
+    record = {
+        "format": TRAJECTORY_FORMAT,
+        "softplan_jax_version": _version(),
+        "q": np.asarray(result.q),
+        "tip": np.asarray(result.tip),
+        "clearance": np.asarray(result.clearance),
+        "goal": np.asarray(scenario.goal),
+        "status": result.status,
+        "iterations": int(result.iterations),
+        "reached": bool(result.reached),
+        "collided": bool(result.collided),
+        "min_clearance": float(result.min_clearance),
+        "final_error": float(result.final_error),
+    }
+    for key in ("scenario", "method", "n_points", "repulsion", "dtype", "max_steps", "goal_tolerance",
+                "compile_time_s", "run_time_s"):
+        record[key] = summary[key]
+    return record
+
+
+def _json_ready(x):
+    """Arrays to nested lists, non-finite floats to None (strict JSON)."""
+    import numpy as np
+
+    if isinstance(x, np.ndarray):
+        return _json_ready(x.tolist())
+    if isinstance(x, (list, tuple)):
+        return [_json_ready(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def write_trajectory(path: str, record: dict) -> None:
+    """Write :func:`trajectory_record` as JSON or NPZ, by the extension of ``path``."""
+    import numpy as np
+
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".json":
+        with open(path, "w", encoding="utf-8") as fh:
+            json.dump({k: _json_ready(v) for k, v in record.items()}, fh, allow_nan=False)
+            fh.write("\n")
+    elif ext == ".npz":
+        # None (n_points of the curve method) has no array form: left out.
+        arrays = {k: np.asarray(v) for k, v in record.items() if v is not None}
+        with open(path, "wb") as fh:  # np.savez would append .npz to a name without it
+            np.savez(fh, **arrays)
+    else:
+        raise ValueError(f"unknown trajectory format {ext!r}; use .json or .npz")
 
 
 # ----------------------------------------------------------------------------
@@ -298,6 +405,7 @@ def _cmd_run(args) -> int:
         "time_per_scan_step_s": run_time / max_steps,
         "plot": None,
         "gif": None,
+        "out": None,
     }
 
     title = (
@@ -328,6 +436,16 @@ def _cmd_run(args) -> int:
                 summary["gif"] = os.path.abspath(args.gif)
         except OSError as err:
             raise InputError(f"cannot write output: {err}") from None
+
+    if args.out is not None:
+        replaced = os.path.exists(args.out)
+        try:
+            write_trajectory(args.out, trajectory_record(result, scenario, summary))
+        except OSError as err:
+            raise InputError(f"cannot write output: {err}") from None
+        summary["out"] = os.path.abspath(args.out)
+        if replaced:  # allowed by --force; never silently
+            print(f"softplan: overwrote {args.out} (--force)", file=sys.stderr)
 
     if args.json:
         # Non-finite numbers (min clearance without obstacles is inf) become null.
@@ -366,6 +484,8 @@ def _text_summary(s: dict) -> str:
         rows.append(("plot", s["plot"]))
     if s["gif"]:
         rows.append(("gif", s["gif"]))
+    if s["out"]:
+        rows.append(("trajectory", s["out"]))
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 

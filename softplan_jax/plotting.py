@@ -393,6 +393,31 @@ def plot_snapshot_panels(scenario, result, steps=None, title=None, view=None, fi
     return fig
 
 
+def _fit_axis_labels_inside(fig, ax, limits, margin=4.0, tries=12):
+    """Shrink the 3-D box (``set_box_aspect(zoom=...)``) until the axis labels and
+    tick labels lie inside the figure, ``margin`` pixels from its edges.
+
+    A GIF frame is the whole figure (no tight bounding box as in ``savefig``),
+    so a label drawn past the edge is cut off. The camera is fixed during an
+    animation, so fitting once at the start is enough. Returns the zoom used.
+    """
+    aspect = tuple(limits[:, 1] - limits[:, 0])
+    zoom = 1.0
+    for _ in range(tries):
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        W, H = fig.canvas.get_width_height()
+        # the 3-D axes' tight box holds the axis labels and the tick labels drawn
+        boxes = [ax.get_tightbbox(renderer, bbox_extra_artists=[])]  # the legend is not ours to fit
+        boxes += [a.label.get_window_extent(renderer)
+                  for a in (ax.xaxis, ax.yaxis, ax.zaxis)]
+        if all(b.x0 >= margin and b.y0 >= margin and b.x1 <= W - margin and b.y1 <= H - margin for b in boxes):
+            break
+        zoom *= 0.93
+        ax.set_box_aspect(aspect, zoom=zoom)
+    return zoom
+
+
 def animate(scenario, result, path, fps=15, max_frames=200, hold=1.0, title=None, view=None,
             figsize=(8, 6), dpi=80):
     """Write an animated GIF of the motion (matplotlib's PillowWriter).
@@ -405,6 +430,9 @@ def animate(scenario, result, path, fps=15, max_frames=200, hold=1.0, title=None
         subsampled; the start and the final step always).
       hold: seconds the final frame is held.
       title: title prefix; default none.
+
+    The 3-D box is shrunk as needed so that the axis labels and tick labels
+    lie inside every frame.
 
     Returns:
       ``path``.
@@ -448,6 +476,8 @@ def animate(scenario, result, path, fps=15, max_frames=200, hold=1.0, title=None
         prefix = "" if title is None else f"{title}\n"
         text = fig.suptitle("", fontsize=11, y=0.97)
         frames = list(range(len(steps))) + [len(steps) - 1] * int(round(hold * fps))
+        fig.set_dpi(dpi)  # fit the labels at the resolution of the frames
+        _fit_axis_labels_inside(fig, ax, limits)
 
         def update(k):
             b = backbones[k]

@@ -1,7 +1,10 @@
-"""pytest configuration: float64 everywhere (strict dtype promotion on request).
+"""pytest configuration: float64 everywhere (strict dtype promotion on request)
+and jax's persistent compilation cache (``session.py``).
 
 x64 must be switched on before any array is created, i.e. at import time of
-this conftest (pytest imports it before the test modules).
+this conftest (pytest imports it before the test modules). Tests marked
+``slow`` are deselected by default (pyproject.toml); ``pytest -m slow`` runs
+them.
 """
 
 import os
@@ -16,6 +19,8 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import jax  # noqa: E402
 
+TESTS = os.path.dirname(os.path.abspath(__file__))
+
 jax.config.update("jax_enable_x64", True)
 # Strict promotion makes any silent float32/float64 (or int/float) mixing
 # an error.  It is OFF by default because the library does not survive it
@@ -25,13 +30,12 @@ jax.config.update("jax_enable_x64", True)
 if os.environ.get("SOFTPLAN_TEST_STRICT", "0") == "1":
     jax.config.update("jax_numpy_dtype_promotion", "strict")
 
-# make `import oracle` / `import helpers` work regardless of rootdir
-sys.path.insert(0, os.path.dirname(__file__))
+# `import helpers` / `import session` from tests/; `import oracle` /
+# `import closest_cases` (the independent reference and the closest-point case
+# corpus, shared with the benchmarks) and the benchmark scripts from benchmarks/.
+sys.path.insert(0, os.path.join(os.path.dirname(TESTS), "benchmarks"))
+sys.path.insert(0, TESTS)
 
+import session  # noqa: E402
 
-def pytest_sessionfinish(session, exitstatus):
-    """Stop the oracle worker pool that test_closest.py may have started."""
-    mod = sys.modules.get("test_closest")
-    pool = getattr(mod, "_POOL", None) if mod is not None else None
-    if pool is not None:
-        pool.shutdown(wait=True, cancel_futures=True)
+session.enable()

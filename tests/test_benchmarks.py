@@ -9,7 +9,7 @@
   must give the same statuses and iterations as on 1 device, and q to 1e-3
   (rounding differs between the per-device programs and rollouts amplify it).
   The three subprocesses run at once (each spends most of its time compiling;
-  they share a persistent compilation cache under .pytest_cache, so a rerun
+  they share the suite's persistent compilation cache (conftest.py), so a rerun
   of the suite is much faster).
 * ``random_scenarios``: seeded and deterministic, the requested shapes, each
   entry equal to ``make_scenario`` of its own obstacles, goals reachable (an
@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy import optimize
+from session import subprocess_env
 
 import softplan_jax as sp
 
@@ -41,11 +42,11 @@ BENCH = os.path.join(ROOT, "benchmarks")
 SUBPROCESS_TIMEOUT = 1200  # seconds; generous for a loaded 2-core machine
 
 
-def _env(devices: int | None, cache_dir: str):
-    env = dict(os.environ)
-    # A persistent XLA compilation cache shared by these runs across test sessions
-    # (compilation dominates the quick runs; a rerun of the suite reuses it).
-    env.setdefault("JAX_COMPILATION_CACHE_DIR", cache_dir)
+def _env(devices: int | None):
+    # This checkout's softplan_jax, and the suite's persistent XLA compilation
+    # cache, shared by these runs across test sessions (compilation dominates
+    # the quick runs; a rerun reuses it).
+    env = subprocess_env()
     flags = [f for f in env.get("XLA_FLAGS", "").split() if "xla_force_host_platform_device_count" not in f]
     if devices:
         flags.append(f"--xla_force_host_platform_device_count={devices}")
@@ -58,7 +59,6 @@ def _env(devices: int | None, cache_dir: str):
 def runs(tmp_path_factory, request):
     """Start the three quick benchmark runs at once; wait for all; return their outputs."""
     d = tmp_path_factory.mktemp("bench")
-    cache_dir = str(request.config.cache.mkdir("jax_compilation_cache"))
     py = sys.executable
     specs = {
         "paper": (
@@ -107,7 +107,7 @@ def runs(tmp_path_factory, request):
         procs[name] = subprocess.Popen(
             cmd,
             cwd=ROOT,
-            env=_env(devices, cache_dir),
+            env=_env(devices),
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
@@ -375,8 +375,7 @@ def test_sweep_check_groups_cover_every_scenario_once():
     """batch_sweep's grouping of rollouts for the (time-cut) collision checks: every
     scenario exactly once, each group long enough for its longest rollout, and the
     shortest such length."""
-    sys.path.insert(0, BENCH)
-    import batch_sweep as bs
+    import batch_sweep as bs  # benchmarks/ is on sys.path (conftest)
 
     assert bs.check_lengths(61, 2) == [31, 61]
     assert bs.check_lengths(201, 4) == [51, 101, 151, 201]

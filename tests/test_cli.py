@@ -19,6 +19,7 @@ import sys
 
 import numpy as np
 import pytest
+from session import subprocess_env
 
 import softplan_jax as sp
 from softplan_jax.cli import main
@@ -28,7 +29,7 @@ STEPS = "80"
 SUMMARY_FIELDS = {
     "scenario", "method", "n_points", "repulsion", "dtype", "status", "iterations", "max_steps", "reached",
     "collided", "min_clearance", "final_error", "goal_tolerance", "compile_time_s", "run_time_s",
-    "time_per_scan_step_s", "plot", "gif",
+    "time_per_scan_step_s", "plot", "gif", "out",
 }
 
 
@@ -116,6 +117,56 @@ def test_require_reached(sim1_file, tmp_path, capsys):
 # Other commands.
 
 
+def _check_trajectory(data, summary):
+    """A ``run --out`` record (loaded from JSON or NPZ) against the run's summary and independent checks."""
+    it = summary["iterations"]
+    q, tip, clearance = (np.asarray(data[k], dtype=float) for k in ("q", "tip", "clearance"))
+    assert q.shape == (it + 1, 3, 3) and tip.shape == (it + 1, 3) and clearance.shape == (it + 1, 1)
+    np.testing.assert_allclose(q[0], np.asarray(sp.paper_scenario("sim1").q0), atol=0)
+    for k in (0, it // 2, it):
+        np.testing.assert_allclose(tip[k], np.asarray(sp.tip_position(q[k])), atol=1e-12)
+    np.testing.assert_allclose(np.asarray(data["goal"], float), [1.1, -0.8, 0.9])
+    assert np.all(np.isfinite(clearance))
+    assert abs(clearance.min() - summary["min_clearance"]) <= 1e-9 + 0.5 * abs(summary["min_clearance"])
+    assert str(data["format"]) == "softplan-trajectory/1"
+    for key in ("status", "scenario", "method", "repulsion", "dtype"):
+        assert str(data[key]) == summary[key], key
+    for key in ("iterations", "max_steps", "reached", "collided"):
+        assert data[key] == summary[key], key
+    for key in ("min_clearance", "final_error", "goal_tolerance"):
+        assert float(data[key]) == summary[key], key
+    assert abs(np.linalg.norm(tip[-1] - [1.1, -0.8, 0.9]) - summary["final_error"]) < 1e-12
+
+
+def test_run_out_json_and_npz_round_trip(tmp_path, capsys):
+    path_json, path_npz = tmp_path / "sim1.json", tmp_path / "sim1.npz"
+    code, out, err = run_main(capsys, "run", "sim1", "--max-steps", STEPS, "--json", "--out", path_json)
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["out"] == str(path_json)
+    data = json.loads(path_json.read_text())
+    assert data["n_points"] is None  # curve method
+    _check_trajectory(data, summary)
+
+    code, out, err = run_main(capsys, "run", "sim1", "--max-steps", STEPS, "--out", path_npz)
+    assert code == 0, err
+    assert "trajectory" in out and str(path_npz) in out
+    with np.load(path_npz) as z:  # no pickles needed
+        npz = {k: z[k] for k in z.files}
+    assert "n_points" not in npz
+    _check_trajectory({k: (v.item() if v.ndim == 0 else v) for k, v in npz.items()}, summary)
+    for key in ("q", "tip", "clearance", "goal"):  # JSON and NPZ hold the same numbers, exactly
+        np.testing.assert_array_equal(np.asarray(data[key]), npz[key])
+
+    # An existing file is replaced only with --force, and the command says so.
+    before = path_json.read_bytes()
+    code, out, err = run_main(capsys, "run", "sim1", "--max-steps", STEPS, "--out", path_json)
+    assert code == 2 and "--force" in err and path_json.read_bytes() == before
+    code, out, err = run_main(capsys, "run", "sim1", "--max-steps", STEPS, "--out", path_json, "--force")
+    assert code == 0 and "overwrote" in err
+    assert json.loads(path_json.read_text())["q"] == data["q"]
+
+
 def test_scenarios_lists_paper_scenarios(capsys):
     code, out, err = run_main(capsys, "scenarios")
     assert code == 0, err
@@ -190,6 +241,13 @@ def _bad_cases(tmp: str, scenario_file: str):
         ("gif not .gif", ["run", "sim1", "--gif", j(tmp, "anim.png")]),
         ("gif in missing directory", ["run", "sim1", "--gif", j(tmp, "no", "anim.gif")]),
         ("plot and gif the same", ["run", "sim1", "--plot", j(tmp, "a.gif"), "--gif", j(tmp, "a.gif")]),
+        ("out unknown extension", ["run", "sim1", "--out", j(tmp, "trajectory.txt")]),
+        ("out without extension", ["run", "sim1", "--out", j(tmp, "trajectory")]),
+        ("out existing file", ["run", "sim1", "--out", scenario_file]),
+        ("out over the input file", ["run", scenario_file, "--out", scenario_file, "--force"]),
+        ("out in missing directory", ["run", "sim1", "--out", j(tmp, "no", "t.npz")]),
+        ("out and plot the same", ["run", "sim1", "--out", j(tmp, "t.json"), "--plot", j(tmp, "t.json")]),
+        ("force without out", ["run", "sim1", "--force"]),
         ("unknown command", ["plan", "sim1"]),
         ("run without scenario", ["run"]),
         ("export unknown name", ["export", "sim9", j(tmp, "x.json")]),
@@ -240,11 +298,12 @@ def test_bad_file_message_names_the_field(tmp_path, capsys):
 
 def test_entry_point_subprocess(tmp_path):
     cmd = [sys.executable, "-m", "softplan_jax.cli"]
-    ok = subprocess.run(cmd + ["scenarios"], capture_output=True, text=True, timeout=120)
+    env = subprocess_env()  # this checkout's softplan_jax
+    ok = subprocess.run(cmd + ["scenarios"], capture_output=True, text=True, timeout=120, env=env)
     assert ok.returncode == 0, ok.stderr
     assert "sim1" in ok.stdout and "tree" in ok.stdout
     bad = subprocess.run(cmd + ["run", str(tmp_path / "missing.json")], capture_output=True, text=True,
-                         timeout=120)
+                         timeout=120, env=env)
     assert bad.returncode == 2
     assert bad.stdout == ""
     assert bad.stderr.strip().splitlines() == [bad.stderr.strip()]
@@ -312,3 +371,30 @@ def test_animate_writes_gif(mixed_scenario, tmp_path):
     assert gif.read_bytes()[:6] in (b"GIF89a", b"GIF87a")
     with pytest.raises(ValueError, match=r"\.gif"):
         plotting.animate(mixed_scenario, result, tmp_path / "motion.png")
+
+
+@pytest.mark.parametrize("name", ["sim1", "tree"])
+def test_animation_axis_labels_inside_the_frame(name, tmp_path, monkeypatch):
+    """A GIF frame is the whole figure: the X, Y, Z labels must be drawn inside it."""
+    from softplan_jax import plotting
+
+    fitted = []
+    fit = plotting._fit_axis_labels_inside
+
+    def spy(fig, ax, limits, **kw):
+        zoom = fit(fig, ax, limits, **kw)
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        W, H = fig.canvas.get_width_height()
+        boxes = {a.label.get_text(): a.label.get_window_extent(renderer) for a in (ax.xaxis, ax.yaxis, ax.zaxis)}
+        boxes["tight"] = ax.get_tightbbox(renderer, bbox_extra_artists=[])
+        fitted.append((W, H, boxes))
+        return zoom
+
+    monkeypatch.setattr(plotting, "_fit_axis_labels_inside", spy)
+    scenario = sp.paper_scenario(name)
+    plotting.animate(scenario, _fake_result(scenario.q0, steps=3), tmp_path / "a.gif", hold=0.0, max_frames=4)
+    (W, H, boxes), = fitted
+    assert set(boxes) == {"X", "Y", "Z", "tight"}
+    for label, b in boxes.items():
+        assert 0 <= b.x0 and b.x1 <= W and 0 <= b.y0 and b.y1 <= H, (label, b, W, H)

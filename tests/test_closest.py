@@ -1,24 +1,28 @@
 """Closest point arm <-> curve (paper section 2.3): the accuracy suite.
 
-Every case is compared with ``tests/oracle.py`` (dense grids + L-BFGS-B +
+Every case (``benchmarks/closest_cases.py``: ~1000 main cases, the paper's
+obstacles, a helix) is compared with ``benchmarks/oracle.py`` (dense grids + L-BFGS-B +
 bounded Brent on the edges + corners + Newton polish, plain NumPy/SciPy),
 which is itself checked here against closed-form answers first.
 
 Bar: |distance - oracle| <= 1e-9 (float64) in EVERY case, and the returned
 points must be F_R(s) and F_o(u) at the returned parameters with
 |arm_point - obstacle_point| == distance.
+
+Importing this module runs nothing: the cases are built on first use and the
+oracle's answers come from the on-disk cache of ``closest_cases`` (computed
+on the first run after the oracle or the cases change, in 2 worker processes;
+``SOFTPLAN_ORACLE_WORKERS=0`` computes them in this process).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
 from functools import cache
 
+import closest_cases as cc
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -29,8 +33,7 @@ from helpers import assert_allclose, assert_finite, closest_per_obstacle, unpack
 import softplan_jax as sp
 from softplan_jax.closest import SolverOptions
 
-TOL = 1e-9
-N_RANDOM = 470  # generic random cases; other families are added below
+TOL = cc.TOL  # 1e-9
 
 # --------------------------------------------------------------------------
 # closed-form references used to check the ORACLE
@@ -157,301 +160,25 @@ class TestOracleClosedForm:
         # constructed near-touch cases have distance exactly delta (n = 1)
         rng = np.random.default_rng(1003)
         for _ in range(40):
-            case = make_touch_case(rng, n=1)
+            case = cc.make_touch_case(rng, n=1)
             d = oracle.closest_distance(case.q, case.ocurve())
             assert abs(d - case.expected) < 1e-13, (case, d)
 
     def test_crossing(self):
         rng = np.random.default_rng(1004)
         for _ in range(20):
-            case = make_cross_case(rng)
+            case = cc.make_cross_case(rng)
             d = oracle.closest_distance(case.q, case.ocurve())
             assert d < 1e-14, (case, d)
-
-
-# --------------------------------------------------------------------------
-# case generation
-# --------------------------------------------------------------------------
-
-
-@dataclasses.dataclass
-class Case:
-    kind: str
-    q: np.ndarray  # (n, 3)
-    coeffs: np.ndarray  # (3, K)
-    u_range: tuple
-    expected: float | None = None  # known upper bound / value when constructed
-    exact: bool = False  # expected is exact
-
-    def ocurve(self):
-        return oracle.OPoly(self.coeffs, *self.u_range)
-
-    def describe(self):
-        return (
-            f"kind={self.kind} q=np.array({self.q.tolist()!r}), "
-            f"coeffs=np.array({self.coeffs.tolist()!r}), u_range={self.u_range!r}"
-        )
-
-
-def sample_theta(rng):
-    r = rng.random()
-    if r < 0.12:
-        return 0.0
-    if r < 0.22:
-        return float(rng.choice([1e-12, -1e-12]))
-    if r < 0.27:
-        return float(rng.choice([1e-8, -1e-6, 1e-4, -1e-4]))
-    if r < 0.45:
-        return float(rng.uniform(-6.0, -0.3))
-    if r < 0.55:
-        return float(rng.uniform(4.0, 6.0) * rng.choice([-1, 1]))
-    return float(rng.uniform(-3.0, 3.0))
-
-
-def random_q(rng, n, L_range=(0.3, 2.0)):
-    return np.array(
-        [[rng.uniform(*L_range), sample_theta(rng), rng.uniform(-np.pi, np.pi)] for _ in range(n)]
-    )
-
-
-def arm_geometry(q, i, s):
-    """Point, unit tangent, unit 'outward' normal (away from the arc centre)."""
-    F, dF, ddF = oracle.segment_point_derivs(q, i, [s])
-    p, T = F[0], dF[0] / np.linalg.norm(dF[0])
-    if np.linalg.norm(ddF[0]) > 1e-9:
-        N = -ddF[0] / np.linalg.norm(ddF[0])  # outward (convex side)
-    else:
-        N = None
-    return p, T, N
-
-
-def unit_perp(rng, v):
-    w = rng.normal(size=3)
-    w -= (w @ v) * v
-    return w / np.linalg.norm(w)
-
-
-def poly_from_local(p0, t1, t2, t3, u_star, degree=3):
-    """coeffs (3, degree+1) of c(u) = p0 + t1 (u-u*) + t2 (u-u*)^2 + t3 (u-u*)^3,
-    the terms above `degree` dropped BEFORE expanding (so c(u*) = p0 always)."""
-    P = np.polynomial.polynomial
-    coeffs = np.zeros((3, degree + 1))
-    for dim in range(3):
-        base = np.array([p0[dim]])
-        for k, tk in enumerate((t1, t2, t3)[:degree], start=1):
-            base = P.polyadd(base, tk[dim] * P.polypow([-u_star, 1.0], k))
-        coeffs[dim, : len(base)] = base
-    return coeffs
-
-
-def make_random_case(rng, n=None):
-    n = int(rng.integers(1, 5)) if n is None else n
-    q = random_q(rng, n)
-    degree = int(rng.integers(1, 4))
-    i = int(rng.integers(0, n))
-    p = oracle.segment_point(q, i, rng.uniform())
-    centre = p + rng.normal(size=3) * rng.choice([0.05, 0.3, 1.0])
-    long = rng.random() < 0.5
-    if long:
-        a, b = np.sort(rng.uniform(-3, 3, 2))
-        if b - a < 1.0:
-            a, b = a - 0.5, b + 0.5
-        scale = [1.0, rng.choice([0.3, 1.0, 5.0]), rng.choice([0.1, 0.3, 1.0])]
-    else:
-        mid = rng.uniform(-1, 1)
-        half = rng.uniform(0.02, 0.08)
-        a, b = mid - half, mid + half
-        scale = [1.0, rng.choice([0.3, 1.0, 5.0]), 1.0]
-    coeffs = np.zeros((3, degree + 1))
-    for k in range(1, degree + 1):
-        coeffs[:, k] = rng.normal(size=3) * scale[k - 1]
-    umid = 0.5 * (a + b)
-    cmid = sum(coeffs[:, k] * umid**k for k in range(1, degree + 1))
-    coeffs[:, 0] = centre - cmid
-    return Case("random", q, coeffs, (float(a), float(b)))
-
-
-def make_touch_case(rng, n=None, delta=None):
-    """Curve passing delta (1e-6..1e-3) off an arm point, on the convex side.
-
-    For the touched segment alone the distance is exactly delta: the curve's
-    offset along the outward normal is delta + a (u-u*)^2 (a >= 0) and the arc
-    lies on the other side of its tangent plane.
-    """
-    n = int(rng.integers(1, 5)) if n is None else n
-    q = random_q(rng, n)
-    i = int(rng.integers(0, n))
-    s = float(rng.choice([rng.uniform(0.05, 0.95), 0.0, 1.0], p=[0.8, 0.1, 0.1]))
-    p, T, N = arm_geometry(q, i, s)
-    nrm = N if N is not None else unit_perp(rng, T)
-    delta = float(10 ** rng.uniform(-6, -3)) if delta is None else delta
-    t1 = unit_perp(rng, nrm) * rng.uniform(0.5, 2.0)
-    t3 = unit_perp(rng, nrm) * rng.uniform(0, 1.0)
-    t2 = nrm * rng.uniform(0, 2.0) + unit_perp(rng, nrm) * rng.uniform(0, 1.0)
-    degree = int(rng.integers(1, 4))
-    u_star = float(rng.uniform(-1, 1))
-    where = rng.random()
-    if where < 0.6:
-        a, b = u_star - rng.uniform(0.05, 1.5), u_star + rng.uniform(0.05, 1.5)
-    elif where < 0.8:
-        a, b = u_star, u_star + rng.uniform(0.05, 1.5)  # minimum at u0
-    else:
-        a, b = u_star - rng.uniform(0.05, 1.5), u_star  # minimum at u1
-    coeffs = poly_from_local(p + delta * nrm, t1, t2, t3, u_star, degree)
-    # with s at an end of the segment the curve may get closer to a
-    # neighbouring segment, so the constructed value is an upper bound
-    exact = n == 1 and 0 < s < 1
-    return Case("touch", q, coeffs, (a, b), expected=delta, exact=exact)
-
-
-def make_cross_case(rng):
-    n = int(rng.integers(1, 5))
-    q = random_q(rng, n)
-    i = int(rng.integers(0, n))
-    s = float(rng.uniform(0.0, 1.0))
-    p, T, _ = arm_geometry(q, i, s)
-    t1 = rng.normal(size=3)
-    t2 = rng.normal(size=3) * rng.uniform(0, 2)
-    t3 = rng.normal(size=3) * rng.uniform(0, 0.5)
-    degree = int(rng.integers(1, 4))
-    u_star = float(rng.uniform(-1, 1))
-    a, b = u_star - rng.uniform(0.05, 1.0), u_star + rng.uniform(0.05, 1.0)
-    coeffs = poly_from_local(p, t1, t2, t3, u_star, degree)
-    return Case("cross", q, coeffs, (a, b), expected=0.0)
-
-
-def make_parallel_case(rng):
-    """A straight line (nearly) parallel to a straight arm segment."""
-    n = int(rng.integers(1, 5))
-    q = random_q(rng, n)
-    i = int(rng.integers(0, n))
-    q[i, 1] = float(rng.choice([0.0, 1e-12, 0.0]))
-    s = float(rng.uniform(0.2, 0.8))
-    p, T, _ = arm_geometry(q, i, s)
-    nrm = unit_perp(rng, T)
-    m = unit_perp(rng, T)
-    delta = float(10 ** rng.uniform(-6, -2))
-    alpha = float(rng.choice([0.0, 1e-9, 1e-6, 1e-4, 1e-2]))
-    direction = np.cos(alpha) * T + np.sin(alpha) * m
-    half = rng.uniform(0.05, 1.5) * q[i, 0]
-    u_star = float(rng.uniform(-0.5, 0.5))
-    coeffs = poly_from_local(p + delta * nrm, direction, 0 * T, 0 * T, u_star, 1)
-    shift = rng.uniform(-0.5, 0.5) * half
-    return Case("parallel", q, coeffs, (u_star - half + shift, u_star + half + shift), expected=delta)
-
-
-def make_boundary_case(rng):
-    """Minima on the boundary: beyond the tip / below the base / past u ends."""
-    n = int(rng.integers(1, 5))
-    q = random_q(rng, n)
-    degree = int(rng.integers(1, 4))
-    kind = rng.choice(["tip", "tip_pair", "base_pair", "u_end"])
-    d = float(10 ** rng.uniform(-5, -0.5))
-    if kind in ("tip", "tip_pair"):
-        p, T, _ = arm_geometry(q, n - 1, 1.0)
-        if kind == "tip":  # line across the tangent ray beyond the tip
-            m = unit_perp(rng, T)
-            coeffs = poly_from_local(p + d * T, m, 0.3 * unit_perp(rng, T) * rng.random(), 0 * T, 0.0, degree)
-            a, b = -rng.uniform(0.1, 1), rng.uniform(0.1, 1)
-        else:  # a curve starting beyond the tip and leaving it: endpoint pair
-            e = T + 0.3 * unit_perp(rng, T)
-            e /= np.linalg.norm(e)
-            coeffs = poly_from_local(p + d * e, e * rng.uniform(0.5, 2), 0.2 * e, 0 * T, 0.0, degree)
-            a, b = 0.0, rng.uniform(0.1, 2)
-    elif kind == "base_pair":  # below the base, pointing down: (s=0, u=u0)
-        e = np.array([0.0, 0.0, -1.0]) + 0.3 * np.append(rng.normal(size=2), 0)
-        e /= np.linalg.norm(e)
-        coeffs = poly_from_local(d * e, e * rng.uniform(0.5, 2), 0.1 * e, 0 * e, 0.0, degree)
-        a, b = 0.0, rng.uniform(0.1, 2)
-    else:  # the foot of the perpendicular lies past u1: minimum at u = u1
-        i = int(rng.integers(0, n))
-        s = float(rng.uniform(0.1, 0.9))
-        p, T, N = arm_geometry(q, i, s)
-        nrm = N if N is not None else unit_perp(rng, T)
-        t1 = unit_perp(rng, nrm)
-        coeffs = poly_from_local(p + d * nrm, t1, 0.2 * unit_perp(rng, nrm), 0 * t1, 0.0, degree)
-        off = rng.uniform(0.01, 0.3)
-        a, b = -off - rng.uniform(0.1, 1), -off
-    return Case("boundary_" + str(kind), q, coeffs, (float(a), float(b)))
-
-
-def make_long_case(rng):
-    """Long ranges and large coefficients (Sim2-like X=c, Y=u, Z=5u^2)."""
-    n = int(rng.integers(1, 5))
-    q = random_q(rng, n)
-    X0 = rng.uniform(-1.5, 1.5)
-    coeffs = np.array(
-        [
-            [X0, rng.normal() * 0.2, 0.0, 0.0],
-            [rng.normal() * 0.3, 1.0, 0.0, 0.0],
-            [rng.uniform(-1, 2), rng.normal() * 0.5, rng.choice([5.0, -5.0, 3.0]), rng.normal()],
-        ]
-    )
-    span = rng.uniform(1, 3)
-    return Case("long", q, coeffs[:, : int(rng.integers(3, 5))].copy(), (-span, span))
-
-
-# The paper's obstacles (Tables 2-4; the tree uses the four legible branches
-# plus the trunk X=1, Y=1, Z=u, u in [0, 3], as DESIGN.md prescribes).
-PAPER_OBSTACLES = {
-    "sim1": (np.array([[1.0, 0.0], [0.0, 1.0], [0.5, -1.0]]), (-2.0, 2.0)),
-    "sim2": (np.array([[0.5, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 5.0]]), (-2.0, 2.0)),
-    "branch1": (np.array([[1.0, -0.2, 0.0], [1.0, -1.0, 0.0], [2.0, 0.0, -1.0]]), (0.0, 1.0)),
-    "branch2": (np.array([[1.0, -0.5, 0.0], [1.0, 1.0, -1.0], [1.7, 0.3, 0.0]]), (0.0, 1.5)),
-    "branch3": (np.array([[1.0, 1.0, -1.0], [1.0, -1.0, 0.0], [2.0, -0.1, 0.0]]), (0.0, 1.5)),
-    "branch4": (np.array([[1.0, 0.0], [1.0, -1.0], [1.5, 0.1]]), (0.0, 1.5)),
-    "trunk": (np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), (0.0, 3.0)),
-}
-
-
-def paper_configs(rng, count):
-    out = []
-    for k in range(count):
-        q = np.array(
-            [[rng.uniform(0.7, 1.3), sample_theta(rng), rng.uniform(-np.pi, np.pi)] for _ in range(3)]
-        )
-        if k == 0:
-            q[:, 1] = 0.0  # the straight start
-        out.append(q)
-    return out
-
-
-def build_cases():
-    rng = np.random.default_rng(20240601)
-    cases = [make_random_case(rng) for _ in range(N_RANDOM)]
-    cases += [make_touch_case(rng) for _ in range(150)]
-    cases += [make_cross_case(rng) for _ in range(80)]
-    cases += [make_parallel_case(rng) for _ in range(80)]
-    cases += [make_boundary_case(rng) for _ in range(140)]
-    cases += [make_long_case(rng) for _ in range(60)]
-    return cases
-
-
-CASES = build_cases()
-PAPER_CASES = [
-    Case("paper_" + name, q, coeffs, u_range)
-    for name, (coeffs, u_range) in PAPER_OBSTACLES.items()
-    for q in paper_configs(np.random.default_rng(sum(map(ord, name))), 20)
-]
-
-
-def _helix_fn(u):
-    return jnp.stack([jnp.cos(u), jnp.sin(u), 0.2 * u])
-
-
-HELIX_RANGE = (-3.0, 3.0)
-HELIX_QS = paper_configs(np.random.default_rng(77), 40)
 
 
 # --------------------------------------------------------------------------
 # running library and oracle (once per session)
 # --------------------------------------------------------------------------
 
-# The oracle is plain Python and is the slow part; it runs in a pool of
-# spawned worker processes started at collection time, so it overlaps with
-# XLA compiling the library (set SOFTPLAN_TEST_ORACLE_WORKERS=0 to run it in
-# this process).  Library batches are padded to CHUNK cases so that each
-# (function, n, dtype) compiles once.
+# The oracle's answers are cached on disk by closest_cases (keyed by the
+# oracle's source and each case's data).  Library batches are padded to CHUNK
+# cases so that each (function, n, dtype) compiles once.
 
 CHUNK = 64
 
@@ -463,6 +190,11 @@ def _dist(q, curve):
 _pairwise = jax.jit(jax.vmap(sp.closest_point))  # over q AND curve
 _pairwise_grad = jax.jit(jax.vmap(jax.grad(_dist)))
 _per_q = jax.jit(jax.vmap(sp.closest_point, in_axes=(0, None)))  # one curve
+
+
+def _helix_fn(u):
+    """The helix of closest_cases (oracle.helix: radius 1, pitch 0.2), in jax."""
+    return jnp.stack([jnp.cos(u), jnp.sin(u), 0.2 * u])
 
 
 def _to_numpy(res):
@@ -507,126 +239,23 @@ def run_cases(cases, dtype=jnp.float64, fn=_pairwise):
     return out
 
 
-# ---- gradient cases (n = 3, some/all theta = 0 exactly), chosen at import
-
-
-def _isolated(o, q, curve, gap=2e-3):
-    """The minimum is unique: every candidate within `gap` of it is the same point."""
-    A = oracle.segment_point(q, o.segment, o.s)
-    for d, i, s, u in o.candidates:
-        if d > o.distance + gap:
-            break
-        Ai = oracle.segment_point(q, i, s)
-        Ci = curve.point(np.array([u]))[0]
-        if np.linalg.norm(Ai - A) > 1e-4 or np.linalg.norm(Ci - o.obstacle_point) > 1e-4:
-            return False
-    return True
-
-
-def gradient_cases():
-    rng = np.random.default_rng(4242)
-    out = []
-    while len(out) < 8:
-        case = make_random_case(rng, n=3)
-        if len(out) >= 4:  # theta = 0 exactly in some / all segments
-            case.q[:, 1] = np.where(rng.random(3) < 0.7, 0.0, case.q[:, 1])
-            if len(out) == 7:
-                case.q[:, 1] = 0.0
-        o = oracle.closest_point(case.q, case.ocurve())
-        if o.distance < 0.05 or not _isolated(o, case.q, case.ocurve()):
-            continue
-        out.append((case, o))
-    return out
-
-
-GRAD_CASES = gradient_cases()
-FD_H = 1e-6
-
-
-def _fd_qs(q):
-    n = q.shape[0]
-    E = np.eye(3 * n).reshape(3 * n, n, 3) * FD_H
-    return np.concatenate([q + E, q - E])
-
-
-# ---- the oracle, in worker processes
-
-
-def _oracle_jobs():
-    h = oracle.helix(*HELIX_RANGE)
-    jobs = {
-        "main": [(c.q, c.ocurve()) for c in CASES],
-        "paper": [(c.q, c.ocurve()) for c in PAPER_CASES],
-        "helix": [(q, h) for q in HELIX_QS],
-    }
-    fd = []
-    for case, _ in GRAD_CASES:
-        fd += [(qq, case.ocurve()) for qq in _fd_qs(case.q)]
-    jobs["grad_fd"] = fd
-    return jobs
-
-
-def _make_pool():
-    workers = int(os.environ.get("SOFTPLAN_TEST_ORACLE_WORKERS", "2"))
-    if workers <= 0:
-        return None
-    try:
-        return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
-    except Exception:  # noqa: BLE001 - no subprocesses: compute serially
-        return None
-
-
-_POOL = _make_pool()
-_JOBS = _oracle_jobs()
-_FUTURES = {}
-if _POOL is not None:
-    for _name in ("grad_fd", "main", "paper", "helix"):
-        _batch = 16
-        _FUTURES[_name] = [
-            _POOL.submit(
-                oracle.closest_point_many if _name != "grad_fd" else oracle.closest_distance_many,
-                _JOBS[_name][k : k + _batch],
-            )
-            for k in range(0, len(_JOBS[_name]), _batch)
-        ]
-
-
 @cache
 def oracle_results(which):
-    fn = oracle.closest_point_many if which != "grad_fd" else oracle.closest_distance_many
-    if which in _FUTURES:
-        try:
-            return [r for f in _FUTURES[which] for r in f.result()]
-        except Exception:  # noqa: BLE001 - a broken pool: recompute here
-            pass
-    return fn(_JOBS[which])
+    """The oracle's answers (cached on disk by closest_cases), case by case."""
+    return cc.oracle_answers(which)
 
 
 @cache
 def library_results(which):
     if which == "main":
-        return run_cases(CASES)
+        return run_cases(cc.main_cases())
     if which == "paper":
-        return run_cases(PAPER_CASES)
+        return run_cases(cc.paper_cases())
     if which == "helix":
-        helix = sp.ParametricCurve(_helix_fn, HELIX_RANGE)
-        res = _to_numpy(_per_q(jnp.asarray(np.stack(HELIX_QS)), helix))
-        return [{f: v[j] for f, v in res.items()} for j in range(len(HELIX_QS))]
+        helix = sp.ParametricCurve(_helix_fn, cc.HELIX_RANGE)
+        res = _to_numpy(_per_q(jnp.asarray(np.stack(cc.helix_qs())), helix))
+        return [{f: v[j] for f, v in res.items()} for j in range(len(cc.helix_qs()))]
     raise KeyError(which)
-
-
-def _cases(which):
-    if which == "main":
-        return CASES
-    if which == "paper":
-        return PAPER_CASES
-    return [Case("helix", q, np.zeros((3, 1)), HELIX_RANGE) for q in HELIX_QS]
-
-
-def _ocurve(which, case):
-    if which == "helix":
-        return oracle.helix(*HELIX_RANGE)
-    return case.ocurve()
 
 
 # --------------------------------------------------------------------------
@@ -638,16 +267,16 @@ WHICH = ["main", "paper", "helix"]
 
 def test_case_counts_and_coverage():
     kinds = {}
-    for c in CASES + PAPER_CASES:
+    for c in cc.main_cases() + cc.paper_cases():
         kinds[c.kind.split("_")[0]] = kinds.get(c.kind.split("_")[0], 0) + 1
-    total = len(CASES) + len(PAPER_CASES) + len(HELIX_QS)
+    total = len(cc.main_cases()) + len(cc.paper_cases()) + len(cc.helix_qs())
     assert total >= 1000, kinds
-    thetas = np.concatenate([c.q[:, 1] for c in CASES])
+    thetas = np.concatenate([c.q[:, 1] for c in cc.main_cases()])
     assert (thetas == 0).sum() > 50 and (np.abs(thetas) == 1e-12).sum() > 50
     assert (thetas < -1).sum() > 100 and (np.abs(thetas) > 4).sum() > 50
-    ns = {c.q.shape[0] for c in CASES}
+    ns = {c.q.shape[0] for c in cc.main_cases()}
     assert ns == {1, 2, 3, 4}
-    degrees = {c.coeffs.shape[1] - 1 for c in CASES}
+    degrees = {c.coeffs.shape[1] - 1 for c in cc.main_cases()}
     assert degrees == {1, 2, 3}
 
 
@@ -656,7 +285,7 @@ def test_oracle_minima_cover_every_case_type():
     # (judged by the oracle's answers, not by the construction)
     orc = oracle_results("main")
     ends_s = [o.s in (0.0, 1.0) for o in orc]
-    ends_u = [o.u in c.u_range for c, o in zip(CASES, orc, strict=True)]
+    ends_u = [o.u in c.u_range for c, o in zip(cc.main_cases(), orc, strict=True)]
     count = {
         "s at an end, u interior": sum(a and not b for a, b in zip(ends_s, ends_u, strict=True)),
         "u at an end, s interior": sum(b and not a for a, b in zip(ends_s, ends_u, strict=True)),
@@ -686,7 +315,7 @@ def _report(rows, header):
 
 @pytest.mark.parametrize("which", WHICH)
 def test_distance_matches_oracle(which):
-    cases, lib, orc = _cases(which), library_results(which), oracle_results(which)
+    cases, lib, orc = cc.cases(which), library_results(which), oracle_results(which)
     misses = []
     for c, r, o in zip(cases, lib, orc, strict=True):
         err = abs(float(r["distance"]) - o.distance)
@@ -715,16 +344,21 @@ GRID = SolverOptions(method="grid")
 _pairwise_grid = jax.jit(jax.vmap(lambda q, c: sp.closest_point(q, c, GRID)))
 
 
-@pytest.mark.parametrize("options", [SolverOptions(), GRID], ids=["reduced", "grid"])
+@pytest.mark.parametrize(
+    "options",
+    [SolverOptions(), pytest.param(GRID, marks=pytest.mark.slow)],  # the grid solver: compiles for ~1 min
+    ids=["reduced", "grid"],
+)
 def test_known_hard_cases(options):
     for q, coeffs, u_range, d_oracle in HARD_CASES:
         r = sp.closest_point(jnp.asarray(q), sp.PolynomialCurve(coeffs, u_range), options)
         assert abs(float(r.distance) - d_oracle) <= TOL, (q, float(r.distance), d_oracle)
 
 
+@pytest.mark.slow  # the non-default solver: ~2 min of compiling
 def test_grid_method_matches_oracle():
     """The alternative 2-D solver (method="grid") on the main and paper suites."""
-    for which, cases in (("main", CASES), ("paper", PAPER_CASES)):
+    for which, cases in (("main", cc.main_cases()), ("paper", cc.paper_cases())):
         lib = run_cases(cases, fn=_pairwise_grid)
         errs = [abs(float(r["distance"]) - o.distance) for r, o in zip(lib, oracle_results(which), strict=True)]
         bad = [k for k, e in enumerate(errs) if not e <= TOL]
@@ -733,7 +367,7 @@ def test_grid_method_matches_oracle():
 
 @pytest.mark.parametrize("which", WHICH)
 def test_returned_points_are_on_arm_and_curve(which):
-    cases, lib = _cases(which), library_results(which)
+    cases, lib = cc.cases(which), library_results(which)
     misses = []
     for c, r in zip(cases, lib, strict=True):
         n = c.q.shape[0]
@@ -749,7 +383,7 @@ def test_returned_points_are_on_arm_and_curve(which):
         if not (u0 <= u <= u1):
             problems.append(f"u={u!r} outside [{u0}, {u1}]")
         A = oracle.segment_point(c.q, seg, s)
-        C = _ocurve(which, c).point(np.array([u]))[0]
+        C = cc.ocurve(which, c).point(np.array([u]))[0]
         scale = max(1.0, np.abs(A).max(), np.abs(C).max())
         ea = np.abs(r["arm_point"] - A).max()
         ec = np.abs(r["obstacle_point"] - C).max()
@@ -778,7 +412,7 @@ def test_constructed_cases_agree_with_construction():
     lib = library_results("main")
     orc = oracle_results("main")
     bad = []
-    for c, r, o in zip(CASES, lib, orc, strict=True):
+    for c, r, o in zip(cc.main_cases(), lib, orc, strict=True):
         if c.expected is None:
             continue
         for name, d in (("oracle", o.distance), ("library", float(r["distance"]))):
@@ -798,10 +432,10 @@ def test_constructed_cases_agree_with_construction():
 
 def test_vmap_over_stacked_curves_for_one_q():
     rng = np.random.default_rng(5)
-    q = random_q(rng, 3)
+    q = cc.random_q(rng, 3)
     q[1, 1] = 0.0
     curves_np = [
-        PAPER_OBSTACLES[k] for k in ("sim1", "sim2", "branch1", "branch2", "branch3", "branch4", "trunk")
+        cc.PAPER_OBSTACLES[k] for k in ("sim1", "sim2", "branch1", "branch2", "branch3", "branch4", "trunk")
     ]
     curves = [sp.PolynomialCurve(jnp.asarray(cf), jnp.asarray(ur)) for cf, ur in curves_np]
     stacked, mask = unpack_stacked(sp.stack_curves(curves, size=9, degree=3))
@@ -815,9 +449,9 @@ def test_vmap_over_stacked_curves_for_one_q():
 def test_concrete_q_closed_over_inside_jit():
     # the documented per-obstacle vmap, inside a user's jit, q a closed-over constant
     q = jnp.asarray([[1.0, 0.4, 0.2], [1.0, 0.0, 1.0], [1.0, -0.3, 2.0]])
-    c = sp.PolynomialCurve(jnp.asarray(PAPER_OBSTACLES["sim1"][0]), jnp.asarray((-2.0, 2.0)))
+    c = sp.PolynomialCurve(jnp.asarray(cc.PAPER_OBSTACLES["sim1"][0]), jnp.asarray((-2.0, 2.0)))
     d = jax.jit(lambda cc: sp.closest_point(q, cc).distance)(c)
-    o = oracle.closest_point(np.asarray(q), oracle.OPoly(PAPER_OBSTACLES["sim1"][0], -2.0, 2.0))
+    o = oracle.closest_point(np.asarray(q), oracle.OPoly(cc.PAPER_OBSTACLES["sim1"][0], -2.0, 2.0))
     assert abs(float(d) - o.distance) <= TOL
 
 
@@ -825,7 +459,7 @@ def test_eager_single_calls_match_oracle():
     # un-jitted, un-vmapped path, native degree (one shape: one compile)
     picks = [
         c
-        for c in CASES
+        for c in cc.main_cases()
         if c.kind in ("touch", "parallel", "cross", "random") and c.q.shape[0] == 3 and c.coeffs.shape[1] == 2
     ][:3]
     for c in picks:
@@ -840,10 +474,10 @@ def test_eager_single_calls_match_oracle():
 
 
 def test_float32_within_1e4_of_float64():
-    cases = [c for c in CASES if c.q.shape[0] == 3]
+    cases = [c for c in cc.main_cases() if c.q.shape[0] == 3]
     assert len(cases) >= 200
     lib32 = run_cases(cases, jnp.float32)
-    orc = {id(c): o for c, o in zip(CASES, oracle_results("main"), strict=True)}
+    orc = {id(c): o for c, o in zip(cc.main_cases(), oracle_results("main"), strict=True)}
     misses = []
     for c, r in zip(cases, lib32, strict=True):
         assert r["distance"].dtype == np.float32, r["distance"].dtype
@@ -865,14 +499,14 @@ def test_float32_within_1e4_of_float64():
 
 
 def test_distance_gradient():
-    cases = [c for c, _ in GRAD_CASES]
+    cases = [c for c, _ in cc.gradient_cases()]
     g_all = run_pairwise(
         [c.q for c in cases],
         [c.coeffs for c in cases],
         [c.u_range for c in cases],
         fn=_pairwise_grad,
     )
-    fd_qs = np.concatenate([_fd_qs(c.q) for c in cases])
+    fd_qs = np.concatenate([cc.fd_qs(c.q) for c in cases])
     rep = 2 * 9
     vals = run_pairwise(
         fd_qs,
@@ -880,8 +514,8 @@ def test_distance_gradient():
         [c.u_range for c in cases for _ in range(rep)],
     )
     vals = np.array([v["distance"] for v in vals]).reshape(len(cases), rep)
-    vals_o = np.asarray(oracle_results("grad_fd")).reshape(len(cases), rep)
-    for k, (case, o) in enumerate(GRAD_CASES):
+    vals_o = cc.oracle_distances("grad_fd").reshape(len(cases), rep)
+    for k, (case, o) in enumerate(cc.gradient_cases()):
         q = case.q
         g = np.asarray(g_all[k]).ravel()
         msg = case.describe()
@@ -891,16 +525,16 @@ def test_distance_gradient():
         env = (o.arm_point - o.obstacle_point) @ J / o.distance
         assert_allclose(g, env, atol=1e-8, err_msg="envelope " + msg)
         # 2) central differences (h = 1e-6) of the library distance
-        fd = (vals[k, :9] - vals[k, 9:]) / (2 * FD_H)
+        fd = (vals[k, :9] - vals[k, 9:]) / (2 * cc.FD_H)
         assert_allclose(g, fd, atol=1e-6, err_msg="FD(lib) " + msg)
         # 3) central differences of the ORACLE distance
-        fdo = (vals_o[k, :9] - vals_o[k, 9:]) / (2 * FD_H)
+        fdo = (vals_o[k, :9] - vals_o[k, 9:]) / (2 * cc.FD_H)
         assert_allclose(g, fdo, atol=1e-6, err_msg="FD(oracle) " + msg)
 
 
 def test_distance_gradient_finite_everywhere():
     # crossings (distance 0), touching, parallel, theta = 0 / 1e-12 cases
-    picks = [c for c in CASES if c.kind in ("cross", "touch", "parallel") and c.q.shape[0] == 3]
+    picks = [c for c in cc.main_cases() if c.kind in ("cross", "touch", "parallel") and c.q.shape[0] == 3]
     assert len(picks) > 30
     grads = run_pairwise(
         [c.q for c in picks],
@@ -932,7 +566,7 @@ def _closest_points_lib(qs, pts):
 @pytest.mark.parametrize("n,N", [(1, 1), (2, 2), (3, 50), (4, 7)])
 def test_closest_point_to_points_brute_force(n, N):
     rng = np.random.default_rng(99 + n)
-    qs = np.stack([random_q(rng, n) for _ in range(POINT_BATCH)])
+    qs = np.stack([cc.random_q(rng, n) for _ in range(POINT_BATCH)])
     qs[0, :, 1] = 0.0
     pts = rng.normal(size=(POINT_BATCH, N, 3)) * 1.5 + [0, 0, 1]
     r = _closest_points_lib(qs, pts)
@@ -962,7 +596,7 @@ def test_closest_point_to_points_uses_ten_samples_per_segment():
 
 
 def test_curve_points_feed_n_point_method():
-    c = sp.PolynomialCurve(jnp.asarray(PAPER_OBSTACLES["sim1"][0]), jnp.asarray((-2.0, 2.0)))
+    c = sp.PolynomialCurve(jnp.asarray(cc.PAPER_OBSTACLES["sim1"][0]), jnp.asarray((-2.0, 2.0)))
     pts = np.asarray(sp.curve_points(c, 5))
     assert_allclose(pts[:, 1], [-2, -1, 0, 1, 2], atol=1e-15)
     q = np.array([[1.0, 0.5, 0.0], [1.0, -0.3, 1.0], [1.0, 0.2, 2.0]])
@@ -972,7 +606,7 @@ def test_curve_points_feed_n_point_method():
     # and the N-point distance can never be below the true curve distance
     assert (
         float(r.distance)
-        >= oracle.closest_distance(q, oracle.OPoly(PAPER_OBSTACLES["sim1"][0], -2, 2)) - 1e-12
+        >= oracle.closest_distance(q, oracle.OPoly(cc.PAPER_OBSTACLES["sim1"][0], -2, 2)) - 1e-12
     )
 
 
@@ -985,7 +619,7 @@ def test_point_distance_matches_dense_sampling():
     s_dense = np.linspace(0.0, 1.0, 20001)
     for n in (1, 3):
         for _ in range(15):
-            q = random_q(rng, n)
+            q = cc.random_q(rng, n)
             pts = rng.normal(size=(6, 3)) * rng.choice([0.3, 1.0, 3.0])
             pts[0] = oracle.segment_point(q, n - 1, 0.5) + 1e-4 * rng.normal(size=3)  # nearly on the arm
             lib = np.asarray(sp.point_distance(jnp.asarray(q), jnp.asarray(pts)))

@@ -7,16 +7,19 @@ own ``python3`` kernel spec (which may point to another Python) is never used.
 If no kernel can be started the tests FAIL: a notebook that was not run is not
 a notebook that works.
 
-Executing the notebooks is opt-in (``SOFTPLAN_TEST_NOTEBOOKS=1``; the other
-tests here always run). It takes minutes, nearly all of it XLA compilation inside the notebooks:
-on a 2-core CPU about 2.5 min for quickstart.ipynb and 5-13 min for
-tuning.ipynb (two compilations of the gradient of a whole rollout), the
-longer figure on a busy machine.
+The notebooks are executed in the default run, at small sizes: each has one
+code cell tagged ``parameters`` (the sizes a Colab user can enlarge), and the
+test executes a copy whose parameter cell is replaced by ``SMALL[name]`` (the
+same names, smaller values). The committed notebooks keep their full-size
+outputs. Nearly all of the time is XLA compilation inside the kernel, which
+shares the suite's persistent compilation cache (``session.py``), so a rerun
+is much faster than the first run (minutes on a 2-core CPU, most of it the two
+compilations of the gradient of a whole rollout in tuning.ipynb).
 """
 
+import ast
 import importlib.util
 import json
-import os
 import subprocess
 import sys
 import time
@@ -24,11 +27,18 @@ from pathlib import Path
 
 import nbformat
 import pytest
+from session import subprocess_env
 
 NOTEBOOK_DIR = Path(__file__).resolve().parent.parent / "notebooks"
 NOTEBOOKS = ["quickstart.ipynb", "tuning.ipynb"]
 CELL_TIMEOUT = 900  # seconds per cell; a compilation takes 15-150 s on a 2-core CPU
 KERNEL_START_TIMEOUT = 120
+
+# The parameter cells' small values for the test run (same names as the notebooks' own).
+SMALL = {
+    "quickstart.ipynb": "MAX_STEPS = 60     # the tree reaches its goal in 51 iterations\nN_POINTS = (1,)\n",
+    "tuning.ipynb": "ROLL_STEPS = 10\nTUNING_STEPS = 2\nPLAN_STEPS = 60\n",
+}
 
 
 def _read(name):
@@ -50,25 +60,42 @@ def _kernel_manager(spec_dir: Path):
         "argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
         "display_name": "softplan test kernel",
         "language": "python",
+        # this checkout's softplan_jax and the suite's persistent compilation cache
+        "env": {k: v for k, v in subprocess_env().items() if k == "PYTHONPATH" or k.startswith("JAX_")},
     }
     (kernel / "kernel.json").write_text(json.dumps(spec))
     ksm = KernelSpecManager(kernel_dirs=[str(spec_dir)])
     return AsyncKernelManager(kernel_name="softplan-test-python", kernel_spec_manager=ksm)
 
 
-# Running both notebooks costs 6-15 min of a 2-core CPU (two compilations of the
-# gradient of a whole rollout), too much for every CI run: opt in with
-# SOFTPLAN_TEST_NOTEBOOKS=1 (the skip is reported by -ra; it is not a pass).
-RUN_NOTEBOOKS = os.environ.get("SOFTPLAN_TEST_NOTEBOOKS", "0") == "1"
+def _parameter_cell(nb, name):
+    """Index of the one code cell tagged ``parameters``."""
+    tagged = [k for k, c in enumerate(nb.cells) if "parameters" in c.metadata.get("tags", [])]
+    assert len(tagged) == 1, f"{name}: need exactly one cell tagged 'parameters', found {len(tagged)}"
+    assert nb.cells[tagged[0]].cell_type == "code", f"{name}: the parameter cell must be a code cell"
+    return tagged[0]
 
 
-@pytest.mark.skipif(not RUN_NOTEBOOKS, reason="notebook execution is opt-in: set SOFTPLAN_TEST_NOTEBOOKS=1")
+def _assigned_names(src):
+    return {t.id for node in ast.parse(src).body if isinstance(node, ast.Assign) for t in node.targets}
+
+
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_parameter_cell_matches_the_small_values(name):
+    """The test's small values set exactly the names the notebook's parameter cell sets."""
+    nb = _read(name)
+    cell = nb.cells[_parameter_cell(nb, name)]
+    assert _assigned_names(cell.source) == _assigned_names(SMALL[name]), (cell.source, SMALL[name])
+
+
 @pytest.mark.parametrize("name", NOTEBOOKS)
 def test_notebook_runs_top_to_bottom(name, tmp_path):
+    """Executed top to bottom at small sizes (the parameter cell replaced by SMALL[name])."""
     from nbclient import NotebookClient
     from nbclient.exceptions import CellExecutionError
 
     nb = _read(name)
+    nb.cells[_parameter_cell(nb, name)].source = SMALL[name]
     work = tmp_path / "cwd"
     work.mkdir()
     km = _kernel_manager(tmp_path / "kernels")
@@ -169,6 +196,7 @@ def _run_cell(src, mode, tmp_path):
     proc = subprocess.run(
         [sys.executable, str(harness), str(cell), mode, str(out)],
         cwd=cwd,
+        env=subprocess_env(),  # this checkout's softplan_jax
         capture_output=True,
         text=True,
         timeout=300,
