@@ -134,6 +134,11 @@ class CurveFit(NamedTuple):
     rms_residual: float
     max_residual: float
 
+    @property
+    def curves(self) -> list:
+        """``[curve]``, as :attr:`CloudFit.curves`."""
+        return [self.curve]
+
 
 class CloudFit(NamedTuple):
     """Curves fitted to a whole cloud (:func:`fit_curves`).
@@ -743,14 +748,16 @@ def _report(max_res: float, tol: float, noise: float, max_residual, warn: bool, 
 
 def _warn_if_poor(curve: PolynomialCurve, points, what: str) -> None:
     """FitWarning when an (ordered) fit's farthest point is far beyond the noise
-    level, with the hint that the points may not be in order."""
+    level (twice the tolerance of :func:`fit_curve`: the chord-length
+    parameter of an ordered fit costs some accuracy by itself), with the
+    hint that the points may not be in order."""
     P = np.asarray(points, np.float64)
     if P.shape[0] < 4:
         return
     lo, hi = (float(x) for x in np.asarray(curve.u_range))
     _, dist = _closest_u(np.asarray(curve.coeffs, np.float64), P, lo, hi)
     noise = _noise_level(P)
-    tol = _tolerance(noise, P.shape[0], float(np.max(np.ptp(P, axis=0))))
+    tol = 2.0 * _tolerance(noise, P.shape[0], float(np.max(np.ptp(P, axis=0))))
     mx = float(dist.max())
     if mx > tol:
         warnings.warn(
@@ -1263,9 +1270,15 @@ def fit_curves(
     G, gidx = _graph_subset(P)
     sc = _scales(P, G)
 
-    # Separate obstacles: cut the raw cloud's spanning tree at edges much longer than the spacing.
-    T_raw = _spanning_tree(G)
-    T_raw.data[T_raw.data > sc.cut] = 0.0
+    # Separate obstacles: cut the raw cloud's spanning tree at edges much longer
+    # than the point spacing, both the cloud's and the local one at the edge's
+    # two ends (sampling is often sparser along parts of a curve).
+    T_raw = _spanning_tree(G).tocoo()
+    k = min(6, G.shape[0] - 1)
+    local = cKDTree(G).query(G, k + 1)[0][:, k]
+    long_edge = T_raw.data > np.maximum(sc.cut, 2.5 * (local[T_raw.row] + local[T_raw.col]))
+    T_raw.data[long_edge] = 0.0
+    T_raw = T_raw.tocsr()
     T_raw.eliminate_zeros()
     ncomp, comp = connected_components(T_raw, directed=False)
     near = cKDTree(G).query(P)[1] if G.shape[0] != n else None  # cloud point -> graph point
