@@ -14,6 +14,14 @@ from .curves import curve_points as curve_points
 from .curves import fit_polynomial_curve as fit_polynomial_curve
 from .curves import line_segment as line_segment
 from .curves import stack_curves as stack_curves
+from .fitting import CloudFit as CloudFit
+from .fitting import CurveFit as CurveFit
+from .fitting import FitWarning as FitWarning
+from .fitting import curve_distance as curve_distance
+from .fitting import fit_curve as fit_curve
+from .fitting import fit_curves as fit_curves
+from .fitting import load_cloud as load_cloud
+from .fitting import save_fit_scenario as save_fit_scenario
 from .kinematics import backbone_points as backbone_points
 from .kinematics import motion_bound as motion_bound
 from .kinematics import point_jacobian as point_jacobian

@@ -8,6 +8,9 @@
                           [--json] [--float32] [--require-reached]
     softplan scenarios [--json]
     softplan export NAME PATH [--force]
+    softplan fit CLOUD [--out JSON] [--goal X Y Z] [--degree D] [--max-degree D]
+                       [--max-residual R] [--radius R] [--inflate] [--single]
+                       [--plot PNG] [--force] [--json]
 
 SCENARIO is a paper scenario name (``sim1``, ``sim2``, ``tree``) or the path of
 a JSON scenario file (a file literally named like a paper scenario: write
@@ -134,7 +137,40 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("name", metavar="NAME", help="paper scenario (sim1, sim2, tree)")
     export.add_argument("path", metavar="PATH", help="output .json file")
     export.add_argument("--force", action="store_true", help="overwrite PATH if it exists")
+    _add_fit_parser(sub)
     return parser
+
+
+def _add_fit_parser(sub) -> None:
+    fit = sub.add_parser(
+        "fit",
+        help="fit obstacle curves to a point cloud and write a JSON scenario",
+        description="Fit polynomial curves to an unordered, noisy point cloud (one or several curve-like "
+        "obstacles: a trunk with branches, crossing wires) and write a JSON scenario of them, with the "
+        "fit's residuals as metadata, for 'softplan run'. CLOUD is .npy (an (N, 3) array), .csv "
+        "(x,y,z per line, optional header) or .xyz (x y z per line).",
+        epilog="Exit codes: 0 written (a poor fit prints a warning); 2 bad input, or the maximum "
+        "residual is above --max-residual.",
+    )
+    fit.add_argument("cloud", metavar="CLOUD", help="point cloud file: .npy, .csv or .xyz")
+    fit.add_argument("--out", metavar="JSON", default=None,
+                     help="scenario file to write (default: CLOUD with the extension .json)")
+    fit.add_argument("--goal", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
+                     help="goal of the arm's tip (default: the straight arm's tip [0, 0, 3]; edit the JSON later)")
+    fit.add_argument("--degree", type=int, default=None, metavar="D",
+                     help="degree of every curve (default: chosen per curve by BIC)")
+    fit.add_argument("--max-degree", type=int, default=8, metavar="D",
+                     help="highest degree tried when --degree is not given (default 8)")
+    fit.add_argument("--max-residual", type=float, default=None, metavar="R",
+                     help="fail (exit 2) when some cloud point is farther than R from every fitted curve")
+    fit.add_argument("--radius", type=float, default=0.0, metavar="R", help="obstacle radius of the curves (default 0)")
+    fit.add_argument("--inflate", action="store_true",
+                     help="add each curve's maximum residual to its radius (planning stays clear of the raw points)")
+    fit.add_argument("--single", action="store_true",
+                     help="fit exactly one curve to the whole cloud (default: split it into its curves)")
+    fit.add_argument("--plot", metavar="PATH", help="write a figure of the cloud with the fitted curves (PNG, PDF, ...)")
+    fit.add_argument("--force", action="store_true", help="overwrite the output file if it exists")
+    fit.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
 # ----------------------------------------------------------------------------
@@ -532,6 +568,104 @@ def _cmd_export(args) -> int:
     return EXIT_OK
 
 
+def _cmd_fit(args) -> int:
+    import warnings
+
+    import jax
+
+    jax.config.update("jax_enable_x64", True)  # fit and write the coefficients in float64
+    from .fitting import CLOUD_EXTENSIONS, FitWarning, fit_curve, fit_curves, load_cloud, save_fit_scenario
+
+    cloud = args.cloud
+    if os.path.splitext(cloud)[1].lower() not in CLOUD_EXTENSIONS:
+        raise InputError(f"cannot read point cloud {cloud!r}: use a file ending in {', '.join(CLOUD_EXTENSIONS)}")
+    out = args.out if args.out is not None else os.path.splitext(cloud)[0] + ".json"
+    if os.path.exists(out) and not args.force:
+        raise InputError(f"{out} exists; pass --force to overwrite it (or choose --out)")
+    _check_output_path(out, "--out", (cloud,))
+    if args.plot is not None:
+        _check_output_path(args.plot, "--plot", (cloud,))
+        _check_plot_format(args.plot)
+        if os.path.abspath(args.plot) == os.path.abspath(out):
+            raise InputError("--plot and --out name the same file")
+    for opt, value in (("--max-residual", args.max_residual), ("--radius", args.radius)):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise InputError(f"{opt} must be a finite number >= 0, got {value}")
+    if args.goal is not None and not all(math.isfinite(g) for g in args.goal):
+        raise InputError(f"--goal must be three finite numbers, got {args.goal}")
+    goal = args.goal if args.goal is not None else [0.0, 0.0, 3.0]
+    kwargs = dict(degree=args.degree, max_degree=args.max_degree, max_residual=args.max_residual,
+                  radius=args.radius, inflate=args.inflate)
+    try:
+        points = load_cloud(cloud)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", FitWarning)
+            fit = fit_curve(points, **kwargs) if args.single else fit_curves(points, **kwargs)
+    except ValueError as err:
+        raise InputError(str(err)) from None
+    for w in caught:
+        if issubclass(w.category, FitWarning):
+            print(f"softplan: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
+    meta = {"source": {"cloud": os.path.abspath(cloud), "command": "softplan fit", "single": bool(args.single),
+                       "inflate": bool(args.inflate)}}
+    try:
+        save_fit_scenario(fit, out, goal, name=os.path.splitext(os.path.basename(cloud))[0], metadata=meta,
+                          overwrite=args.force)
+    except (OSError, ValueError) as err:
+        raise InputError(f"cannot write {out}: {err}") from None
+    from .fitting import _as_cloud_fit
+
+    cf = _as_cloud_fit(fit)
+    plot_path = None
+    if args.plot is not None:
+        if "matplotlib.pyplot" not in sys.modules:
+            import matplotlib
+
+            matplotlib.use("Agg")  # the command never opens a window
+        import matplotlib.pyplot as plt
+
+        from .plotting import plot_cloud_fit
+
+        fig = plot_cloud_fit(points, fit, title=f"{os.path.basename(cloud)}: {len(cf.fits)} curve(s), "
+                             f"max residual {cf.max_residual:.3g}")
+        try:
+            fig.savefig(args.plot, dpi=120, bbox_inches="tight")
+        except OSError as err:
+            raise InputError(f"cannot write output: {err}") from None
+        finally:
+            plt.close(fig)
+        plot_path = os.path.abspath(args.plot)
+    summary = {
+        "cloud": cloud,
+        "points": int(points.shape[0]),
+        "noise": cf.noise if math.isfinite(cf.noise) else None,
+        "curves": [
+            {"degree": f.degree, "points": int(f.indices.size), "rms_residual": f.rms_residual,
+             "max_residual": f.max_residual, "radius": float(f.curve.radius)}
+            for f in cf.fits
+        ],
+        "rms_residual": cf.rms_residual,
+        "max_residual": cf.max_residual,
+        "goal": list(goal),
+        "scenario": os.path.abspath(out),
+        "plot": plot_path,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        noise = "" if summary["noise"] is None else f", estimated noise level {summary['noise']:.4g}"
+        lines = [f"{cloud}: {summary['points']} points{noise}",
+                 f"{len(cf.fits)} curve(s); max residual {cf.max_residual:.4g}, rms {cf.rms_residual:.4g}"]
+        for k, c in enumerate(summary["curves"]):
+            lines.append(f"  curve {k}: degree {c['degree']}, {c['points']} points, rms {c['rms_residual']:.4g}, "
+                         f"max {c['max_residual']:.4g}, radius {c['radius']:.4g}")
+        if args.goal is None:
+            lines.append("goal [0, 0, 3] (the straight arm's tip): pass --goal X Y Z or edit the JSON")
+        lines.append(f"wrote {out}" + (f" and {args.plot}" if plot_path else "") + f"; plan with: softplan run {out}")
+        print("\n".join(lines))
+    return EXIT_OK
+
+
 def main(argv=None) -> int:
     """Entry point of the ``softplan`` command; returns the exit code."""
     parser = build_parser()
@@ -547,6 +681,8 @@ def main(argv=None) -> int:
             return _cmd_run(args)
         if args.command == "scenarios":
             return _cmd_scenarios(args)
+        if args.command == "fit":
+            return _cmd_fit(args)
         return _cmd_export(args)
     except InputError as err:
         msg = " ".join(str(err).split())  # one line

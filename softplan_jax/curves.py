@@ -280,20 +280,32 @@ def curve_points(curve, n_points: int):
     return jax.vmap(curve.point)(u)
 
 
-def fit_polynomial_curve(points, degree: int = 3, radius=0.0) -> PolynomialCurve:
+def fit_polynomial_curve(points, degree: int = 3, radius=0.0, *, ordered: bool = True) -> PolynomialCurve:
     """Fit a polynomial curve to an ordered point cloud by least squares.
 
     The parameter is the normalised cumulative chord length, so u runs over
     [0, 1] from the first point to the last. Ordered means the points follow
     the obstacle from one end to the other (a branch scanned along its length).
+    When the fit is far from some points against the cloud's noise level (as
+    when the points are NOT in order), a :class:`~softplan_jax.fitting.FitWarning`
+    says so. For unordered clouds pass ``ordered=False`` (or use
+    :func:`~softplan_jax.fitting.fit_curve`, which also reports residuals, and
+    :func:`~softplan_jax.fitting.fit_curves` for several obstacles in one cloud).
 
     Args:
       points: (N, 3), N >= degree + 1, not all identical.
       degree: polynomial degree >= 1.
+      radius: obstacle radius (>= 0).
+      ordered: False = the points are in any order: delegate to
+        :func:`~softplan_jax.fitting.fit_curve` (u_range (-1, 1) then).
 
     Returns:
       PolynomialCurve with coeffs (3, degree + 1) and u_range (0, 1).
     """
+    if not ordered:
+        from .fitting import fit_curve  # fitting imports this module
+
+        return fit_curve(points, int(degree), radius=radius).curve
     points = check_points(points)
     degree = int(degree)
     if degree < 1:
@@ -309,4 +321,9 @@ def fit_polynomial_curve(points, degree: int = 3, radius=0.0) -> PolynomialCurve
     u = jnp.concatenate([jnp.zeros(1, points.dtype), jnp.cumsum(chord)]) / total
     V = u[:, None] ** jnp.arange(degree + 1, dtype=u.dtype)  # Vandermonde, lowest power first
     coeffs, *_ = jnp.linalg.lstsq(V, points)
-    return PolynomialCurve(coeffs.T, jnp.array([0.0, 1.0], dtype=points.dtype), radius)
+    curve = PolynomialCurve(coeffs.T, jnp.array([0.0, 1.0], dtype=points.dtype), radius)
+    if is_concrete(coeffs):
+        from .fitting import _warn_if_poor  # fitting imports this module
+
+        _warn_if_poor(curve, points, "fit_polynomial_curve")
+    return curve

@@ -307,7 +307,8 @@ def paper_scenario(name: str, *, dtype=None, **kwargs) -> Scenario:
 # ----------------------------------------------------------------------------
 # JSON scenario files.
 
-_TOP_KEYS = {"format", "arm", "goal", "obstacles", "name", "description"}
+# "metadata": any JSON object (e.g. fit residuals from `softplan fit`); kept out of the Scenario.
+_TOP_KEYS = {"format", "arm", "goal", "obstacles", "name", "description", "metadata"}
 _ARM_KEYS = {"segments", "start", "radius", "length_limits"}
 _FORMAT = "softplan-scenario/1"
 
@@ -354,6 +355,8 @@ def scenario_from_dict(data: dict, dtype=None) -> Scenario:
         raise _err(sorted(unknown)[0], f"unknown key (allowed: {sorted(_TOP_KEYS)})")
     if data.get("format", _FORMAT) != _FORMAT:
         raise _err("format", f"must be {_FORMAT!r}, got {data.get('format')!r}")
+    if not isinstance(data.get("metadata", {}), dict):
+        raise _err("metadata", f"must be a JSON object, got {data['metadata']!r}")
     if "goal" not in data:
         raise _err("goal", "is missing")
     goal = _num_array(data["goal"], "goal", (3,))
@@ -396,15 +399,17 @@ def scenario_from_dict(data: dict, dtype=None) -> Scenario:
             raise _err(path, "must be an object with a 'type'")
         kind = ob["type"]
         allowed = {
-            "polynomial": {"type", "coeffs", "u_range", "radius", "name"},
-            "line_segment": {"type", "start", "end", "radius", "name"},
-            "points": {"type", "points", "radius", "name"},
+            "polynomial": {"type", "coeffs", "u_range", "radius", "name", "metadata"},
+            "line_segment": {"type", "start", "end", "radius", "name", "metadata"},
+            "points": {"type", "points", "radius", "name", "metadata"},
         }
         if kind not in allowed:
             raise _err(f"{path}.type", f"unknown obstacle type {kind!r}; choose one of {sorted(allowed)}")
         extra = set(ob) - allowed[kind]
         if extra:
             raise _err(f"{path}.{sorted(extra)[0]}", f"unknown key for a {kind} obstacle")
+        if not isinstance(ob.get("metadata", {}), dict):
+            raise _err(f"{path}.metadata", f"must be a JSON object, got {ob['metadata']!r}")
         r = _num_array(ob.get("radius", 0.0), f"{path}.radius", ())
         if r < 0:
             raise _err(f"{path}.radius", f"must be >= 0, got {float(r)}")

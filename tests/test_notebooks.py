@@ -30,7 +30,7 @@ import pytest
 from session import subprocess_env
 
 NOTEBOOK_DIR = Path(__file__).resolve().parent.parent / "notebooks"
-NOTEBOOKS = ["quickstart.ipynb", "tuning.ipynb"]
+NOTEBOOKS = ["quickstart.ipynb", "tuning.ipynb", "point_clouds.ipynb"]
 CELL_TIMEOUT = 900  # seconds per cell; a compilation takes 15-150 s on a 2-core CPU
 KERNEL_START_TIMEOUT = 120
 
