@@ -65,7 +65,7 @@ import scipy
 from scipy import optimize, spatial
 
 import softplan_jax as sp
-from softplan_jax.planner import make_options, planner_step, rollout_jit
+from softplan_jax.planner import PAPER_STEP, make_options, planner_step, rollout_jit
 
 __all__ = [
     "NumpyScenario",
@@ -667,7 +667,7 @@ def jax_trajectory(scenario, method: str, n_points: int, steps: int, gains=None,
                    goal_tolerance: float = 1e-2):
     """The JAX planner stepped with the jitted ``planner_step`` on the host, with the
     same stop rule; returns (steps_taken + 1, n, 3)."""
-    opts = make_options(method, n_points, goal_tolerance=goal_tolerance)
+    opts = make_options(method, n_points, goal_tolerance=goal_tolerance, **PAPER_STEP)
     gains = jax_gains(gains)
     goal = np.asarray(scenario.goal)
     q = scenario.q0
@@ -843,7 +843,7 @@ def closest_point_check(name: str = "sim2", q=None, n_s: int = 1001, n_u: int = 
 
 def _time_jax_step(scenario, method, n_points, states, repeats: int):
     """Median wall time of the jitted planner_step over the given states (compile excluded)."""
-    opts = make_options(method, n_points)
+    opts = make_options(method, n_points, **PAPER_STEP)  # the paper's step, as the NumPy peer
     gains = sp.default_gains(jnp.float64)
     _planner_step_timed_first(states[0], scenario, gains, opts).block_until_ready()
     compile_s = _FIRST_CALL_S[_shape_key(scenario, opts)]  # first call (compile) wherever it happened
@@ -859,7 +859,7 @@ def _time_jax_step(scenario, method, n_points, states, repeats: int):
 
 
 def _time_rollout(scenario, method, n_points, max_steps: int, repeats: int):
-    opts = make_options(method, n_points)
+    opts = make_options(method, n_points, **PAPER_STEP)  # the paper's step, as the NumPy peer
     gains = sp.default_gains(jnp.float64)
     t0 = time.perf_counter()
     r = rollout_jit(scenario, gains, opts, max_steps)

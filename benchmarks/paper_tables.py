@@ -56,7 +56,7 @@ from _common import (  # noqa: E402
 )
 
 import softplan_jax as sp  # noqa: E402
-from softplan_jax.planner import make_options, result_from_rollout, rollout_jit, status_name  # noqa: E402
+from softplan_jax.planner import PAPER_STEP, make_options, result_from_rollout, rollout_jit, status_name  # noqa: E402
 from softplan_jax.scenarios import PAPER_RESULTS, PAPER_SCENARIOS  # noqa: E402
 
 METHODS = ("curve", 1, 10, 50, 100)
@@ -101,8 +101,10 @@ def run_method(method, names, scenarios, gains, max_steps, repeats, step_repeats
     """All measurements of one obstacle model on the given scenarios; one compilation
     per padded shape and rollout kind."""
     method_name, n_points = ("curve", 10) if method == "curve" else ("points", int(method))
-    opts_plan = make_options(method_name, n_points, check_collisions=False)
-    opts_check = make_options(method_name, n_points, check_collisions=True)
+    # The paper's step (no safe step, no escapes), as the paper tables were made.
+    opts_plan = make_options(method_name, n_points, check_collisions=False, **PAPER_STEP)
+    opts_check = make_options(method_name, n_points, check_collisions=True, **PAPER_STEP)
+    prng = jax.random.PRNGKey(0)  # the rollouts' PRNG key argument (unused: no escapes)
     compiled = {}
     rows = []
     for name in names:
@@ -119,10 +121,10 @@ def run_method(method, names, scenarios, gains, max_steps, repeats, step_repeats
             compiled[key] = (plan_exe, plan_compile, check_exe, check_compile)
         plan_exe, plan_compile, check_exe, check_compile = compiled[key]
         # Planning-only rollout: the timing.
-        r_plan, plan_med, plan_times = median_time(plan_exe, sc, gains, repeats=repeats)
+        r_plan, plan_med, plan_times = median_time(plan_exe, sc, gains, prng, repeats=repeats)
         per_iter = plan_med / (max_steps + 1)
         # Checked rollout: iterations, status, clearance, collisions.
-        r = check_exe(sc, gains)
+        r = check_exe(sc, gains, prng)
         jax.block_until_ready(r)
         res = result_from_rollout(r, sc)
         states = [jnp.asarray(q) for q in res.q[:-1]] or [sc.q0]

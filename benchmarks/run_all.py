@@ -1,6 +1,6 @@
 """Regenerate every benchmark result: the closest-point benchmark and solver sweep,
-the NumPy baseline, the paper's tables, the speed targets and the batched sweep,
-one after the other (each in its own process, so that each sets jax's precision
+the NumPy baseline, the paper's tables, the speed targets, the batched sweep and
+the safe-step sweep (held-out seed 1, float64 and float32), one after the other (each in its own process, so that each sets jax's precision
 and devices itself).
 
     python benchmarks/run_all.py                 # everything, as in benchmarks/README.md
@@ -28,7 +28,8 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--skip",
         default="",
-        help="comma list of scripts to skip: closest, numpy_baseline, paper_tables, speed_targets, batch_sweep",
+        help="comma list of scripts to skip: closest, numpy_baseline, paper_tables, speed_targets, batch_sweep, "
+        "safe_step",
     )
     ap.add_argument("sweep_args", nargs="*", help="further batch_sweep.py arguments (after --)")
     args = ap.parse_args(argv)
@@ -42,15 +43,26 @@ def main(argv=None) -> int:
         ("speed_targets", quick),
         ("batch_sweep", quick + (["--n", str(args.sweep_n)] if args.sweep_n else []) + args.sweep_args),
     ]
+    if args.quick:
+        runs.append(("safe_step", ["--n", "16", "--max-steps", "60", "--chunk", "16",
+                                   "--out", os.path.join(quick_dir, "safe_step")]))
+    else:
+        held_out = ["--seed", "1", "--n", "1000", "--chunk", "64", "--max-steps", "600"]
+        runs += [
+            ("safe_step", held_out + ["--variants", "default", "--methods", "curve,10,50"]),
+            ("safe_step", held_out + ["--variants", "default", "--float32"]),
+            ("safe_step", held_out + ["--variants", "plain,safe", "--out",
+                                      os.path.join(HERE, "results", "safe_step_float64_seed1_n1000_before")]),
+        ]
     times = {}
-    for name, extra in runs:
+    for k, (name, extra) in enumerate(runs):
         if name in skip:
             continue
         cmd = [sys.executable, os.path.join(HERE, f"{name}.py"), *extra]
         print(f"$ {' '.join(cmd)}", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         rc = subprocess.call(cmd, stdout=subprocess.DEVNULL)
-        times[name] = time.perf_counter() - t0
+        times[f"{name} ({k})" if name in times else name] = time.perf_counter() - t0
         if rc:
             print(f"{name} failed (exit code {rc})", file=sys.stderr)
             return rc

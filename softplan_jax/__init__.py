@@ -32,6 +32,7 @@ from .kinematics import tip_jacobian as tip_jacobian
 from .kinematics import tip_position as tip_position
 from .metrics import dense_trajectory_clearance as dense_trajectory_clearance
 from .metrics import true_closest as true_closest
+from .planner import PAPER_STEP as PAPER_STEP
 from .planner import STATUS_NAMES as STATUS_NAMES
 from .planner import Gains as Gains
 from .planner import PlanOptions as PlanOptions

@@ -69,6 +69,7 @@ __all__ = [
     "PlanOptions",
     "Status",
     "STATUS_NAMES",
+    "PAPER_STEP",
     "planner_step",
     "Rollout",
     "rollout",
@@ -189,6 +190,12 @@ class PlanOptions(NamedTuple):
     safe_fraction: float = 0.8
     escapes: int = 20
     escape_steps: int = 15
+
+
+# The paper's step (eq. 9, unscaled, no escapes) with the stall test of the earlier
+# releases: ``make_options(method, N, **PAPER_STEP)`` plans exactly as before the safe
+# step (bit for bit on the paper scenes); the paper tables and the NumPy baseline use it.
+PAPER_STEP = {"step": "plain", "escapes": 0, "stall_window": 60, "stall_tolerance": 1e-4}
 
 
 class Status:

@@ -82,7 +82,8 @@ def test_collision_between_steps_is_detected():
     goal = jnp.array([1.2, -0.6, 1.4])
     far = sp.line_segment([-5.0, -5.0, 0.0], [-5.0, -4.0, 0.0])
     gains = sp.default_gains()._replace(eta=jnp.asarray(1e-12), v_max=jnp.asarray(1.0))
-    free = sp.plan(sp.make_scenario(goal, [far], q0, **PAD), gains=gains, max_steps=200)
+    # The paper's step: the safe step (the default) would not let the arm reach the wire.
+    free = sp.plan(sp.make_scenario(goal, [far], q0, **PAD), gains=gains, max_steps=200, **sp.PAPER_STEP)
     k = 10
     q_mid = 0.5 * (free.q[k] + free.q[k + 1])
     p_mid = np.asarray(sp.tip_position(q_mid))
@@ -92,7 +93,7 @@ def test_collision_between_steps_is_detected():
     axis /= np.linalg.norm(axis)
     wire = sp.line_segment(p_mid - 0.1 * axis, p_mid + 0.1 * axis)
     sc = sp.make_scenario(goal, [wire], q0, **PAD)
-    r = sp.plan(sc, gains=gains, max_steps=200)
+    r = sp.plan(sc, gains=gains, max_steps=200, **sp.PAPER_STEP)
     assert r.collided and r.status == "collided"
     assert r.iterations == k + 1
     # Both configurations around the crossing are clear ...
@@ -135,7 +136,7 @@ def test_collision_flag_agrees_with_dense_check_on_random_scenes(paper, paper_pl
         a, b = mid - 1.5 * d, mid + 1.5 * d
         sc = sp.make_scenario(goal, [sp.line_segment(a, b)], **PAD)
         weak = sp.default_gains()._replace(eta=jnp.asarray(1e-5 * rng.uniform(0, 1) + 1e-9))
-        r = sp.plan(sc, gains=weak, max_steps=200)  # the paper plans' shape: no new compilation
+        r = sp.plan(sc, gains=weak, max_steps=200, **sp.PAPER_STEP)  # the paper's step: it can collide
         assert r.q.shape[0] == r.iterations + 1
         if r.collided:
             # The flag fires at the first step whose motion touches the wire.
@@ -195,14 +196,19 @@ def test_mixed_obstacles_both_methods():
     helix = sp.ParametricCurve(lambda u: jnp.stack([0.3 * jnp.cos(u) + 1.4, 0.3 * jnp.sin(u), 0.15 * u]),
                                (0.0, 12.0))
     pts = np.stack([np.full(12, -0.6), np.linspace(-1, 1, 12), np.full(12, 1.6)], 1)
-    line = sp.line_segment([0.8, -1.0, 2.2], [0.8, 1.0, 1.8])
-    sc = sp.make_scenario([1.0, 0.5, 1.2], [line, pts, helix])
+    line = sp.line_segment([0.8, -1.0, 2.2], [0.8, 1.0, 1.8], radius=0.03)
+    sc = sp.make_scenario([1.0, 0.5, 1.2], [line, pts, helix], arm_radius=0.02)
     for method in ("curve", "points"):
         r = sp.plan(sc, method=method, n_points=20, max_steps=200)
         assert np.isfinite(r.q).all()
         assert r.clearance.shape[1] == 3
         if method == "curve":
+            # Radii (arm 0.02, wire 0.03) included: the safe step keeps the surfaces apart.
             assert r.reached and not r.collided, (r.status, r.min_clearance)
+            assert r.min_clearance > 0
+            dense = np.asarray(sp.dense_trajectory_clearance(jnp.asarray(r.q), sc, substeps=4, arm_samples=40,
+                                                             curve_samples=1000))
+            assert dense.min() > 0, dense.min()
 
 
 def test_gradient_through_rollout_matches_finite_differences(paper):
@@ -269,8 +275,8 @@ def test_post_hoc_collision_checks_equal_in_scan_checks():
     for eta in (1e-12, 1e-3):
         sc = sp.make_scenario([1.4, 0.2, 0.9], [wire], q0, curve_slots=5, degree=2)
         g = sp.default_gains()._replace(eta=jnp.asarray(eta))
-        checked = rollout_jit(sc, g, make_options("curve"), 200)
-        opts = make_options("curve", check_collisions=False)
+        checked = rollout_jit(sc, g, make_options("curve", **sp.PAPER_STEP), 200)
+        opts = make_options("curve", check_collisions=False, **sp.PAPER_STEP)
         free = rollout_jit(sc, g, opts, 200)
         assert np.isnan(np.asarray(free.clearance)).all() and int(free.status) != sp.Status.COLLIDED
         post = jax.jit(apply_collision_checks, static_argnums=2)(free, sc, opts)
