@@ -1,6 +1,7 @@
 """Regenerate every benchmark result: the closest-point benchmark and solver sweep,
 the NumPy baseline, the paper's tables, the speed targets, the batched sweep and
-the safe-step sweep (held-out seed 1, float64 and float32), one after the other (each in its own process, so that each sets jax's precision
+the safe-step sweep (held-out seed 1, float64 and float32), one after the other
+(each in its own process, so that each sets jax's precision
 and devices itself).
 
     python benchmarks/run_all.py                 # everything, as in benchmarks/README.md

@@ -108,9 +108,9 @@ def main(argv=None) -> dict:
     if not args.float32:
         jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
+    from _common import RESULTS_DIR, finish_machine, log, machine_info, machine_lines
 
     import softplan_jax as sp
-    from _common import RESULTS_DIR, finish_machine, log, machine_info, machine_lines
     from softplan_jax.planner import apply_collision_checks, make_options, rollout_batch, status_name
 
     dtype = jnp.float32 if args.float32 else jnp.float64

@@ -172,7 +172,8 @@ class ParametricCurve:
             if bad.any():
                 raise ValueError(
                     f"fn(u) is not finite inside u_range at u = {float(u[np.argmax(bad)]):.6g} "
-                    f"({int(bad.sum())} of {_FINITE_CHECK_SAMPLES} samples); restrict u_range to where the curve is defined"
+                    f"({int(bad.sum())} of {_FINITE_CHECK_SAMPLES} samples); "
+                    "restrict u_range to where the curve is defined"
                 )
         self.fn = fn
         self.u_range = u_range
