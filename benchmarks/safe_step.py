@@ -13,9 +13,10 @@ iterations, min clearance) go to the JSON file.
 
 Variants:
 
-* ``plain``: the paper's step (``step="plain"``, no escapes);
-* ``safe``: the clearance-bounded step, no escapes;
-* ``default``: the library's defaults (safe step and escapes).
+* ``plain``: the paper's step as the earlier releases planned (``sp.PAPER_STEP``:
+  ``step="plain"``, no escapes, stall test 60 steps / 1e-4);
+* ``safe``: the same with the clearance-bounded step;
+* ``default``: the library's defaults (safe step, escapes, stall test 30 steps / 0.02).
 
 ``--dense K`` re-checks the first K scenes of every curve-method variant with
 the brute-force :func:`softplan_jax.dense_trajectory_clearance` (dense
@@ -41,12 +42,14 @@ import time
 
 import numpy as np
 
+from softplan_jax.planner import PAPER_STEP
+
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 VARIANTS = {
-    "plain": dict(step="plain", escapes=0),
-    "safe": dict(step="safe", escapes=0),
-    "default": dict(),
+    "plain": dict(PAPER_STEP),  # the earlier default: the paper's step, no escapes, stall test 60 steps / 1e-4
+    "safe": dict(PAPER_STEP, step="safe"),  # the same with the clearance-bounded step
+    "default": dict(),  # the library's defaults: safe step, escapes, stall test 30 steps / 0.02
 }
 STATUSES = ("reached", "collided", "stalled", "max_steps", "non_finite")
 

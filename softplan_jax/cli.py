@@ -208,9 +208,8 @@ def _check_plot_format(path: str) -> None:
 
 
 def _check_run_args(args, paper_names) -> None:
-    if args.n_points is not None and args.method == "curve":
-        _warn("--n-points applies to --method points only; the curve method ignores it")
-    if args.n_points is None:
+    n_points_given = args.n_points is not None
+    if not n_points_given:
         args.n_points = 10
     if args.escapes is not None and args.escapes < 0:
         raise InputError(f"--escapes must be >= 0, got {args.escapes}")
@@ -260,6 +259,9 @@ def _check_run_args(args, paper_names) -> None:
             raise InputError(f"--out: {args.out} exists; pass --force to overwrite it")
     elif args.force:
         raise InputError("--force only applies to --out")
+    # Last, so that a bad argument is one error line, not a warning and an error.
+    if n_points_given and args.method == "curve":
+        _warn("--n-points applies to --method points only; the curve method ignores it")
 
 
 # ----------------------------------------------------------------------------

@@ -206,9 +206,13 @@ def test_sharded_sweep_matches_single_device(runs):
         assert q1.shape == (30, 61, 3, 3) and np.all(np.isfinite(q1))
         # Not bit-identical: each device runs its own compiled program on its shard,
         # whose rounding differs from the 1-device program's, and rollouts near
-        # obstacles amplify rounding (measured: max 4e-5 over 60 steps, half of the
-        # curve rollouts within 1e-9). Outcomes (above) must be identical.
-        np.testing.assert_allclose(q2, q1, rtol=0, atol=1e-3, err_msg=method)
+        # obstacles amplify rounding. The safe step (a min over clearances) and the
+        # escapes (a stall test that starts a random walk) are discrete decisions that
+        # amplify it further: measured with them, 1 of 30 curve rollouts differs by
+        # 7e-3 after 60 steps, the others within 1e-3. Outcomes (above) must be identical.
+        per_rollout = np.max(np.abs(q2 - q1), axis=(1, 2, 3))
+        assert np.sum(per_rollout > 1e-3) <= 2, (method, per_rollout)
+        np.testing.assert_allclose(q2, q1, rtol=0, atol=2e-2, err_msg=method)
 
 
 # ----------------------------------------------------------------------------

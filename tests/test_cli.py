@@ -27,7 +27,7 @@ from softplan_jax.planner import PlanResult
 
 STEPS = "80"
 SUMMARY_FIELDS = {
-    "scenario", "method", "n_points", "repulsion", "dtype", "status", "iterations", "max_steps", "reached",
+    "scenario", "method", "n_points", "repulsion", "step", "escapes", "dtype", "status", "iterations", "max_steps", "reached",
     "collided", "min_clearance", "final_error", "goal_tolerance", "compile_time_s", "run_time_s",
     "time_per_scan_step_s", "plot", "gif", "out",
 }
@@ -398,3 +398,26 @@ def test_animation_axis_labels_inside_the_frame(name, tmp_path, monkeypatch):
     assert set(boxes) == {"X", "Y", "Z", "tight"}
     for label, b in boxes.items():
         assert 0 <= b.x0 and b.x1 <= W and 0 <= b.y0 and b.y1 <= H, (label, b, W, H)
+
+
+def test_run_warns_about_n_points_with_the_curve_method(capsys):
+    code, out, err = run_main(capsys, "run", "sim1", "--max-steps", STEPS, "--n-points", "20")
+    assert code == 0, err
+    assert "warning: --n-points applies to --method points only" in err
+
+
+def test_run_plain_step_and_bad_escapes(capsys):
+    code, out, err = run_main(capsys, "run", "sim1", "--max-steps", STEPS, "--step", "plain", "--json")
+    assert code == 0, err
+    assert json.loads(out)["step"] == "plain"
+    code, out, err = run_main(capsys, "run", "sim1", "--escapes", "-1")
+    assert code == 2 and "--escapes" in err
+
+
+def test_run_warns_about_a_goal_inside_an_obstacle(capsys, tmp_path):
+    path = tmp_path / "inside.json"
+    path.write_text(json.dumps({"format": "softplan-scenario/1", "goal": [1.0, 0.0, 1.0], "obstacles": [
+        {"type": "line_segment", "start": [1.0, -1.0, 1.0], "end": [1.0, 1.0, 1.0], "radius": 0.05}]}))
+    code, out, err = run_main(capsys, "run", str(path), "--max-steps", "5")
+    assert code == 0, err
+    assert "warning: the goal" in err and "inside obstacle" in err

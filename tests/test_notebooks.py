@@ -38,6 +38,7 @@ KERNEL_START_TIMEOUT = 120
 SMALL = {
     "quickstart.ipynb": "MAX_STEPS = 60     # the tree reaches its goal in 51 iterations\nN_POINTS = (1,)\n",
     "tuning.ipynb": "ROLL_STEPS = 10\nTUNING_STEPS = 2\nPLAN_STEPS = 60\n",
+    "point_clouds.ipynb": "MAX_STEPS = 150\n",
 }
 
 
