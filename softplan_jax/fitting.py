@@ -77,6 +77,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra, minimum_spannin
 from scipy.spatial import cKDTree
 
 from .curves import PolynomialCurve
+from .scenarios import write_json_file
 
 __all__ = [
     "CurveFit",
@@ -1396,19 +1397,4 @@ def save_fit_scenario(fit, path, goal, q0=None, *, name: str | None = None, meta
                       overwrite: bool = False) -> None:
     """Write :func:`fit_scenario_dict` as a JSON scenario file (whole or not at
     all); refuses to replace an existing file unless ``overwrite=True``."""
-    import json
-    import tempfile
-
-    path = os.fspath(path)
-    if os.path.exists(path) and not overwrite:
-        raise ValueError(f"{path} exists; pass overwrite=True to replace it")
-    text = json.dumps(fit_scenario_dict(fit, goal, q0, name=name, metadata=metadata), indent=2)
-    fd, tmp = tempfile.mkstemp(prefix=".softplan-", suffix=".json", dir=os.path.dirname(os.path.abspath(path)))
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_json_file(path, fit_scenario_dict(fit, goal, q0, name=name, metadata=metadata), overwrite)

@@ -522,10 +522,17 @@ def load_scenario(path, dtype=None) -> Scenario:
 def save_scenario(scenario: Scenario, path, name: str | None = None, overwrite: bool = False) -> None:
     """Write a scenario as JSON. Refuses to replace an existing file unless
     ``overwrite=True``; the file is written whole (via a temporary file) or not at all."""
+    write_json_file(path, scenario_to_dict(scenario, name), overwrite)
+
+
+def write_json_file(path, data: dict, overwrite: bool = False) -> None:
+    """Write ``data`` as an indented JSON file, whole (via a temporary file in the
+    same directory, then a rename) or not at all; an existing file is replaced
+    only with ``overwrite=True`` (ValueError otherwise)."""
     path = os.fspath(path)
     if os.path.exists(path) and not overwrite:
         raise ValueError(f"{path} exists; pass overwrite=True to replace it")
-    text = json.dumps(scenario_to_dict(scenario, name), indent=2)
+    text = json.dumps(data, indent=2)
     fd, tmp = tempfile.mkstemp(prefix=".softplan-", suffix=".json", dir=os.path.dirname(os.path.abspath(path)))
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
