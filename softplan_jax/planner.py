@@ -292,10 +292,11 @@ def _obstacle_radius_and_mask(scenario: Scenario):
     return radius, mask
 
 
-def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk_velocity=None):
+def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None):
     """Paper eq. (9): qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj).
 
-    ``walk_velocity`` (3,), if given, replaces F_e (an escape's random walk).
+    ``walk = (walking () bool, velocity (3,))``, if given: while walking, the
+    velocity replaces F_e (an escape's random walk).
     Returns ``(qdot (n, 3), clearance (m,))``: the clearance of the planner's
     own obstacle model (exact for the curve method), +inf for padding slots.
     """
@@ -312,7 +313,9 @@ def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: Pla
     clearance = cps.distance - scenario.arm_radius - radius
     F_s = jax.vmap(lambda v, d: repulsion(v, d, gains, options.repulsion))(V_s, clearance)
     F_s = jnp.where(mask[:, None], F_s, 0.0)
-    F_e = attraction(V_e, gains) if walk_velocity is None else walk_velocity
+    F_e = attraction(V_e, gains)
+    if walk is not None:
+        F_e = jnp.where(walk[0], walk[1], F_e)
     # Paper eq. (9).
     qdot = pinvs[0] @ F_e - jnp.einsum("kij,kj->i", pinvs[1:], F_s)
     return qdot.reshape(n, 3), jnp.where(mask, clearance, jnp.inf)
@@ -349,9 +352,9 @@ def _step_scale(q, q_next, clearance, options: PlanOptions):
     return jnp.where(jnp.isnan(c), jnp.nan, alpha)
 
 
-def _next_q(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk_velocity=None):
+def _next_q(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None):
     """One planner step from q: ``(q_next, alpha)`` (alpha = 1 for the plain step)."""
-    qdot, clearance = _qdot(q, scenario, gains, truth, options, walk_velocity)
+    qdot, clearance = _qdot(q, scenario, gains, truth, options, walk)
     q_next = _apply_step(q, qdot, scenario, gains)
     if options.step == "plain":
         return q_next, jnp.ones((), q.dtype)
@@ -527,11 +530,7 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
             walk_left = jnp.where(start, options.escape_steps, walk_left)
             escapes = escapes + start.astype(jnp.int32)
             since = jnp.where(start, 0, since)
-            q_field, alpha_field = _next_q(q, scenario, gains, truth, options)
-            q_walk, alpha_walk = _next_q(q, scenario, gains, truth, options, walk_velocity)
-            in_walk = walk_left > 0
-            q_next = jnp.where(in_walk, q_walk, q_field)
-            alpha = jnp.where(in_walk, alpha_walk, alpha_field)
+            q_next, alpha = _next_q(q, scenario, gains, truth, options, (walk_left > 0, walk_velocity))
         else:
             q_next, alpha = _next_q(q, scenario, gains, truth, options)
         finite = jnp.all(jnp.isfinite(q_next))
