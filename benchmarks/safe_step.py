@@ -18,11 +18,6 @@ Variants:
 * ``safe``: the same with the clearance-bounded step;
 * ``default``: the library's defaults (safe step, escapes, stall test 30 steps / 0.02).
 
-``--dense K`` re-checks the first K scenes of every curve-method variant with
-the brute-force :func:`softplan_jax.dense_trajectory_clearance` (dense
-interpolation in q, dense sampling of arm and curves, minus the sampling error
-bound), independent of the closest-point solver.
-
 Usage::
 
     python benchmarks/safe_step.py --seed 0 --n 256            # training seed
@@ -42,15 +37,20 @@ import time
 
 import numpy as np
 
-from softplan_jax.planner import PAPER_STEP
-
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-VARIANTS = {
-    "plain": dict(PAPER_STEP),  # the earlier default: the paper's step, no escapes, stall test 60 steps / 1e-4
-    "safe": dict(PAPER_STEP, step="safe"),  # the same with the clearance-bounded step
-    "default": dict(),  # the library's defaults: safe step, escapes, stall test 30 steps / 0.02
-}
+VARIANTS = ("plain", "safe", "default")
+
+
+def variant_options(variant: str) -> dict:
+    """PlanOptions fields of a variant (imported lazily: this module imports no jax)."""
+    from softplan_jax.planner import PAPER_STEP
+
+    return {
+        "plain": dict(PAPER_STEP),  # the earlier default: the paper's step, no escapes, stall test 60 / 1e-4
+        "safe": dict(PAPER_STEP, step="safe"),  # the same with the clearance-bounded step
+        "default": {},  # the library's defaults: safe step, escapes, stall test 30 steps / 0.02
+    }[variant]
 STATUSES = ("reached", "collided", "stalled", "max_steps", "non_finite")
 
 
@@ -80,7 +80,6 @@ def parse_args(argv=None):
     ap.add_argument("--methods", default="curve", help="comma list of 'curve' and point counts N (default curve)")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="override a PlanOptions field of every variant (e.g. safe_fraction=0.3)")
-    ap.add_argument("--dense", type=int, default=0, help="brute-force re-check of the first K scenes (curve)")
     ap.add_argument("--float32", action="store_true", help="float32 (default float64)")
     ap.add_argument("--out", default=None, help="output prefix (default benchmarks/results/safe_step_...)")
     args = ap.parse_args(argv)
@@ -134,7 +133,7 @@ def main(argv=None) -> dict:
     for variant in args.variant_list:
         for method in args.method_list:
             label = f"{variant}/{'curve' if method == 'curve' else f'N={method}'}"
-            kw = dict(VARIANTS[variant], **args.overrides)
+            kw = dict(variant_options(variant), **args.overrides)
             opts = make_options("curve" if method == "curve" else "points", 10 if method == "curve" else method,
                                 check_collisions=False, **kw)
             status, iters, minc, escapes, alphas = [], [], [], [], []
@@ -179,30 +178,6 @@ def main(argv=None) -> dict:
                                   escapes=escapes.tolist())
             log(f"  {label}: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
 
-    dense = []
-    if args.dense:
-        k = min(args.dense, n)
-        log(f"safe_step: brute-force re-check of {k} scenes per curve variant ...")
-        dense_fn = jax.jit(lambda qs, sc: sp.dense_trajectory_clearance(qs, sc, substeps=8, arm_samples=40,
-                                                                         curve_samples=400))
-        for variant in args.variant_list:
-            opts = make_options("curve", **dict(VARIANTS[variant], **args.overrides))
-            worst = np.inf
-            for i in range(k):
-                sc = jax.tree_util.tree_map(lambda x, i=i: x[i], suite)
-                res = sp.plan(sc, gains=gains, max_steps=args.max_steps, seed=args.seed * 100003 + i,
-                              **opts._asdict())
-                if res.q.shape[0] < 2:
-                    continue
-                c = np.asarray(dense_fn(jnp.asarray(res.q), sc))
-                # Sampling error: half the arm spacing (segment length <= max L / 40) plus half the curve spacing.
-                lmax = float(np.max(res.q[:, :, 0]))
-                pts = np.asarray(sp.curve_points(sc.curves, 400))
-                h_c = float(np.max(np.linalg.norm(np.diff(pts, axis=-2), axis=-1)))
-                worst = min(worst, float(np.min(c)) - 0.5 * (lmax / 40 + h_c))
-            dense.append(dict(variant=variant, scenes=k, worst_lower_bound=worst))
-            log(f"  {variant}: brute-force lower bound on the clearance over {k} scenes: {worst:.4g}")
-
     total = time.perf_counter() - t_all
     finish_machine(machine)
     lines = [f"# Safe step and escapes on random_scenarios({args.seed}, {n}), {dname}", ""]
@@ -231,10 +206,6 @@ def main(argv=None) -> dict:
     for r in summary:
         if r["collided_scenes"]:
             lines.append(f"- {r['label']} collided in scenes {r['collided_scenes']}")
-    for d in dense:
-        lines.append(f"- brute-force re-check ({d['variant']}, first {d['scenes']} scenes, substeps 8, "
-                     f"40 arm / 400 curve samples, minus the sampling error): smallest lower bound on the "
-                     f"clearance {d['worst_lower_bound']:.4g}")
     report = "\n".join(lines) + "\n"
     out = args.out or os.path.join(RESULTS_DIR, f"safe_step_{dname}_seed{args.seed}_n{n}")
     os.makedirs(os.path.dirname(out), exist_ok=True)
@@ -242,9 +213,9 @@ def main(argv=None) -> dict:
         fh.write(report)
     with open(out + ".json", "w", encoding="utf-8") as fh:
         json.dump(dict(machine=machine, args={k: v for k, v in vars(args).items()}, summary=summary,
-                       dense=dense, records=records, seconds=total), fh, indent=1, default=str)
+                       records=records, seconds=total), fh, indent=1, default=str)
     print(report)
-    return dict(summary=summary, dense=dense)
+    return dict(summary=summary)
 
 
 if __name__ == "__main__":

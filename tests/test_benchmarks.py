@@ -397,3 +397,31 @@ def test_sweep_check_groups_cover_every_scenario_once():
         assert length >= need and all(L < need for L in lengths if L < length)
     with pytest.raises(ValueError):
         bs.check_groups(its[:7], 8, lengths)
+
+
+# ----------------------------------------------------------------------------
+# safe_step.py
+
+
+def test_safe_step_wilson_interval_matches_the_formula():
+    import safe_step
+
+    lo, hi = safe_step.wilson(5, 10)  # Wilson (1927): 0.5 +- 1.96 sqrt(0.025 + 0.0096) / 1.384
+    assert abs(lo - 0.2366) < 1e-4 and abs(hi - 0.7634) < 1e-4
+    lo, hi = safe_step.wilson(0, 1000)
+    assert abs(lo) < 1e-12 and abs(hi - 0.00383) < 1e-5
+
+
+@pytest.mark.slow
+def test_safe_step_quick_run_writes_its_report(tmp_path):
+    import safe_step
+
+    out = safe_step.main(["--n", "4", "--chunk", "4", "--max-steps", "20", "--variants", "plain,default",
+                          "--out", str(tmp_path / "ss")])
+    rows = out["summary"]
+    assert [r["label"] for r in rows] == ["plain/curve", "default/curve"]
+    for r in rows:
+        assert sum(r["counts"].values()) == 4
+    saved = json.loads((tmp_path / "ss.json").read_text())
+    assert len(saved["records"]["default/curve"]["status"]) == 4
+    assert "Wilson" in (tmp_path / "ss.md").read_text()
