@@ -1,62 +1,141 @@
 """softplan_jax: a JAX-accelerated, differentiable path planner for soft
-continuum arms around curve-like obstacles (branches, pipes, wires)."""
+continuum arms around curve-like obstacles (branches, pipes, wires).
+
+The public API is the names in ``__all__`` (see docs/api.md). Two host-side
+submodules are public as modules: :mod:`softplan_jax.plotting` (matplotlib)
+and :mod:`softplan_jax.cli` (the ``softplan`` command).
+"""
 
 from importlib.metadata import PackageNotFoundError, version
 
-from .closest import ClosestPoint as ClosestPoint
-from .closest import SolverOptions as SolverOptions
-from .closest import closest_point as closest_point
-from .closest import closest_point_to_points as closest_point_to_points
-from .closest import point_distance as point_distance
-from .curves import ParametricCurve as ParametricCurve
-from .curves import PolynomialCurve as PolynomialCurve
-from .curves import curve_points as curve_points
-from .curves import fit_polynomial_curve as fit_polynomial_curve
-from .curves import line_segment as line_segment
-from .curves import stack_curves as stack_curves
-from .fitting import CloudFit as CloudFit
-from .fitting import CurveFit as CurveFit
-from .fitting import FitWarning as FitWarning
-from .fitting import curve_distance as curve_distance
-from .fitting import fit_curve as fit_curve
-from .fitting import fit_curves as fit_curves
-from .fitting import load_cloud as load_cloud
-from .fitting import save_fit_scenario as save_fit_scenario
-from .kinematics import backbone_points as backbone_points
-from .kinematics import motion_bound as motion_bound
-from .kinematics import point_jacobian as point_jacobian
-from .kinematics import segment_frames as segment_frames
-from .kinematics import segment_point as segment_point
-from .kinematics import segment_transform as segment_transform
-from .kinematics import tip_jacobian as tip_jacobian
-from .kinematics import tip_position as tip_position
-from .metrics import dense_trajectory_clearance as dense_trajectory_clearance
-from .metrics import true_closest as true_closest
-from .planner import PAPER_STEP as PAPER_STEP
-from .planner import STATUS_NAMES as STATUS_NAMES
-from .planner import Gains as Gains
-from .planner import PlanOptions as PlanOptions
-from .planner import PlanResult as PlanResult
-from .planner import Rollout as Rollout
-from .planner import Status as Status
-from .planner import attraction as attraction
-from .planner import default_gains as default_gains
-from .planner import plan as plan
-from .planner import plan_batch as plan_batch
-from .planner import planner_step as planner_step
-from .planner import repulsion as repulsion
-from .planner import rollout as rollout
-from .planner import stack_scenarios as stack_scenarios
-from .scenarios import Scenario as Scenario
-from .scenarios import default_start as default_start
-from .scenarios import load_scenario as load_scenario
-from .scenarios import make_scenario as make_scenario
-from .scenarios import paper_scenario as paper_scenario
-from .scenarios import random_scenarios as random_scenarios
-from .scenarios import save_scenario as save_scenario
-from .scenarios import scenario_warnings as scenario_warnings
+from .closest import ClosestPoint, SolverOptions, closest_point, closest_point_to_points, point_distance
+from .curves import ParametricCurve, PolynomialCurve, curve_points, fit_polynomial_curve, line_segment, stack_curves
+from .fitting import CloudFit, CurveFit, FitWarning, curve_distance, fit_curve, fit_curves, load_cloud, save_fit_scenario
+from .kinematics import (
+    backbone_points,
+    motion_bound,
+    point_jacobian,
+    segment_frames,
+    segment_point,
+    segment_transform,
+    tip_jacobian,
+    tip_position,
+)
+from .metrics import dense_trajectory_clearance, true_closest
+from .planner import (
+    PAPER_STEP,
+    STATUS_NAMES,
+    Gains,
+    PlanOptions,
+    PlanResult,
+    Rollout,
+    Status,
+    apply_collision_checks,
+    attraction,
+    default_gains,
+    make_options,
+    plan,
+    plan_batch,
+    planner_step,
+    repulsion,
+    result_from_rollout,
+    rollout,
+    rollout_batch,
+    rollout_jit,
+    status_name,
+)
+from .scenarios import (
+    Scenario,
+    default_start,
+    load_scenario,
+    make_scenario,
+    paper_scenario,
+    random_scenarios,
+    save_scenario,
+    scenario_from_dict,
+    scenario_to_dict,
+    scenario_warnings,
+    stack_scenarios,
+)
+from .tuning import LossWeights, TuningResult, batch_loss, rollout_loss, tune_gains
 
 try:
     __version__ = version("softplan_jax")
 except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0+unknown"
+
+__all__ = [
+    # kinematics (paper section 2.1)
+    "segment_transform",
+    "segment_frames",
+    "segment_point",
+    "tip_position",
+    "point_jacobian",
+    "tip_jacobian",
+    "backbone_points",
+    "motion_bound",
+    # obstacle curves and point clouds
+    "PolynomialCurve",
+    "ParametricCurve",
+    "line_segment",
+    "stack_curves",
+    "curve_points",
+    "fit_polynomial_curve",
+    "CurveFit",
+    "CloudFit",
+    "FitWarning",
+    "fit_curve",
+    "fit_curves",
+    "curve_distance",
+    "load_cloud",
+    "save_fit_scenario",
+    # closest points (paper section 2.3)
+    "ClosestPoint",
+    "SolverOptions",
+    "closest_point",
+    "closest_point_to_points",
+    "point_distance",
+    # scenarios
+    "Scenario",
+    "default_start",
+    "make_scenario",
+    "stack_scenarios",
+    "scenario_warnings",
+    "paper_scenario",
+    "random_scenarios",
+    "load_scenario",
+    "save_scenario",
+    "scenario_from_dict",
+    "scenario_to_dict",
+    # planner (paper eq. 9)
+    "Gains",
+    "default_gains",
+    "attraction",
+    "repulsion",
+    "PlanOptions",
+    "make_options",
+    "PAPER_STEP",
+    "planner_step",
+    "Status",
+    "STATUS_NAMES",
+    "status_name",
+    "Rollout",
+    "rollout",
+    "rollout_jit",
+    "rollout_batch",
+    "PlanResult",
+    "result_from_rollout",
+    "plan",
+    "plan_batch",
+    # metrics
+    "true_closest",
+    "dense_trajectory_clearance",
+    "apply_collision_checks",
+    # tuning
+    "LossWeights",
+    "TuningResult",
+    "rollout_loss",
+    "batch_loss",
+    "tune_gains",
+    "__version__",
+]

@@ -576,7 +576,15 @@ def _cmd_fit(args) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)  # fit and write the coefficients in float64
-    from .fitting import CLOUD_EXTENSIONS, FitWarning, fit_curve, fit_curves, load_cloud, save_fit_scenario
+    from .fitting import (
+        CLOUD_EXTENSIONS,
+        CloudFit,
+        FitWarning,
+        fit_curve,
+        fit_curves,
+        load_cloud,
+        save_fit_scenario,
+    )
 
     cloud = args.cloud
     if os.path.splitext(cloud)[1].lower() not in CLOUD_EXTENSIONS:
@@ -615,9 +623,7 @@ def _cmd_fit(args) -> int:
                           overwrite=args.force)
     except (OSError, ValueError) as err:
         raise InputError(f"cannot write {out}: {err}") from None
-    from .fitting import _as_cloud_fit
-
-    cf = _as_cloud_fit(fit)
+    cf = CloudFit.from_fit(fit)
     plot_path = None
     if args.plot is not None:
         if "matplotlib.pyplot" not in sys.modules:

@@ -78,6 +78,7 @@ from scipy.spatial import cKDTree
 
 from .curves import PolynomialCurve
 from .scenarios import write_json_file
+from .validation import check_cloud
 
 __all__ = [
     "CurveFit",
@@ -169,40 +170,23 @@ class CloudFit(NamedTuple):
         """The fitted curves, a list of :class:`PolynomialCurve`."""
         return [f.curve for f in self.fits]
 
+    @classmethod
+    def from_fit(cls, fit) -> CloudFit:
+        """``fit`` itself if a CloudFit; a CurveFit as a one-curve CloudFit (every point
+        labelled 0; the cloud-level coverage figures NaN)."""
+        if isinstance(fit, CloudFit):
+            return fit
+        if isinstance(fit, CurveFit):
+            n = int(fit.indices.size)
+            return cls((fit,), np.zeros(n, int), fit.residuals, fit.rms_residual, fit.max_residual, math.nan,
+                       math.nan)
+        raise ValueError(f"fit must be a CloudFit (fit_curves) or a CurveFit (fit_curve), got {type(fit).__name__}")
+
 
 # ----------------------------------------------------------------------------
 # Input.
 
 
-def _as_cloud(points, name: str = "points") -> np.ndarray:
-    """Validate a point cloud: a finite (N, 3) array of numbers, not all one point.
-
-    Returns it as float64 NumPy (fits run on the host in float64).
-    """
-    try:
-        arr = np.asarray(points)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{name} must be an (N, 3) array of numbers: {err}") from None
-    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
-        raise ValueError(f"{name} must be an (N, 3) array of real numbers, got dtype {arr.dtype}")
-    if arr.ndim != 2 or arr.shape[1] != 3:
-        raise ValueError(f"{name} must have shape (N, 3) (one row x, y, z per point); got shape {arr.shape}")
-    if arr.shape[0] == 0:
-        raise ValueError(f"{name} is empty: a point cloud needs points")
-    arr = arr.astype(np.float64)
-    bad = ~np.all(np.isfinite(arr), axis=1)
-    if bad.any():
-        rows = np.nonzero(bad)[0]
-        shown = ", ".join(str(int(r)) for r in rows[:10]) + (", ..." if rows.size > 10 else "")
-        raise ValueError(
-            f"{name} has {rows.size} row(s) with NaN or inf (rows {shown}); drop them first, e.g. "
-            "points[np.isfinite(points).all(axis=1)]"
-        )
-    extent = float(np.max(np.ptp(arr, axis=0)))
-    scale = float(np.max(np.abs(arr)))
-    if extent <= 1e-12 * max(scale, 1.0):
-        raise ValueError(f"{name}: all {arr.shape[0]} points are identical: no curve can be fitted")
-    return arr
 
 
 def _check_degree(degree, max_degree: int):
@@ -272,7 +256,7 @@ def load_cloud(path) -> np.ndarray:
             arr = _read_text_cloud(path, "," if ext == ".csv" else None)
     except OSError as err:
         raise ValueError(f"cannot read point cloud {path}: {err.strerror or err}") from None
-    return _as_cloud(arr, f"point cloud {path}")
+    return check_cloud(arr, f"point cloud {path}")
 
 
 def _read_text_cloud(path: str, delimiter) -> np.ndarray:
@@ -426,7 +410,7 @@ def curve_distance(curve: PolynomialCurve, points):
     """
     if not isinstance(curve, PolynomialCurve) or curve.coeffs.ndim != 2:
         raise ValueError("curve_distance needs a single PolynomialCurve (coeffs of shape (3, K))")
-    pts = _as_cloud(points) if np.size(points) else np.zeros((0, 3))
+    pts = check_cloud(points) if np.size(points) else np.zeros((0, 3))
     lo, hi = (float(x) for x in np.asarray(curve.u_range))
     u, dist = _closest_u(np.asarray(curve.coeffs, np.float64), pts, lo, hi)
     return dist, u
@@ -811,7 +795,7 @@ def fit_curve(
       :class:`CurveFit` (``.curve`` is the PolynomialCurve, u_range (-1, 1)).
     """
     out_dtype = _resolve_dtype(points, dtype)
-    P = _as_cloud(points)
+    P = check_cloud(points)
     degree = _check_degree(degree, max_degree)
     _check_points_for_degree(P.shape[0], degree)
     max_residual = _check_nonneg(max_residual, "max_residual")
@@ -1255,7 +1239,7 @@ def fit_curves(
       :func:`~softplan_jax.make_scenario`.
     """
     out_dtype = _resolve_dtype(points, dtype)
-    P = _as_cloud(points)
+    P = check_cloud(points)
     degree = _check_degree(degree, max_degree)
     _check_points_for_degree(P.shape[0], degree)
     max_residual = _check_nonneg(max_residual, "max_residual")
@@ -1336,15 +1320,6 @@ def fit_curves(
 # Scenario files with the fit's residuals.
 
 
-def _as_cloud_fit(fit) -> CloudFit:
-    if isinstance(fit, CloudFit):
-        return fit
-    if isinstance(fit, CurveFit):
-        n = int(fit.indices.size)
-        return CloudFit((fit,), np.zeros(n, int), fit.residuals, fit.rms_residual, fit.max_residual, math.nan, math.nan)
-    raise ValueError(f"fit must be a CloudFit (fit_curves) or a CurveFit (fit_curve), got {type(fit).__name__}")
-
-
 def fit_scenario_dict(fit, goal, q0=None, *, name: str | None = None, metadata: dict | None = None) -> dict:
     """The JSON structure of a scenario whose obstacles are fitted curves, with
     the fit's residuals as ``metadata`` (top level: the whole cloud; each
@@ -1363,7 +1338,7 @@ def fit_scenario_dict(fit, goal, q0=None, *, name: str | None = None, metadata: 
     """
     from .scenarios import make_scenario, scenario_to_dict
 
-    cf = _as_cloud_fit(fit)
+    cf = CloudFit.from_fit(fit)
     scenario = make_scenario(goal, [f.curve for f in cf.fits], q0)
     data = scenario_to_dict(scenario, name)
     for ob, f in zip(data["obstacles"], cf.fits, strict=True):

@@ -42,6 +42,7 @@ used), and checks the motion BETWEEN steps for a pass through an obstacle (see
 
 from __future__ import annotations
 
+import enum
 from functools import partial
 from typing import NamedTuple
 
@@ -198,8 +199,9 @@ class PlanOptions(NamedTuple):
 PAPER_STEP = {"step": "plain", "escapes": 0, "stall_window": 60, "stall_tolerance": 1e-4}
 
 
-class Status:
-    """Rollout status codes."""
+class Status(enum.IntEnum):
+    """Rollout status codes (stored as int32 in a :class:`Rollout`;
+    ``Status(code).label`` is the name used in reports and JSON)."""
 
     RUNNING = 0
     REACHED = 1
@@ -208,8 +210,13 @@ class Status:
     MAX_STEPS = 4
     NONFINITE = 5
 
+    @property
+    def label(self) -> str:
+        """The report name: "running", "reached", "collided", "stalled", "max_steps", "non_finite"."""
+        return "non_finite" if self is Status.NONFINITE else self.name.lower()
 
-STATUS_NAMES = {0: "running", 1: "reached", 2: "collided", 3: "stalled", 4: "max_steps", 5: "non_finite"}
+
+STATUS_NAMES = {int(s): s.label for s in Status}
 
 
 def check_options(options: PlanOptions) -> PlanOptions:
@@ -630,8 +637,8 @@ def apply_collision_checks(r: Rollout, scenario: Scenario, options: PlanOptions)
 
 
 def status_name(code) -> str:
-    """Human name of a status code."""
-    return STATUS_NAMES[int(np.asarray(code))]
+    """Report name of a status code (see :attr:`Status.label`)."""
+    return Status(int(np.asarray(code))).label
 
 
 # ----------------------------------------------------------------------------
@@ -790,22 +797,6 @@ def result_from_rollout(r: Rollout, scenario: Scenario) -> PlanResult:
         clearance=np.asarray(r.clearance[: it + 1])[:, mask],
         final_error=float(r.final_error),
     )
-
-
-def stack_scenarios(scenarios) -> Scenario:
-    """Stack scenarios of one padded shape into a batch (leading axis)."""
-    scenarios = list(scenarios)
-    if not scenarios:
-        raise ValueError("stack_scenarios needs at least one scenario")
-    ref = jax.tree_util.tree_structure(scenarios[0])
-    shapes0 = [x.shape for x in jax.tree_util.tree_leaves(scenarios[0])]
-    for k, sc in enumerate(scenarios):
-        if jax.tree_util.tree_structure(sc) != ref or [x.shape for x in jax.tree_util.tree_leaves(sc)] != shapes0:
-            raise ValueError(
-                f"scenario {k} has a different padded shape or obstacle functions than scenario 0; "
-                "build them with the same curve_slots/point_slots/max_points/degree"
-            )
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *scenarios)
 
 
 def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,

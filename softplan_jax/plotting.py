@@ -672,10 +672,11 @@ def plot_cloud_fit(points, fit, ax=None, title=None, max_points: int = 6000, fig
     Returns:
       The matplotlib Figure.
     """
-    from .fitting import _as_cloud, _as_cloud_fit
+    from .fitting import CloudFit
+    from .validation import check_cloud
 
-    P = _as_cloud(points)
-    cf = _as_cloud_fit(fit)
+    P = check_cloud(points)
+    cf = CloudFit.from_fit(fit)
     plt = _pyplot()
     if ax is None:
         fig = plt.figure(figsize=figsize)

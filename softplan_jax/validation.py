@@ -114,3 +114,34 @@ def check_radius(radius, name: str = "radius"):
         if not np.all(np.isfinite(arr)) or np.any(arr < 0):
             raise ValueError(f"{name} must be finite and >= 0; got {arr.tolist()}")
     return radius
+
+
+def check_cloud(points, name: str = "points") -> np.ndarray:
+    """Validate a point cloud: a finite (N, 3) array of numbers, not all one point.
+
+    Returns it as float64 NumPy (fits run on the host in float64).
+    """
+    try:
+        arr = np.asarray(points)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must be an (N, 3) array of numbers: {err}") from None
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise ValueError(f"{name} must be an (N, 3) array of real numbers, got dtype {arr.dtype}")
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3) (one row x, y, z per point); got shape {arr.shape}")
+    if arr.shape[0] == 0:
+        raise ValueError(f"{name} is empty: a point cloud needs points")
+    arr = arr.astype(np.float64)
+    bad = ~np.all(np.isfinite(arr), axis=1)
+    if bad.any():
+        rows = np.nonzero(bad)[0]
+        shown = ", ".join(str(int(r)) for r in rows[:10]) + (", ..." if rows.size > 10 else "")
+        raise ValueError(
+            f"{name} has {rows.size} row(s) with NaN or inf (rows {shown}); drop them first, e.g. "
+            "points[np.isfinite(points).all(axis=1)]"
+        )
+    extent = float(np.max(np.ptp(arr, axis=0)))
+    scale = float(np.max(np.abs(arr)))
+    if extent <= 1e-12 * max(scale, 1.0):
+        raise ValueError(f"{name}: all {arr.shape[0]} points are identical: no curve can be fitted")
+    return arr

@@ -1,0 +1,257 @@
+"""Scenario files: the JSON format ``softplan-scenario/1`` documented in the
+README (arm, goal, obstacles as polynomial curves, line segments or point sets),
+read with every malformed field named in a ValueError, and written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..curves import PolynomialCurve, line_segment
+from .scenario import Scenario, default_start, make_scenario
+
+__all__ = ["scenario_from_dict", "scenario_to_dict", "load_scenario", "save_scenario", "write_json_file"]
+
+
+# "metadata": any JSON object (e.g. fit residuals from `softplan fit`); kept out of the Scenario.
+_TOP_KEYS = {"format", "arm", "goal", "obstacles", "name", "description", "metadata"}
+_ARM_KEYS = {"segments", "start", "radius", "length_limits"}
+_FORMAT = "softplan-scenario/1"
+
+
+def _err(path: str, msg: str) -> ValueError:
+    return ValueError(f"scenario field {path}: {msg}")
+
+
+def _only_numbers(value) -> bool:
+    if isinstance(value, bool) or isinstance(value, str) or value is None:
+        return False
+    if isinstance(value, (list, tuple)):
+        return all(_only_numbers(v) for v in value)
+    return isinstance(value, (int, float))
+
+
+def _num_array(value, path: str, shape=None):
+    if not _only_numbers(value):
+        raise _err(path, f"must be numbers (JSON numbers, not strings or booleans), got {value!r}")
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise _err(path, f"must be numbers, got {value!r}") from None
+    if shape is not None and (
+        arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape, shape, strict=True))
+    ):
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise _err(path, f"must have shape {want}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise _err(path, f"must be finite, got {value!r}")
+    return arr
+
+
+def scenario_from_dict(data: dict, dtype=None) -> Scenario:
+    """Build a Scenario from the JSON structure (see the README); every
+    malformed field raises a ValueError naming the field."""
+    if not isinstance(data, dict):
+        raise _err("(top)", f"must be a JSON object, got {type(data).__name__}")
+    for key in ("name", "description"):
+        if key in data and not isinstance(data[key], str):
+            raise _err(key, f"must be a string, got {data[key]!r}")
+    unknown = set(data) - _TOP_KEYS
+    if unknown:
+        raise _err(sorted(unknown)[0], f"unknown key (allowed: {sorted(_TOP_KEYS)})")
+    if data.get("format", _FORMAT) != _FORMAT:
+        raise _err("format", f"must be {_FORMAT!r}, got {data.get('format')!r}")
+    if not isinstance(data.get("metadata", {}), dict):
+        raise _err("metadata", f"must be a JSON object, got {data['metadata']!r}")
+    if "goal" not in data:
+        raise _err("goal", "is missing")
+    goal = _num_array(data["goal"], "goal", (3,))
+    arm = data.get("arm", {})
+    if not isinstance(arm, dict):
+        raise _err("arm", "must be an object")
+    unknown = set(arm) - _ARM_KEYS
+    if unknown:
+        raise _err(f"arm.{sorted(unknown)[0]}", f"unknown key (allowed: {sorted(_ARM_KEYS)})")
+    n = arm.get("segments", 3)
+    if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+        raise _err("arm.segments", f"must be an integer >= 1, got {n!r}")
+    if "start" in arm:
+        q0 = _num_array(arm["start"], "arm.start", (n, 3))
+        if np.any(q0[:, 0] <= 0):
+            raise _err("arm.start", f"segment lengths (first column) must be > 0, got {q0[:, 0].tolist()}")
+    else:
+        q0 = np.asarray(default_start(n))
+    radius = _num_array(arm.get("radius", 0.0), "arm.radius", ())
+    if radius < 0:
+        raise _err("arm.radius", f"must be >= 0, got {float(radius)}")
+    L_min, L_max = 1e-3, math.inf
+    if "length_limits" in arm:
+        lim = arm["length_limits"]
+        if not isinstance(lim, (list, tuple)) or len(lim) != 2:
+            raise _err("arm.length_limits", f"must be [L_min, L_max], got {lim!r}")
+        L_min = float(_num_array(lim[0], "arm.length_limits[0]", ()))
+        L_max = math.inf if lim[1] is None else float(_num_array(lim[1], "arm.length_limits[1]", ()))
+        if not 0 < L_min < L_max:
+            raise _err("arm.length_limits", f"need 0 < L_min < L_max, got {lim!r}")
+        if np.any(q0[:, 0] < L_min) or np.any(q0[:, 0] > L_max):
+            raise _err("arm.length_limits", f"the start lengths {q0[:, 0].tolist()} lie outside {lim!r}")
+    obstacles_json = data.get("obstacles", [])
+    if not isinstance(obstacles_json, list):
+        raise _err("obstacles", "must be a list")
+    obstacles = []
+    for k, ob in enumerate(obstacles_json):
+        path = f"obstacles[{k}]"
+        if not isinstance(ob, dict) or "type" not in ob:
+            raise _err(path, "must be an object with a 'type'")
+        kind = ob["type"]
+        allowed = {
+            "polynomial": {"type", "coeffs", "u_range", "radius", "name", "metadata"},
+            "line_segment": {"type", "start", "end", "radius", "name", "metadata"},
+            "points": {"type", "points", "radius", "name", "metadata"},
+        }
+        if kind not in allowed:
+            raise _err(f"{path}.type", f"unknown obstacle type {kind!r}; choose one of {sorted(allowed)}")
+        extra = set(ob) - allowed[kind]
+        if extra:
+            raise _err(f"{path}.{sorted(extra)[0]}", f"unknown key for a {kind} obstacle")
+        if not isinstance(ob.get("metadata", {}), dict):
+            raise _err(f"{path}.metadata", f"must be a JSON object, got {ob['metadata']!r}")
+        r = _num_array(ob.get("radius", 0.0), f"{path}.radius", ())
+        if r < 0:
+            raise _err(f"{path}.radius", f"must be >= 0, got {float(r)}")
+        if kind == "polynomial":
+            for key in ("coeffs", "u_range"):
+                if key not in ob:
+                    raise _err(f"{path}.{key}", "is missing")
+            coeffs = _num_array(ob["coeffs"], f"{path}.coeffs", (3, None))
+            if coeffs.shape[1] < 1:
+                raise _err(f"{path}.coeffs", "needs at least one coefficient per axis")
+            u_range = _num_array(ob["u_range"], f"{path}.u_range", (2,))
+            if not u_range[0] < u_range[1]:
+                raise _err(f"{path}.u_range", f"must satisfy u_min < u_max, got {u_range.tolist()}")
+            obstacles.append(PolynomialCurve(coeffs, u_range, float(r)))
+        elif kind == "line_segment":
+            for key in ("start", "end"):
+                if key not in ob:
+                    raise _err(f"{path}.{key}", "is missing")
+            a = _num_array(ob["start"], f"{path}.start", (3,))
+            b = _num_array(ob["end"], f"{path}.end", (3,))
+            obstacles.append(line_segment(a, b, float(r)))
+        else:
+            if "points" not in ob:
+                raise _err(f"{path}.points", "is missing")
+            pts = _num_array(ob["points"], f"{path}.points", (None, 3))
+            if pts.shape[0] == 0:
+                raise _err(f"{path}.points", "is empty")
+            obstacles.append((pts, float(r)))
+    # Point radii are per obstacle: build, then set them.
+    plain = [o[0] if isinstance(o, tuple) else o for o in obstacles]
+    q0 = jnp.asarray(q0, dtype or jnp.result_type(float))
+    scen = make_scenario(jnp.asarray(goal, q0.dtype), plain, q0, arm_radius=float(radius), L_min=L_min, L_max=L_max)
+    radii = [o[1] for o in obstacles if isinstance(o, tuple)]
+    if radii:
+        pr = np.zeros(scen.point_radius.shape)
+        pr[: len(radii)] = radii
+        scen = scen._replace(point_radius=jnp.asarray(pr, q0.dtype))
+    return scen
+
+
+def scenario_to_dict(scenario: Scenario, name: str | None = None) -> dict:
+    """The JSON structure of a Scenario (padding dropped). ParametricCurves
+    cannot be written: their functions are arbitrary code."""
+    if scenario.parametric:
+        raise ValueError(
+            "a scenario with ParametricCurve obstacles cannot be saved to JSON; "
+            "fit a PolynomialCurve to it (fit_polynomial_curve) first"
+        )
+    if scenario.q0.ndim != 2:
+        raise ValueError("save one scenario at a time (this one is batched)")
+    q0 = np.asarray(scenario.q0)
+    obstacles = []
+    coeffs = np.asarray(scenario.curves.coeffs)
+    for k in np.nonzero(np.asarray(scenario.curve_mask))[0]:
+        obstacles.append(
+            {
+                "type": "polynomial",
+                "coeffs": coeffs[k].tolist(),
+                "u_range": np.asarray(scenario.curves.u_range[k]).tolist(),
+                "radius": float(scenario.curves.radius[k]),
+            }
+        )
+    pm = np.asarray(scenario.point_mask)
+    for k in range(pm.shape[0]):
+        if pm[k].any():
+            obstacles.append(
+                {
+                    "type": "points",
+                    "points": np.asarray(scenario.points[k])[pm[k]].tolist(),
+                    "radius": float(scenario.point_radius[k]),
+                }
+            )
+    L_max = float(scenario.L_max.max())
+    out = {
+        "format": _FORMAT,
+        "arm": {
+            "segments": int(q0.shape[0]),
+            "start": q0.tolist(),
+            "radius": float(scenario.arm_radius),
+            "length_limits": [float(scenario.L_min.min()), None if math.isinf(L_max) else L_max],
+        },
+        "goal": np.asarray(scenario.goal).tolist(),
+        "obstacles": obstacles,
+    }
+    if name:
+        out = {"name": name, **out}
+    return out
+
+
+def load_scenario(path, dtype=None) -> Scenario:
+    """Read a scenario JSON file (format ``softplan-scenario/1``, see the README)."""
+    path = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = json.load(fh)
+    except FileNotFoundError:
+        raise ValueError(f"scenario file not found: {path}") from None
+    except json.JSONDecodeError as err:
+        raise ValueError(f"scenario file {path} is not valid JSON: {err}") from None
+    except UnicodeDecodeError as err:
+        raise ValueError(f"scenario file {path} is not UTF-8 text: {err}") from None
+    except OSError as err:
+        raise ValueError(f"cannot read scenario file {path}: {err.strerror or err}") from None
+    try:
+        return scenario_from_dict(data, dtype=dtype)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
+
+
+def save_scenario(scenario: Scenario, path, name: str | None = None, overwrite: bool = False) -> None:
+    """Write a scenario as JSON. Refuses to replace an existing file unless
+    ``overwrite=True``; the file is written whole (via a temporary file) or not at all."""
+    write_json_file(path, scenario_to_dict(scenario, name), overwrite)
+
+
+def write_json_file(path, data: dict, overwrite: bool = False) -> None:
+    """Write ``data`` as an indented JSON file, whole (via a temporary file in the
+    same directory, then a rename) or not at all; an existing file is replaced
+    only with ``overwrite=True`` (ValueError otherwise)."""
+    path = os.fspath(path)
+    if os.path.exists(path) and not overwrite:
+        raise ValueError(f"{path} exists; pass overwrite=True to replace it")
+    text = json.dumps(data, indent=2)
+    fd, tmp = tempfile.mkstemp(prefix=".softplan-", suffix=".json", dir=os.path.dirname(os.path.abspath(path)))
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+

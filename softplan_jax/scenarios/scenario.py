@@ -1,0 +1,267 @@
+"""The Scenario pytree and its constructors: the arm's start, the goal and the
+obstacles of one planning problem (paper section 2: the arm of section 2.1,
+the obstacles of section 2.3 and the goal of the planner, eq. 9).
+
+Obstacles come in three padded groups so that scenes of one padded shape share
+one compilation:
+
+* ``curves`` -- polynomial curves stacked to ``(m_c, 3, K)`` with ``curve_mask``;
+* ``points`` -- point-set obstacles padded to ``(m_p, N_max, 3)`` with
+  ``point_mask`` ``(m_p, N_max)`` (a slot with no real point is padding);
+* ``parametric`` -- a tuple of :class:`ParametricCurve` (their functions are
+  static, so each distinct function compiles separately).
+
+:func:`make_scenario` builds one scene, :func:`stack_scenarios` a batch of
+scenes of one padded shape. The layout of the three groups belongs to
+:mod:`softplan_jax.obstacles`; this module only stores it.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..curves import ParametricCurve, PolynomialCurve, curve_points, stack_curves
+from ..validation import as_float_array, check_configuration, check_finite, check_points
+
+__all__ = [
+    "Scenario",
+    "default_start",
+    "make_scenario",
+    "stack_scenarios",
+    "obstacle_count",
+    "scenario_warnings",
+]
+
+
+class Scenario(NamedTuple):
+    """A planning problem (a pytree; every leaf an array except the static
+    functions of ``parametric``).
+
+    Attributes:
+      q0: (n, 3) start configuration.
+      goal: (3,) goal position of the tip.
+      curves: PolynomialCurve with coeffs (m_c, 3, K), u_range (m_c, 2), radius (m_c,).
+      curve_mask: (m_c,) bool, False for padding slots.
+      points: (m_p, N_max, 3) point-set obstacles.
+      point_mask: (m_p, N_max) bool, False for padding points.
+      point_radius: (m_p,) radius of each point obstacle's points.
+      parametric: tuple of ParametricCurve obstacles.
+      arm_radius: () radius of the arm (clearance is measured from its surface).
+      L_min: (n,) lower actuator limit on each L_i.
+      L_max: (n,) upper actuator limit on each L_i (inf for none).
+    """
+
+    q0: jax.Array
+    goal: jax.Array
+    curves: PolynomialCurve
+    curve_mask: jax.Array
+    points: jax.Array
+    point_mask: jax.Array
+    point_radius: jax.Array
+    parametric: tuple
+    arm_radius: jax.Array
+    L_min: jax.Array
+    L_max: jax.Array
+
+    @property
+    def n_segments(self) -> int:
+        return self.q0.shape[-2]
+
+
+def obstacle_count(scenario: Scenario) -> int:
+    """Number of obstacle slots (padding included): curves + point sets + parametric."""
+    return scenario.curves.coeffs.shape[-3] + scenario.points.shape[-3] + len(scenario.parametric)
+
+
+def default_start(n_segments: int = 3, length: float = 1.0, dtype=None):
+    """The documented default start pose: a straight, vertical arm.
+
+    Every segment has length ``length`` and theta = 0; the bending planes phi
+    are 0, 2*pi/3, 2*pi/3, ... so that, the paper's ``R_i = Rz(phi) Ry(theta)``
+    composing, consecutive segments bend in planes 120 degrees apart and the
+    three lateral directions are all reachable from the straight pose.
+    """
+    if int(n_segments) < 1:
+        raise ValueError(f"n_segments must be >= 1, got {n_segments}")
+    n = int(n_segments)
+    phi = np.full(n, 2 * math.pi / 3)
+    phi[0] = 0.0
+    q = np.stack([np.full(n, float(length)), np.zeros(n), phi], axis=1)
+    return jnp.asarray(q, dtype=dtype or jnp.result_type(float))
+
+
+def make_scenario(
+    goal,
+    obstacles,
+    q0=None,
+    *,
+    arm_radius=0.0,
+    L_min=None,
+    L_max=None,
+    curve_slots: int | None = None,
+    point_slots: int | None = None,
+    max_points: int | None = None,
+    degree: int | None = None,
+) -> Scenario:
+    """Build a :class:`Scenario`.
+
+    Args:
+      goal: (3,) goal of the tip.
+      obstacles: a list of PolynomialCurve, ParametricCurve or (N, 3) point arrays.
+      q0: (n, 3) start; None = :func:`default_start` (3 segments of length 1).
+      arm_radius: radius of the arm, >= 0.
+      L_min, L_max: scalars or (n,) actuator limits on L_i; None = (1e-3, inf).
+      curve_slots, point_slots, max_points, degree: pad the obstacle groups
+        to these sizes (to share one compiled shape across scenes); default
+        the sizes of this scene (a group with no obstacle has zero slots).
+
+    Returns:
+      Scenario.
+    """
+    q0 = default_start() if q0 is None else check_configuration(q0)
+    dtype = q0.dtype
+    goal = as_float_array(goal, "goal")
+    if goal.shape != (3,):
+        raise ValueError(f"goal must have shape (3,); got {goal.shape}")
+    check_finite(goal, "goal")
+    if not isinstance(obstacles, (list, tuple)):
+        raise ValueError(f"obstacles must be a list; got {type(obstacles).__name__}")
+    polys, params, point_sets, point_radii = [], [], [], []
+    for k, ob in enumerate(obstacles):
+        if isinstance(ob, PolynomialCurve):
+            if ob.coeffs.ndim != 2:
+                raise ValueError(f"obstacles[{k}] is a stacked PolynomialCurve; pass single curves")
+            polys.append(ob)
+        elif isinstance(ob, ParametricCurve):
+            params.append(ob.astype(dtype))
+        else:
+            try:
+                pts = check_points(ob, f"obstacles[{k}]")
+            except ValueError as err:
+                raise ValueError(
+                    f"{err} (each obstacle must be a PolynomialCurve, a ParametricCurve or an "
+                    "(N, 3) point array)"
+                ) from None
+            point_sets.append(np.asarray(pts))
+            point_radii.append(0.0)
+    curves, curve_mask = stack_curves(polys, size=max(curve_slots or 0, len(polys)), degree=degree)
+    if curve_slots is not None and curve_slots < len(polys):
+        raise ValueError(f"curve_slots = {curve_slots} < number of polynomial curves {len(polys)}")
+    n_p = max(point_slots or 0, len(point_sets))
+    if point_slots is not None and point_slots < len(point_sets):
+        raise ValueError(f"point_slots = {point_slots} < number of point obstacles {len(point_sets)}")
+    n_max = max([max_points or 0, 1] + [p.shape[0] for p in point_sets])
+    if max_points is not None and max_points < max([0] + [p.shape[0] for p in point_sets]):
+        raise ValueError(f"max_points = {max_points} is smaller than the largest point set")
+    points = np.zeros((n_p, n_max, 3))
+    point_mask = np.zeros((n_p, n_max), bool)
+    for k, p in enumerate(point_sets):
+        points[k, : p.shape[0]] = p
+        point_mask[k, : p.shape[0]] = True
+    n = q0.shape[0]
+    L_min = jnp.broadcast_to(jnp.asarray(1e-3 if L_min is None else L_min, dtype), (n,))
+    L_max = jnp.broadcast_to(jnp.asarray(jnp.inf if L_max is None else L_max, dtype), (n,))
+    if bool(jnp.any(L_min <= 0)) or bool(jnp.any(L_max <= L_min)) or bool(jnp.any(jnp.isnan(L_max))):
+        raise ValueError(f"need 0 < L_min < L_max; got L_min = {L_min.tolist()}, L_max = {L_max.tolist()}")
+    if bool(jnp.any(q0[:, 0] < L_min)) or bool(jnp.any(q0[:, 0] > L_max)):
+        raise ValueError(f"start lengths {q0[:, 0].tolist()} lie outside [L_min, L_max]")
+    arm_radius = as_float_array(arm_radius, "arm_radius")
+    if arm_radius.shape != () or not bool(jnp.isfinite(arm_radius)) or float(arm_radius) < 0:
+        raise ValueError(f"arm_radius must be a finite scalar >= 0; got {arm_radius}")
+    scenario = Scenario(
+        q0=q0,
+        goal=goal.astype(dtype),
+        curves=curves.astype(dtype),
+        curve_mask=curve_mask,
+        points=jnp.asarray(points, dtype),
+        point_mask=jnp.asarray(point_mask),
+        point_radius=jnp.asarray(np.pad(point_radii, (0, n_p - len(point_radii))), dtype),
+        parametric=tuple(params),
+        arm_radius=arm_radius.astype(dtype),
+        L_min=L_min,
+        L_max=L_max,
+    )
+    for msg in scenario_warnings(scenario):
+        warnings.warn(msg, UserWarning, stacklevel=2)
+    return scenario
+
+
+# Curve samples of the goal check in scenario_warnings (a warning, not a proof: a
+# goal within the sample spacing of a curve counts as on it).
+_GOAL_CHECK_SAMPLES = 2049
+
+
+def scenario_warnings(scenario: Scenario) -> list[str]:
+    """Sanity checks of one (unbatched) scenario that are not errors: the goal
+    on or inside an obstacle (its radius plus the arm's), or farther from the
+    base than the arm reaches with every length at its limit L_max.
+
+    Returns the messages (empty when all is well); :func:`make_scenario` and
+    :func:`load_scenario` issue them as ``UserWarning`` and the CLI prints them.
+    """
+    out = []
+    goal = np.asarray(scenario.goal, np.float64)
+    arm_r = float(scenario.arm_radius)
+    # Distance sampled on the curves minus half the sample spacing: never larger than the true one.
+    hits = []
+    m_c = scenario.curves.coeffs.shape[0]
+    # Polynomial curves sampled on the host (NumPy, Horner's rule), all slots at once.
+    coeffs = np.asarray(scenario.curves.coeffs, np.float64)  # (m_c, 3, K)
+    u_range = np.asarray(scenario.curves.u_range, np.float64)
+    t = np.linspace(0.0, 1.0, _GOAL_CHECK_SAMPLES)
+    u = u_range[:, :1] + (u_range[:, 1:] - u_range[:, :1]) * t  # (m_c, S)
+    pts = np.zeros((m_c, 3, t.size))
+    for k in range(coeffs.shape[-1] - 1, -1, -1):
+        pts = pts * u[:, None, :] + coeffs[:, :, k, None]
+    samples = [(k, np.swapaxes(pts[k], 0, 1), float(scenario.curves.radius[k])) for k in range(m_c)
+               if bool(scenario.curve_mask[k])]
+    samples += [(m_c + scenario.points.shape[0] + k, np.asarray(curve_points(pc, _GOAL_CHECK_SAMPLES), np.float64),
+                 float(pc.radius)) for k, pc in enumerate(scenario.parametric)]
+    for k, pts_k, radius in samples:
+        spacing = float(np.max(np.linalg.norm(np.diff(pts_k, axis=0), axis=-1)))
+        d = float(np.min(np.linalg.norm(pts_k - goal, axis=-1))) - 0.5 * spacing
+        if d <= radius + arm_r:
+            hits.append(k)
+    for k in range(scenario.points.shape[0]):
+        pts = np.asarray(scenario.points[k], np.float64)[np.asarray(scenario.point_mask[k])]
+        if pts.size and np.min(np.linalg.norm(pts - goal, axis=-1)) <= float(scenario.point_radius[k]) + arm_r:
+            hits.append(m_c + k)
+    if hits:
+        out.append(f"the goal {goal.tolist()} lies on or inside obstacle(s) {hits} (within the obstacle's "
+                   "radius plus the arm's): it cannot be reached without contact")
+    reach = float(np.sum(np.asarray(scenario.L_max, np.float64)))
+    if np.isfinite(reach) and np.linalg.norm(goal) > reach:
+        out.append(f"the goal is {np.linalg.norm(goal):.4g} from the arm's base, farther than the arm reaches "
+                   f"with every length at L_max ({reach:.4g}): it cannot be reached")
+    return out
+
+
+
+def stack_scenarios(scenarios) -> Scenario:
+    """Stack scenarios of one padded shape into a batch (leading axis)."""
+    scenarios = list(scenarios)
+    if not scenarios:
+        raise ValueError("stack_scenarios needs at least one scenario")
+    ref = jax.tree_util.tree_structure(scenarios[0])
+    shapes0 = [x.shape for x in jax.tree_util.tree_leaves(scenarios[0])]
+    for k, sc in enumerate(scenarios):
+        if jax.tree_util.tree_structure(sc) != ref or [x.shape for x in jax.tree_util.tree_leaves(sc)] != shapes0:
+            raise ValueError(
+                f"scenario {k} has a different padded shape or obstacle functions than scenario 0; "
+                "build them with the same curve_slots/point_slots/max_points/degree"
+            )
+
+    def stack(*xs):
+        if any(isinstance(x, jax.core.Tracer) for x in xs):
+            return jnp.stack(xs)
+        # Concrete leaves: stacked on the host and transferred once (one device_put per
+        # leaf instead of one per scene); the values and dtypes are those of jnp.stack.
+        return jnp.asarray(np.stack([np.asarray(x) for x in xs]), dtype=jnp.result_type(*xs))
+
+    return jax.tree_util.tree_map(stack, *scenarios)
