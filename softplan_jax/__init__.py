@@ -6,7 +6,8 @@ submodules are public as modules: :mod:`softplan_jax.plotting` (matplotlib)
 and :mod:`softplan_jax.cli` (the ``softplan`` command).
 """
 
-from importlib.metadata import PackageNotFoundError, version
+from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
+from importlib.metadata import version as _version
 
 from .closest import ClosestPoint, SolverOptions, closest_point, closest_point_to_points, point_distance
 from .curves import ParametricCurve, PolynomialCurve, curve_points, fit_polynomial_curve, line_segment, stack_curves
@@ -60,8 +61,8 @@ from .scenarios import (
 from .tuning import LossWeights, TuningResult, batch_loss, rollout_loss, tune_gains
 
 try:
-    __version__ = version("softplan_jax")
-except PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = _version("softplan_jax")
+except _PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0+unknown"
 
 __all__ = [

@@ -324,7 +324,7 @@ def fit_polynomial_curve(points, degree: int = 3, radius=0.0, *, ordered: bool =
     coeffs, *_ = jnp.linalg.lstsq(V, points)
     curve = PolynomialCurve(coeffs.T, jnp.array([0.0, 1.0], dtype=points.dtype), radius)
     if is_concrete(coeffs):
-        from .fitting import _warn_if_poor  # fitting imports this module
+        from .fitting import warn_if_poor  # fitting imports this module
 
-        _warn_if_poor(curve, points, "fit_polynomial_curve")
+        warn_if_poor(curve, points, "fit_polynomial_curve")
     return curve

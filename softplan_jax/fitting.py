@@ -731,7 +731,7 @@ def _report(max_res: float, tol: float, noise: float, max_residual, warn: bool, 
         )
 
 
-def _warn_if_poor(curve: PolynomialCurve, points, what: str) -> None:
+def warn_if_poor(curve: PolynomialCurve, points, what: str) -> None:
     """FitWarning when an (ordered) fit's farthest point is far beyond the noise
     level (twice the tolerance of :func:`fit_curve`: the chord-length
     parameter of an ordered fit costs some accuracy by itself), with the

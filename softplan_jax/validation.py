@@ -11,6 +11,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+__all__ = [
+    "is_concrete",
+    "as_float_array",
+    "check_finite",
+    "check_configuration",
+    "check_segment_index",
+    "check_fraction",
+    "check_u_range",
+    "check_points",
+    "check_radius",
+    "check_cloud",
+]
+
 
 def is_concrete(x) -> bool:
     """True when ``x`` holds actual values (not a JAX tracer)."""

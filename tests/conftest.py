@@ -1,4 +1,4 @@
-"""pytest configuration: float64 everywhere (strict dtype promotion on request)
+"""pytest configuration: float64 everywhere, strict dtype promotion,
 and jax's persistent compilation cache (``session.py``).
 
 x64 must be switched on before any array is created, i.e. at import time of
@@ -22,12 +22,10 @@ import jax  # noqa: E402
 TESTS = os.path.dirname(os.path.abspath(__file__))
 
 jax.config.update("jax_enable_x64", True)
-# Strict promotion makes any silent float32/float64 (or int/float) mixing
-# an error.  It is OFF by default because the library does not survive it
-# yet: fit_polynomial_curve computes `u[:, None] ** jnp.arange(degree + 1)`
-# (float64 ** int64), a TypePromotionError under "strict".  Everything else
-# in these tests passes under strict; run with SOFTPLAN_TEST_STRICT=1 to check.
-if os.environ.get("SOFTPLAN_TEST_STRICT", "0") == "1":
+# Strict promotion: any silent float32/float64 (or int/float) mixing in the
+# library is an error under test.  SOFTPLAN_TEST_STRICT=0 turns it off (to
+# tell a promotion error from another failure).
+if os.environ.get("SOFTPLAN_TEST_STRICT", "1") != "0":
     jax.config.update("jax_numpy_dtype_promotion", "strict")
 
 # `import helpers` / `import session` from tests/; `import oracle` /
