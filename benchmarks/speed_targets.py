@@ -10,7 +10,7 @@ On the paper's tree scenario (five curves, three segments), float64 and float32:
 3. batched throughput, curve method: scenario-steps per second (target >= 200,000);
 4. compile time of a rollout (target <= 10 s), reported apart from run time;
    and the number of compilations across scenes of one padded shape (target 0
-   after the first; counted with ``rollout_jit._cache_size()``);
+   after the first; counted with ``rollout_jit.cache_size()``);
 5. gradient of a 200-step rollout loss (``tuning.rollout_loss``) / the
    rollout (target <= 5).
 
@@ -112,10 +112,10 @@ def count_recompiles(steps):
     opts = make_options("curve")
     scenes = [sp.paper_scenario(n, curve_slots=5, degree=2) for n in ("sim1", "sim2", "tree")]
     rollout_jit(scenes[0], sp.default_gains(), opts, steps)
-    before = rollout_jit._cache_size()
+    before = rollout_jit.cache_size()
     for s in scenes[1:]:
         rollout_jit(s, sp.default_gains()._replace(eta=jnp.asarray(2e-3)), opts, steps)
-    return rollout_jit._cache_size() - before
+    return rollout_jit.cache_size() - before
 
 
 def numpy_step_time(steps_timed):

@@ -674,32 +674,48 @@ def _batch_keys(seed, batch: int):
     return jax.random.split(_key(seed), batch)
 
 
-def rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0) -> Rollout:
-    """:func:`rollout` under ``jit`` (options and max_steps static). One
-    compilation per padded scenario shape, dtype, options and max_steps; new
-    goals, obstacles, gain values or seeds reuse it. ``seed``: an int or a PRNG
-    key for the escapes. ``rollout_jit.lower(...)`` lowers ahead of time;
-    ``rollout_jit._cache_size()`` counts compilations."""
-    return _rollout_jit(scenario, _strong_gains(gains, scenario.q0.dtype), options, max_steps, _key(seed))
+class CompiledRollout:
+    """A jitted rollout entry point: normalises its arguments (gains as strong
+    arrays of the scenario's dtype, an int seed as a PRNG key) before the jit
+    boundary, so that equal shapes always hit one compilation.
+
+    Call it as ``f(scenario, gains, options, max_steps, seed=0)``; ``f.lower``
+    takes the same arguments and lowers ahead of time (``.compile()`` then
+    compiles without running); ``f.cache_size()`` counts the compilations.
+    """
+
+    def __init__(self, jitted, batched: bool, doc: str):
+        self._jitted = jitted
+        self._batched = batched
+        self.__doc__ = doc
+
+    def _args(self, scenario, gains, options, max_steps, seed):
+        dtype = scenario.q0.dtype
+        key = _batch_keys(seed, scenario.q0.shape[0]) if self._batched else _key(seed)
+        return scenario, _strong_gains(gains, dtype), options, max_steps, key
+
+    def __call__(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0) -> Rollout:
+        return self._jitted(*self._args(scenario, gains, options, max_steps, seed))
+
+    def lower(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0):
+        """``jax.jit(...).lower`` of the rollout for these arguments."""
+        return self._jitted.lower(*self._args(scenario, gains, options, max_steps, seed))
+
+    def cache_size(self) -> int:
+        """Number of compilations so far (one per padded shape, dtype, options, max_steps)."""
+        return self._jitted._cache_size()
 
 
-def rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0) -> Rollout:
-    """:func:`rollout` vmapped over a batch of scenarios of one padded shape
-    (every leaf of ``scenarios`` has a leading batch axis; gains shared), jitted.
-    Scenario b's escapes use ``jax.random.split(key(seed), B)[b]``."""
-    keys = _batch_keys(seed, scenarios.q0.shape[0])
-    return _rollout_batch(scenarios, _strong_gains(gains, scenarios.q0.dtype), options, max_steps, keys)
+rollout_jit = CompiledRollout(_rollout_jit, batched=False, doc=""":func:`rollout` under ``jit`` (options and
+max_steps static): ``rollout_jit(scenario, gains, options, max_steps, seed=0)``. One compilation per
+padded scenario shape, dtype, options and max_steps; new goals, obstacles, gain values or seeds reuse
+it. ``seed``: an int or a PRNG key for the escapes. ``rollout_jit.lower(...)`` lowers ahead of time;
+``rollout_jit.cache_size()`` counts compilations (see :class:`CompiledRollout`).""")
 
-
-rollout_jit.lower = lambda scenario, gains, options, max_steps, seed=0: _rollout_jit.lower(
-    scenario, _strong_gains(gains, scenario.q0.dtype), options, max_steps, _key(seed)
-)
-rollout_jit._cache_size = _rollout_jit._cache_size
-rollout_batch.lower = lambda scenarios, gains, options, max_steps, seed=0: _rollout_batch.lower(
-    scenarios, _strong_gains(gains, scenarios.q0.dtype), options, max_steps,
-    _batch_keys(seed, scenarios.q0.shape[0]),
-)
-rollout_batch._cache_size = _rollout_batch._cache_size
+rollout_batch = CompiledRollout(_rollout_batch, batched=True, doc=""":func:`rollout` vmapped over a batch of
+scenarios of one padded shape (every leaf of ``scenarios`` has a leading batch axis; gains shared),
+jitted: ``rollout_batch(scenarios, gains, options, max_steps, seed=0)``. Scenario b's escapes use
+``jax.random.split(key(seed), B)[b]``. ``.lower`` and ``.cache_size()`` as :class:`CompiledRollout`.""")
 
 
 class PlanResult(NamedTuple):

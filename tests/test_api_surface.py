@@ -15,8 +15,9 @@ import subprocess
 import sys
 
 import pytest
-import softplan_jax as sp
 from session import REPO, subprocess_env
+
+import softplan_jax as sp
 
 PUBLIC = [
     # kinematics (paper section 2.1)
@@ -139,7 +140,8 @@ def test_no_module_imports_private_names_of_another():
 
 
 def test_the_checker_finds_private_imports():
-    src = "from .kinematics import _frames\nfrom softplan_jax.closest import _x as y\nimport softplan_jax as sp\nsp.planner._f()\n"
+    src = ("from .kinematics import _frames\nfrom softplan_jax.closest import _x as y\n"
+           "import softplan_jax as sp\nsp.planner._f()\n")
     assert [ln for ln, _ in _private_imports_src(src, "x")] == [1, 2, 4]
     assert _private_imports_src("from .kinematics import frames\nsp.planner.f()\n", "x") == []
 

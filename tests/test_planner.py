@@ -172,14 +172,14 @@ def test_same_padded_shape_does_not_recompile(paper):
     gains = sp.default_gains()
     opts = make_options("curve")
     rollout_jit(paper["sim1"], gains, opts, 200)
-    before = rollout_jit._cache_size()
+    before = rollout_jit.cache_size()
     for name in ("sim2", "tree"):
         rollout_jit(paper[name], gains, opts, 200)
     moved = paper["tree"]._replace(goal=paper["tree"].goal + 0.1)
     rollout_jit(moved, gains._replace(eta=gains.eta * 2), opts, 200)
     # Gains given as a Python float or a weakly typed array do not recompile either.
     rollout_jit(moved, gains._replace(eta=2e-3, d0=jnp.asarray(0.08)), opts, 200)
-    assert rollout_jit._cache_size() == before
+    assert rollout_jit.cache_size() == before
 
 
 def test_plan_batch_matches_single(paper):
