@@ -10,6 +10,7 @@ from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
 from importlib.metadata import version as _version
 
 from .closest import ClosestPoint, SolverOptions, closest_point, closest_point_to_points, point_distance
+from .compilation_cache import compilation_cache_dir, enable_compilation_cache
 from .curves import ParametricCurve, PolynomialCurve, curve_points, fit_polynomial_curve, line_segment, stack_curves
 from .fitting import CloudFit, CurveFit, FitWarning, curve_distance, fit_curve, fit_curves, load_cloud, save_fit_scenario
 from .kinematics import (
@@ -138,5 +139,8 @@ __all__ = [
     "rollout_loss",
     "batch_loss",
     "tune_gains",
+    # compiled programs kept on disk
+    "enable_compilation_cache",
+    "compilation_cache_dir",
     "__version__",
 ]

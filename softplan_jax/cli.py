@@ -32,6 +32,11 @@ reached, stalled, collided or max_steps; the status is in the summary);
 output path that cannot be written), with one line ``softplan: error: ...`` on
 stderr; 3 ``run --require-reached`` and the goal was not reached.
 
+``run`` keeps compiled rollouts in jax's persistent compilation cache
+(``~/.cache/softplan_jax/jax``; see :mod:`softplan_jax.compilation_cache`;
+``SOFTPLAN_COMPILATION_CACHE=0`` turns it off), so a second run of the same
+scenario shape does not compile again.
+
 jax is imported inside :func:`main`, after the arguments are parsed, so
 ``--help`` is fast and float64 (``jax_enable_x64``) can be switched on before
 any array exists.
@@ -387,6 +392,9 @@ def _fmt_seconds(t: float) -> str:
 def _cmd_run(args) -> int:
     import jax
 
+    from .compilation_cache import enable_compilation_cache
+
+    enable_compilation_cache()  # a second run loads the compiled rollout from disk
     if not args.float32:
         # float64 needs x64 on before any array is created.
         jax.config.update("jax_enable_x64", True)

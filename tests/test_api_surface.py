@@ -41,6 +41,7 @@ PUBLIC = [
     "true_closest", "dense_trajectory_clearance", "apply_collision_checks",
     # tuning
     "LossWeights", "TuningResult", "rollout_loss", "batch_loss", "tune_gains",
+    "enable_compilation_cache", "compilation_cache_dir",
     "__version__",
 ]
 
