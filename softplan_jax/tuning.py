@@ -158,8 +158,12 @@ def tune_gains(scenarios: Scenario, gains: Gains | None = None, *, steps: int = 
         loss, grad = value_and_grad(params)
         if not np.isfinite(float(loss)) or not all(np.all(np.isfinite(np.asarray(v))) for v in grad.values()):
             raise FloatingPointError(f"non-finite loss or gradient at update {it}: loss = {float(loss)}")
-        updates, state = opt.update(grad, state, params)
-        params = optax.apply_updates(params, updates)
+        # optax mixes Python floats with its int32 step count (adam's bias correction),
+        # which jax's "strict" dtype promotion rejects: the optimiser runs under the
+        # standard rules whatever the caller chose.
+        with jax.numpy_dtype_promotion("standard"):
+            updates, state = opt.update(grad, state, params)
+            params = optax.apply_updates(params, updates)
         losses.append(float(loss))
         history.append(to_gains(params))
         if progress:
