@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 from session import REPO, subprocess_env
+
 from softplan_jax.compilation_cache import compilation_cache_dir
 
 

@@ -60,7 +60,7 @@ def test_motion_bound_is_sound_and_tight_on_planner_steps():
     """Planner steps of the tree (plain step, so every step is full size): the
     bound holds, and is a few times the observed motion, not orders more."""
     sc = sp.paper_scenario("tree", **PAD)
-    r = sp.plan(sc, step="plain", escapes=0, max_steps=200)
+    r = sp.plan(sc, max_steps=200, **sp.PAPER_STEP)  # the rollout test_planner compiles too
     ratios = []
     for k in range(0, r.iterations, 5):
         bound = np.asarray(sp.motion_bound(r.q[k], r.q[k + 1]))
@@ -185,8 +185,8 @@ def test_nan_clearance_is_a_failure_not_clear():
     good = sp.line_segment([0.5, -1.0, 1.5], [0.5, 1.0, 1.5])
     bad = sp.PolynomialCurve.tree_unflatten(None, [good.coeffs * jnp.nan, good.u_range, good.radius])
     sc = sp.make_scenario([1.0, 0.0, 2.0], [bad], **PAD)
-    for step in ("safe", "plain"):
-        r = sp.plan(sc, max_steps=200, step=step)
+    for step, extra in (("safe", {}), ("plain", sp.PAPER_STEP)):
+        r = sp.plan(sc, max_steps=200, **extra)
         assert r.status == "non_finite", (step, r.status)
         assert not r.reached and not r.collided
         assert np.isnan(r.min_clearance)  # never reported as a finite (clear) clearance
@@ -194,9 +194,12 @@ def test_nan_clearance_is_a_failure_not_clear():
 
 @pytest.mark.parametrize("name", ["sim1", "sim2", "tree"])
 def test_float32_paper_scenes_have_finite_clearance(name):
+    """float32 end to end: the default planner and the paper's step (also the float32 smoke test)."""
     sc = sp.paper_scenario(name, dtype=jnp.float32, **PAD)
-    for step in ("safe", "plain"):
-        r = sp.plan(sc, max_steps=200, step=step, escapes=0)
+    assert sc.q0.dtype == jnp.float32
+    for step, extra in (("safe", {}), ("plain", sp.PAPER_STEP)):
+        r = sp.plan(sc, max_steps=200, **extra)
+        assert r.q.dtype == np.float32 and r.clearance.dtype == np.float32
         assert np.isfinite(r.clearance).all() and np.isfinite(r.min_clearance), (name, step)
         assert r.reached and not r.collided, (name, step, r.status)
 
@@ -245,7 +248,7 @@ def test_plain_step_is_the_papers_step():
     the step the paper tables use; the safe step never moves farther."""
     sc = sp.paper_scenario("tree", **PAD)
     g = sp.default_gains()
-    plain = rollout_jit(sc, g, make_options("curve", step="plain", escapes=0), 200)
+    plain = rollout_jit(sc, g, make_options("curve", **sp.PAPER_STEP), 200)
     safe = rollout_jit(sc, g, make_options("curve"), 200)
     assert np.all(np.asarray(plain.step_scale[: int(plain.iterations)]) == 1)
     a = np.asarray(safe.step_scale[: int(safe.iterations)])
