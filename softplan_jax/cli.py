@@ -1,4 +1,5 @@
-"""The ``softplan`` command.
+"""The ``softplan`` command: the paper's simulations (section 3) and the user's
+own scenes from the shell.
 
 ::
 

@@ -1,4 +1,5 @@
-"""Gradient tuning of the gain functions through whole rollouts (optax).
+"""Gradient tuning of the gain functions through whole rollouts (optax): the
+gains of paper eq. (9), which the paper sets by hand, tuned beyond the paper.
 
 The loss of one rollout (:func:`rollout_loss`) is differentiable in the gains:
 the planner step is smooth in the gains, the closest points carry implicit

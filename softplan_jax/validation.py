@@ -1,4 +1,5 @@
-"""Host-side checks of user input, raising ``ValueError`` with a clear message.
+"""Host-side checks of user input, raising ``ValueError`` with a clear message
+(not part of the paper's method: the boundary of every public function).
 
 Shapes are always checked (they are static under ``jit``); values (finite,
 positive lengths, ordered ranges) are checked only when the input is concrete,
