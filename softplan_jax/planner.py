@@ -613,10 +613,10 @@ def apply_collision_checks(r: Rollout, scenario: Scenario, options: PlanOptions)
         r.q[:-1], r.q[1:], prev, nxt
     )
     cb = jnp.concatenate([c[:1], jnp.where(mask, cb, jnp.inf)])
-    steps = jnp.arange(r.q.shape[0])
+    steps = jnp.arange(r.q.shape[0], dtype=r.iterations.dtype)
     nan = jnp.any(jnp.isnan(c), axis=1) | jnp.any(jnp.isnan(cb), axis=1)
     hit = (jnp.any(c <= contact, axis=1) | jnp.any(cb <= contact, axis=1) | nan) & (steps <= r.iterations)
-    first = jnp.argmax(hit)
+    first = jnp.argmax(hit).astype(r.iterations.dtype)
     collided = jnp.any(hit)
     end = jnp.where(collided, first, r.iterations)
     keep = steps <= end
