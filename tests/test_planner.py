@@ -10,7 +10,6 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.planner import make_options, rollout_jit
-from softplan_jax.tuning import rollout_loss
 
 # All paper scenarios padded to one shape: one compilation serves the three.
 PAD = dict(curve_slots=5, degree=2)
@@ -213,25 +212,28 @@ def test_mixed_obstacles_both_methods():
 
 
 def test_gradient_through_rollout_matches_finite_differences(paper):
-    sc = paper["tree"]
-    opts = make_options("curve", goal_tolerance=1e-9, stall_window=10**6)
+    """jax.grad through whole rollouts (the batch loss of notebooks/tuning.ipynb, the same
+    compiled program: the notebook's test run and this test share it through the persistent
+    cache) against central finite differences of the same loss."""
+    batch = sp.stack_scenarios([paper["sim1"], paper["tree"]])
+    opts = sp.PlanOptions(method="curve")
     # A wider influence distance than the default, so that the repulsion acts
-    # within the short horizon (the arm passes 0.1-0.2 from the branches early).
-    g = sp.default_gains()._replace(d0=jnp.asarray(0.3))
-    steps = 30
+    # within the short horizon (the arm passes 0.3-0.4 from a tree branch early).
+    g = sp.default_gains()._replace(d0=jnp.asarray(0.5))
+    steps = 10  # no rollout ends within 10 steps: the loss is smooth in the gains
     # One compilation for the loss and its gradient (the finite differences use its value).
-    loss_and_grad = jax.jit(jax.value_and_grad(lambda g: rollout_loss(g, sc, opts, steps)))
-    _, grad = loss_and_grad(g)
+    loss_and_grad = jax.jit(jax.value_and_grad(sp.batch_loss), static_argnames=("options", "max_steps"))
+    _, grad = loss_and_grad(g, batch, opts, steps)
     for k in ("k_att", "v_max", "eta", "d0", "dt"):
         h = 1e-6 * float(getattr(g, k))
-        fp = float(loss_and_grad(g._replace(**{k: getattr(g, k) + h}))[0])
-        fm = float(loss_and_grad(g._replace(**{k: getattr(g, k) - h}))[0])
+        fp = float(loss_and_grad(g._replace(**{k: getattr(g, k) + h}), batch, opts, steps)[0])
+        fm = float(loss_and_grad(g._replace(**{k: getattr(g, k) - h}), batch, opts, steps)[0])
         fd = (fp - fm) / (2 * h)
         ad = float(getattr(grad, k))
         assert np.isfinite(ad)
         assert abs(ad - fd) <= 1e-3 * abs(fd) + 1e-9, (k, ad, fd)
-    # The repulsion gains matter in the tree (the arm passes within d0 of a branch).
-    assert abs(float(grad.eta)) > 1e-3 and abs(float(grad.d0)) > 1e-3
+    # The repulsion gains matter (the arm passes within d0 of a branch).
+    assert abs(float(grad.eta)) > 1e-3 and abs(float(grad.d0)) > 1e-3, grad
 
 
 @pytest.mark.parametrize(
