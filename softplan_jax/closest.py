@@ -72,7 +72,7 @@ import jax
 import jax.numpy as jnp
 
 from .curves import ParametricCurve, PolynomialCurve
-from .kinematics import _backbone_points, _frames, arc_derivatives_local, arc_point_local
+from .kinematics import arc_derivatives_local, arc_point_local, backbone_points, segment_frames
 from .numerics import safe_norm, sin_over_x
 from .validation import check_configuration, check_points
 
@@ -594,7 +594,7 @@ def _implicit(seg: _Segment, curve, s, u):
 def _closest_point_curve(q, curve, options: SolverOptions) -> ClosestPoint:
     """Unvalidated core of :func:`closest_point` for one curve."""
     curve = curve.astype(q.dtype)
-    R_bases, P_bases, _, _ = _frames(q)
+    R_bases, P_bases = segment_frames(q)
     segs = _Segment(q, R_bases, P_bases)
     segs_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
     curve_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, curve)
@@ -657,7 +657,7 @@ def _closest_point_to_points(q, points, mask=None, points_per_segment: int = 10)
     """Unvalidated core of :func:`closest_point_to_points`; mask (N,) bool."""
     n = q.shape[0]
     k = points_per_segment
-    arm = _backbone_points(q, k)  # (n k, 3)
+    arm = backbone_points(q, k)  # (n k, 3)
     diff = arm[:, None, :] - points[None, :, :]
     d2 = jnp.sum(diff * diff, axis=-1)
     if mask is not None:
@@ -727,7 +727,7 @@ def _point_closest(q, p, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoi
     solved per segment in closed form (:func:`_project_to_arc`).
     Returns a ClosestPoint with u = 0."""
     del options  # the closed form needs no solver settings
-    R_bases, P_bases, _, _ = _frames(q)
+    R_bases, P_bases = segment_frames(q)
     segs = _Segment(q, R_bases, P_bases)
     segs_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
     p_ng = jax.lax.stop_gradient(p)

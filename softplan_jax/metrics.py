@@ -33,7 +33,7 @@ from .closest import (
     _FixedPoint,
     _point_set_closest,
 )
-from .kinematics import _backbone_points, _segment_point
+from .kinematics import backbone_points, segment_point
 from .numerics import get_epsilon, safe_norm
 
 __all__ = ["true_closest", "between_steps", "dense_trajectory_clearance"]
@@ -85,7 +85,7 @@ def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
     ts = jnp.array([1.0, 0.5, 0.25, 0.0], dtype)
 
     def residual(x):
-        return _segment_point(q_a + x[0] * dq, i, x[1]) - curve.point(x[2])
+        return segment_point(q_a + x[0] * dq, i, x[1]) - curve.point(x[2])
 
     def body(_, x):
         r = residual(x)
@@ -180,7 +180,7 @@ def dense_trajectory_clearance(qs, scenario, substeps: int = 20, arm_samples: in
         return jnp.min(d)
 
     def at(q):
-        arm = _backbone_points(q, arm_samples)
+        arm = backbone_points(q, arm_samples)
         arm = jnp.concatenate([jnp.zeros((1, 3), arm.dtype), arm])
         dc = jax.vmap(lambda p: min_dist(arm, p))(curve_pts) - radius_c
         dp = jax.vmap(lambda p, m: min_dist(arm, p, m))(scenario.points, scenario.point_mask) - scenario.point_radius

@@ -56,7 +56,7 @@ from .closest import (
     _closest_point_to_points,
 )
 from .curves import curve_points
-from .kinematics import _motion_bounds, _points_jacobians, _tip_position
+from .kinematics import motion_bound, points_jacobian, tip_position
 from .metrics import between_steps, empty_closest, true_closest
 from .numerics import damped_pinv, safe_norm
 from .scenarios import Scenario
@@ -301,13 +301,13 @@ def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: Pla
     own obstacle model (exact for the curve method), +inf for padding slots.
     """
     n = q.shape[0]
-    V_e = scenario.goal - _tip_position(q)
+    V_e = scenario.goal - tip_position(q)
     cps = _planner_closest(q, scenario, truth, options)
     radius, mask = _obstacle_radius_and_mask(scenario)
     # J_e (the tip: s = 1 of the last segment) and every J_sj in one pass.
     segments = jnp.concatenate([jnp.array([n - 1], jnp.int32), cps.segment])
     s = jnp.concatenate([jnp.ones((1,), q.dtype), cps.s])
-    J = _points_jacobians(q, segments, s)
+    J = points_jacobian(q, segments, s)
     pinvs = jax.vmap(lambda J_k: damped_pinv(J_k, gains.damping))(J)  # (1 + m, 3n, 3)
     V_s = cps.obstacle_point - cps.arm_point
     clearance = cps.distance - scenario.arm_radius - radius
@@ -344,7 +344,7 @@ def _step_scale(q, q_next, clearance, options: PlanOptions):
     floor = 2.0 * _contact(options, q.dtype)
     c = jnp.min(clearance, initial=jnp.inf)
     allowed = options.safe_fraction * jnp.maximum(c - floor, 0.0)
-    bound = _motion_bounds(q, q_next - q)[-1]
+    bound = motion_bound(q, q_next)[-1]
     # Double-where: a zero bound (no motion) gives alpha = 1 and no 0/0 in either mode.
     moving = bound > 0
     bound_safe = jnp.where(moving, bound, 1.0)
@@ -496,7 +496,7 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         else:
             c = cb = jnp.full(mask.shape, jnp.nan, dtype)
             nan_clearance = hit = jnp.zeros((), bool)
-        err = safe_norm(scenario.goal - _tip_position(q))
+        err = safe_norm(scenario.goal - tip_position(q))
         improved = err < carry.best_error - options.stall_tolerance
         walking = carry.walk_left > 0
         since = jnp.where(improved | carry.first | walking, 0, carry.since_best + 1)
@@ -550,7 +550,7 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
             walk_left=jnp.where(moved, jnp.maximum(walk_left - 1, 0), walk_left).astype(jnp.int32),
             walk_velocity=walk_velocity,
         )
-        return new, (q, _tip_position(q), c, cb, jnp.where(moved, alpha, 0.0).astype(dtype))
+        return new, (q, tip_position(q), c, cb, jnp.where(moved, alpha, 0.0).astype(dtype))
 
     truth_dummy = _placeholder_truth(q0, scenario)
     carry0 = _Carry(

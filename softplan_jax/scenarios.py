@@ -571,9 +571,9 @@ def _seed_sequence(key_or_seed) -> np.random.SeedSequence:
 @functools.cache
 def _batched_tips():
     """jit(vmap(tip position)), built once (a new jit per call would recompile)."""
-    from .kinematics import _tip_position
+    from .kinematics import tip_position
 
-    return jax.jit(jax.vmap(_tip_position))
+    return jax.jit(jax.vmap(tip_position))
 
 
 def _unit(v):
@@ -709,7 +709,9 @@ def random_scenarios(
       (n, curve_slots), no point sets; each entry equals ``make_scenario(goal,
       curves, q0, curve_slots=curve_slots, degree=degree)``.
     """
-    from .kinematics import _backbone_points_jit
+    from .kinematics import backbone_points
+
+    _backbone_points_jit = jax.jit(backbone_points, static_argnums=1)
 
     n = int(n)
     if n < 1:
