@@ -591,8 +591,18 @@ def _implicit(seg: _Segment, curve, s, u):
     return s - (ds - jax.lax.stop_gradient(ds)), u - (du - jax.lax.stop_gradient(du))
 
 
-def _closest_point_curve(q, curve, options: SolverOptions) -> ClosestPoint:
-    """Unvalidated core of :func:`closest_point` for one curve."""
+def curve_closest(q, curve, options: SolverOptions) -> ClosestPoint:
+    """Exact closest pair between the arm and ONE curve (paper §2.3): the
+    traceable core of :func:`closest_point`, without input validation.
+
+    Args:
+      q: (n, 3) configuration.
+      curve: one PolynomialCurve or ParametricCurve (vmap for stacks).
+      options: SolverOptions (static).
+
+    Returns:
+      ClosestPoint (``segment`` int32, ``u`` of q's dtype).
+    """
     curve = curve.astype(q.dtype)
     R_bases, P_bases = segment_frames(q)
     segs = _Segment(q, R_bases, P_bases)
@@ -615,14 +625,14 @@ def _closest_point_curve(q, curve, options: SolverOptions) -> ClosestPoint:
     distance = safe_norm(
         seg.point(jax.lax.stop_gradient(s)) - curve.point(jax.lax.stop_gradient(u))
     )
-    return ClosestPoint(distance, i, s, u, arm_point, obstacle_point, conv_all[i])
+    return ClosestPoint(distance, i.astype(jnp.int32), s, u, arm_point, obstacle_point, conv_all[i])
 
 
 @partial(jax.jit, static_argnames="options")
 def _closest_point_jit(q, curve, options):
     if isinstance(curve, PolynomialCurve) and curve.coeffs.ndim == 3:
-        return jax.vmap(lambda c: _closest_point_curve(q, c, options))(curve)
-    return _closest_point_curve(q, curve, options)
+        return jax.vmap(lambda c: curve_closest(q, c, options))(curve)
+    return curve_closest(q, curve, options)
 
 
 def closest_point(q, curve, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoint:
@@ -653,9 +663,19 @@ def closest_point(q, curve, options: SolverOptions = DEFAULT_OPTIONS) -> Closest
 # N-point method and point distances.
 
 
-def _closest_point_to_points(q, points, mask=None, points_per_segment: int = 10) -> ClosestPoint:
-    """Unvalidated core of :func:`closest_point_to_points`; mask (N,) bool."""
-    n = q.shape[0]
+def points_closest(q, points, mask=None, points_per_segment: int = 10) -> ClosestPoint:
+    """The N-point method (paper §3): the traceable core of
+    :func:`closest_point_to_points`, without input validation.
+
+    Args:
+      q: (n, 3) configuration.
+      points: (N, 3) obstacle points.
+      mask: (N,) bool, False for padding points; None: all points.
+      points_per_segment: arm samples per segment (static).
+
+    Returns:
+      ClosestPoint (``segment`` int32, ``u`` the point's index as q's dtype).
+    """
     k = points_per_segment
     arm = backbone_points(q, k)  # (n k, 3)
     diff = arm[:, None, :] - points[None, :, :]
@@ -666,19 +686,18 @@ def _closest_point_to_points(q, points, mask=None, points_per_segment: int = 10)
     a, p = flat // points.shape[0], flat % points.shape[0]
     segment = a // k
     s = ((a % k) + 1).astype(q.dtype) / k
-    del n
     return ClosestPoint(
         distance=safe_norm(arm[a] - points[p]),
-        segment=segment,
+        segment=segment.astype(jnp.int32),
         s=s,
-        u=p,
+        u=p.astype(q.dtype),
         arm_point=arm[a],
         obstacle_point=points[p],
         converged=jnp.asarray(True),
     )
 
 
-_closest_point_to_points_jit = jax.jit(_closest_point_to_points, static_argnums=3)
+_closest_point_to_points_jit = jax.jit(points_closest, static_argnums=3)
 
 
 def closest_point_to_points(q, points, points_per_segment: int = 10) -> ClosestPoint:
@@ -694,7 +713,7 @@ def closest_point_to_points(q, points, points_per_segment: int = 10) -> ClosestP
 
     Returns:
       :class:`ClosestPoint`; ``u`` is the index of the nearest obstacle point
-      and ``s`` the fraction of the nearest arm sample.
+      (as a float of q's dtype) and ``s`` the fraction of the nearest arm sample.
     """
     q = check_configuration(q)
     points = check_points(points).astype(q.dtype)
@@ -703,8 +722,9 @@ def closest_point_to_points(q, points, points_per_segment: int = 10) -> ClosestP
     return _closest_point_to_points_jit(q, points, None, int(points_per_segment))
 
 
-class _FixedPoint(NamedTuple):
-    """A point as a degenerate curve (u unused), for the 1-D point-to-arm problem."""
+class FixedPoint(NamedTuple):
+    """A point ``p`` (3,) as a degenerate curve (u unused, derivatives zero):
+    lets a curve routine handle the point-to-arm problem of a point set."""
 
     p: jax.Array
 
@@ -721,12 +741,11 @@ class _FixedPoint(NamedTuple):
     second_derivative = derivative
 
 
-def _point_closest(q, p, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoint:
+def _point_closest(q, p) -> ClosestPoint:
     """Exact closest point of the arm backbone to one point p (3,): the
     boundary problem of paper eqs. (15)-(16) with a fixed obstacle point,
     solved per segment in closed form (:func:`_project_to_arc`).
     Returns a ClosestPoint with u = 0."""
-    del options  # the closed form needs no solver settings
     R_bases, P_bases = segment_frames(q)
     segs = _Segment(q, R_bases, P_bases)
     segs_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
@@ -749,18 +768,28 @@ def _point_closest(q, p, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoi
     s_diff = s - (ds - jax.lax.stop_gradient(ds))
     arm_point = seg.point(s_diff)
     distance = safe_norm(seg.point(s) - p)
-    return ClosestPoint(distance, i, s_diff, jnp.zeros((), dtype), arm_point, p, jnp.asarray(True))
+    return ClosestPoint(distance, i.astype(jnp.int32), s_diff, jnp.zeros((), dtype), arm_point, p, jnp.asarray(True))
 
 
-def _point_set_closest(q, points, mask, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoint:
-    """Exact closest point between the arm backbone and a masked point set (N, 3)."""
-    cps = jax.vmap(lambda p: _point_closest(q, p, options))(points)
+def point_set_closest(q, points, mask) -> ClosestPoint:
+    """Exact closest pair between the arm backbone and a masked point set
+    (the boundary problem of paper eqs. 15-16 with fixed obstacle points).
+
+    Args:
+      q: (n, 3) configuration.
+      points: (N, 3).
+      mask: (N,) bool, False for padding points.
+
+    Returns:
+      ClosestPoint (``u`` the nearest point's index as q's dtype).
+    """
+    cps = jax.vmap(lambda p: _point_closest(q, p))(points)
     k = jnp.argmin(jnp.where(mask, cps.distance, jnp.inf))
     cp = jax.tree_util.tree_map(lambda x: x[k], cps)
     return cp._replace(u=k.astype(q.dtype))
 
 
-def point_distance(q, points, options: SolverOptions = DEFAULT_OPTIONS):
+def point_distance(q, points):
     """Exact distance from each obstacle point to the arm backbone.
 
     Args:
@@ -772,9 +801,9 @@ def point_distance(q, points, options: SolverOptions = DEFAULT_OPTIONS):
     """
     q = check_configuration(q)
     points = check_points(points).astype(q.dtype)
-    return _point_distances(q, points, options)
+    return _point_distances(q, points)
 
 
-@partial(jax.jit, static_argnames="options")
-def _point_distances(q, points, options=DEFAULT_OPTIONS):
-    return jax.vmap(lambda p: _point_closest(q, p, options).distance)(points)
+@jax.jit
+def _point_distances(q, points):
+    return jax.vmap(lambda p: _point_closest(q, p).distance)(points)
