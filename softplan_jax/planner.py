@@ -53,7 +53,7 @@ from .closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
 from .kinematics import motion_bound, points_jacobian, tip_position
 from .metrics import apply_collision_checks as apply_collision_checks  # moved to metrics; old import path
 from .metrics import between_steps
-from .numerics import damped_pinv, safe_norm
+from .numerics import contact_floor, damped_pinv, safe_norm
 from .obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
 from .scenarios import Scenario
 
@@ -271,7 +271,7 @@ def _apply_step(q, qdot, scenario: Scenario, gains: Gains):
 def contact_tolerance(options: PlanOptions, dtype) -> float:
     """Clearance at or below which a rollout counts as collided: the options'
     ``contact_tolerance``, but never below ten times sqrt(eps) of ``dtype``."""
-    return max(float(options.contact_tolerance), 10.0 * float(np.sqrt(np.finfo(dtype).eps)))
+    return max(float(options.contact_tolerance), contact_floor(dtype))
 
 
 def _step_scale(q, q_next, clearance, options: PlanOptions):
