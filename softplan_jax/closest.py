@@ -118,8 +118,10 @@ class SolverOptions(NamedTuple):
       projection_iterations: 1-D Newton steps that polish the distance profiles.
       method: ``"reduced"`` (default): the minimum over s is taken in closed
         form (a PCC segment is a circular arc) and Newton runs on the curve
-        parameter u alone; ``"grid"``: 2-D Newton on both stationarity
-        equations from an (s, u) grid. Both cover the paper's three cases (see
+        parameter u alone; ``"grid"``: the paper's 2-D Newton on both
+        stationarity equations from an (s, u) grid
+        (:mod:`softplan_jax.closest_grid`); pick it with
+        ``SolverOptions(method="grid")``, e.g. ``plan(..., solver=...)``. Both cover the paper's three cases (see
         the module docstring) and both pass the accuracy suite with zero
         misses. ``"reduced"`` uses ``grid_s`` (arm-side profile points),
         ``grid_u``, ``projection_iterations``, ``reduced_starts`` and

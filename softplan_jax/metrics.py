@@ -16,6 +16,10 @@ a pass of the arm through a curve is reported even though both sampled
 configurations are clear, and a collision is never invented. (It could in
 principle miss a dip whose basin neither end's closest pair leads into.)
 
+:func:`apply_collision_checks` adds the true-clearance and between-step
+checks to a planning-only rollout after the fact (vectorised over time).
+Every per-obstacle loop goes through :mod:`softplan_jax.obstacles`.
+
 :func:`dense_trajectory_clearance` is the slow, brute-force check of a whole
 trajectory (dense interpolation in q, dense sampling of arm and curve); the
 tests use it as an independent reference.
