@@ -177,7 +177,8 @@ def main(argv=None) -> dict:
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
     import softplan_jax as sp
-    from softplan_jax.planner import Status, apply_collision_checks, make_options, rollout
+    from softplan_jax.metrics import apply_collision_checks
+    from softplan_jax.planner import Status, make_options, rollout
 
     t_start = time.perf_counter()
     dtype = jnp.float32 if args.float32 else jnp.float64

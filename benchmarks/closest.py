@@ -7,9 +7,9 @@ Two parts, one run, one report (``benchmarks/results/closest.md`` and ``.json``;
    10^4 queries, in float64 and float32 (x64 on; the float32 rows cast q, the
    curve and the points to float32), for
 
-   * the curve method, ``_closest_point_curve(q, curve, options)`` (paper §2.3),
+   * the curve method, ``curve_closest(q, curve, options)`` (paper §2.3),
    * the N-point method with N = 10 and N = 100 obstacle points,
-     ``_closest_point_to_points(q, curve_points(curve, N), mask, 10)`` (the
+     ``points_closest(q, curve_points(curve, N), mask, 10)`` (the
      obstacle points are the obstacle model, made once outside the timing).
 
    Queries: the paper's Sim2 parabola (X = 0.5, Y = u, Z = 5u^2, u in [-2, 2])
@@ -73,8 +73,8 @@ import closest_cases as cc  # noqa: E402
 import softplan_jax as sp  # noqa: E402
 from softplan_jax.closest import (  # noqa: E402
     SolverOptions,
-    _closest_point_curve,
-    _closest_point_to_points,
+    curve_closest,
+    points_closest,
 )
 from softplan_jax.curves import PolynomialCurve, curve_points  # noqa: E402
 
@@ -244,12 +244,12 @@ def time_round_robin(entries: dict, repeats: int) -> dict:
 
 def _curve_fn(options):
     """(q (n, 3), curve) -> ClosestPoint: one query, curve method (paper §2.3)."""
-    return lambda q, curve: _closest_point_curve(q, curve, options)
+    return lambda q, curve: curve_closest(q, curve, options)
 
 
 def _points_fn(q, points, mask):
     """(q (n, 3), points (N, 3), mask (N,)) -> ClosestPoint: N-point method."""
-    return _closest_point_to_points(q, points, mask, ARM_SAMPLES)
+    return points_closest(q, points, mask, ARM_SAMPLES)
 
 
 def _batched(fn, shared_obstacle: bool, n_obstacle_args: int):
@@ -734,8 +734,8 @@ def _markdown(report: dict) -> str:
         "",
         "## 1. Speed: one query and a batch, curve method vs N-point method",
         "",
-        "Curve method `_closest_point_curve(q, curve, SolverOptions())`, 3 segments x 1 curve; N-point "
-        f"method `_closest_point_to_points(q, curve_points(curve, N), mask, {ARM_SAMPLES})` (the points are "
+        "Curve method `curve_closest(q, curve, SolverOptions())`, 3 segments x 1 curve; N-point "
+        f"method `points_closest(q, curve_points(curve, N), mask, {ARM_SAMPLES})` (the points are "
         "made once, outside the timing). Sim2 = X 0.5, Y u, Z 5u^2, u in [-2, 2], padded to degree 3 like "
         "the cubics. Batch: `jax.vmap` over random q (and over the curves / points for random cubics). "
         "Compile = `jax.jit(f).lower(...).compile()` (*reused*: same compiled shape as the row above); "

@@ -113,7 +113,8 @@ def main(argv=None) -> dict:
     from _common import RESULTS_DIR, finish_machine, log, machine_info, machine_lines
 
     import softplan_jax as sp
-    from softplan_jax.planner import apply_collision_checks, make_options, rollout_batch, status_name
+    from softplan_jax.metrics import apply_collision_checks
+    from softplan_jax.planner import make_options, rollout_batch, status_name
 
     dtype = jnp.float32 if args.float32 else jnp.float64
     dname = "float32" if args.float32 else "float64"

@@ -23,16 +23,13 @@ from .kinematics import (
     tip_jacobian,
     tip_position,
 )
-from .metrics import dense_trajectory_clearance, true_closest
+from .metrics import apply_collision_checks, dense_trajectory_clearance, true_closest
 from .planner import (
     PAPER_STEP,
-    STATUS_NAMES,
     Gains,
     PlanOptions,
     PlanResult,
     Rollout,
-    Status,
-    apply_collision_checks,
     attraction,
     default_gains,
     make_options,
@@ -44,7 +41,6 @@ from .planner import (
     rollout,
     rollout_batch,
     rollout_jit,
-    status_name,
 )
 from .scenarios import (
     Scenario,
@@ -59,6 +55,7 @@ from .scenarios import (
     scenario_warnings,
     stack_scenarios,
 )
+from .status import STATUS_NAMES, Status, status_name
 from .tuning import LossWeights, TuningResult, batch_loss, rollout_loss, tune_gains
 
 try:

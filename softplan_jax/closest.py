@@ -30,25 +30,20 @@ curve point), which finds basins narrower than the u-grid's spacing. About
 four times cheaper than ``"grid"`` per query, seven times in a batch
 (``benchmarks/closest.py``).
 
-``"grid"``. ``D^2`` is evaluated on a ``grid_s x grid_u`` grid of the box
-(ends included; half the u samples evenly spaced in u, half in arc length).
-Case 1 starts from the grid's 2-D local minima and from the local minima of two
-distance profiles — each arm sample's distance to the curve, each curve
-sample's distance to the segment, both polished by a few 1-D Newton steps —
-which resolve basins that fall between grid columns; case 2 starts from each
-edge's local minima. Every start is a point of the box, so the answer is never
-worse than the best grid point.
+``"grid"``: the paper's 2-D Newton on both stationarity equations from an
+(s, u) grid, in :mod:`softplan_jax.closest_grid`.
 
-Newton iteration (``"grid"``). Each step solves the linearised stationarity equations
-``H dx = -g`` with the exact gradient ``g`` and Hessian ``H`` of ``D^2 / 2``
-(first and second derivatives of both curves); ``H`` is shifted by a multiple of
-the identity where it is not positive definite, so the step is a descent
-direction (a local maximum or saddle is never approached); a coordinate on a
-bound whose gradient points outward is held (projected Newton); the step is
-limited by a trust radius and accepted only if it lowers ``D^2``, and the point
-stays in the box. Both solvers use fixed iteration counts, so everything compiles
-once; grid sizes, start and iteration counts were chosen by measurement against
-the oracle (``tests/test_closest.py``, ``benchmarks/closest.py``).
+One Newton kernel. The gradient and Hessian of ``D^2 / 2`` (eqs. 13-18) are
+written once, in :func:`pair_terms`; every Newton loop (both solvers, the
+profile polish, the implicit derivative, the convergence test) uses it, and
+all share one trust-region update (:func:`trust_region_radius`): a step is
+capped to a trust radius, accepted only if it lowers ``D^2`` (the radius may
+then grow), otherwise the point stays and the radius shrinks fourfold; every
+iterate stays in the box. Tolerances and curvature floors come from
+:mod:`softplan_jax.numerics` (dtype-aware). Fixed iteration counts, so
+everything compiles once; grid sizes, start and iteration counts were chosen
+by measurement against the oracle (``tests/test_closest.py``,
+``benchmarks/closest.py``).
 
 Derivatives with respect to ``q``. The solve itself runs on
 ``stop_gradient(q)``. ``distance`` is differentiated by the envelope theorem
@@ -72,8 +67,8 @@ import jax
 import jax.numpy as jnp
 
 from .curves import ParametricCurve, PolynomialCurve
-from .kinematics import _backbone_points, _frames, arc_derivatives_local, arc_point_local
-from .numerics import safe_norm, sin_over_x
+from .kinematics import arc_derivatives_local, arc_point_local, backbone_points, segment_frames
+from .numerics import atan_over_x, curvature_floor, psd_shift, safe_norm, sin_over_x, solver_tolerance
 from .validation import check_configuration, check_points
 
 __all__ = [
@@ -123,8 +118,10 @@ class SolverOptions(NamedTuple):
       projection_iterations: 1-D Newton steps that polish the distance profiles.
       method: ``"reduced"`` (default): the minimum over s is taken in closed
         form (a PCC segment is a circular arc) and Newton runs on the curve
-        parameter u alone; ``"grid"``: 2-D Newton on both stationarity
-        equations from an (s, u) grid. Both cover the paper's three cases (see
+        parameter u alone; ``"grid"``: the paper's 2-D Newton on both
+        stationarity equations from an (s, u) grid
+        (:mod:`softplan_jax.closest_grid`); pick it with
+        ``SolverOptions(method="grid")``, e.g. ``plan(..., solver=...)``. Both cover the paper's three cases (see
         the module docstring) and both pass the accuracy suite with zero
         misses. ``"reduced"`` uses ``grid_s`` (arm-side profile points),
         ``grid_u``, ``projection_iterations``, ``reduced_starts`` and
@@ -153,8 +150,9 @@ DEFAULT_OPTIONS = SolverOptions()
 # One segment, one curve.
 
 
-class _Segment(NamedTuple):
-    """Segment i: its row of q and its base frame (R_{i-1}^0, P_{i-1}^0)."""
+class Segment(NamedTuple):
+    """Segment i as the closest-point solvers see it: its row of q and its base
+    frame (R_{i-1}^0, P_{i-1}^0); ``point(s)`` is the paper's F_Ri(s) (§2.3)."""
 
     q_i: jax.Array
     R: jax.Array
@@ -169,87 +167,64 @@ class _Segment(NamedTuple):
         return self.R @ d1, self.R @ d2
 
 
-def _tolerance(dtype):
-    return jnp.sqrt(jnp.finfo(dtype).eps)
+class PairTerms(NamedTuple):
+    """Paper eqs. 13-18 at one (s, u): the terms of f = |F_Ri(s) - F_o(u)|^2 / 2.
 
-
-def _psd_shift(a, b, c, dtype):
-    """Shift mu >= 0 making [[a, b], [b, c]] + mu I safely positive definite."""
-    half_tr = 0.5 * (a + c)
-    lam_min = half_tr - jnp.sqrt((0.5 * (a - c)) ** 2 + b * b)
-    scale = jnp.abs(a) + jnp.abs(c) + jnp.abs(b) + jnp.finfo(dtype).tiny
-    floor = 10 * jnp.finfo(dtype).eps * scale
-    return jnp.where(lam_min > floor, 0.0, floor - lam_min)
-
-
-def _newton_step(seg: _Segment, curve, x, free):
-    """One safeguarded Newton step on f(s, u) = |F_Ri(s) - F_o(u)|^2 / 2.
-
-    ``free`` (2,) bool says which of (s, u) may move: both for case 1 (paper
-    eqs. 13-14), one for the boundary problems of case 2 (eqs. 15-18). A
-    coordinate on a bound with its gradient pointing outward is also held.
-    Returns the Newton step (zero in held coordinates).
+    Attributes:
+      r: (3,) F_Ri(s) - F_o(u).
+      A1, A2: (3,) dF_Ri/ds, d2F_Ri/ds2.
+      C1, C2: (3,) dF_o/du, d2F_o/du2.
+      gs, gu: () df/ds = r . A1 (eq. 13; eqs. 15-16 on the u bounds) and
+        df/du = -r . C1 (eq. 14; eqs. 17-18 on the s bounds).
+      a, b, c: () the Hessian [[a, b], [b, c]] of f: a = A1.A1 + r.A2,
+        b = -A1.C1, c = C1.C1 - r.C2.
     """
-    s, u = x[0], x[1]
-    dtype = x.dtype
+
+    r: jax.Array
+    A1: jax.Array
+    A2: jax.Array
+    C1: jax.Array
+    C2: jax.Array
+    gs: jax.Array
+    gu: jax.Array
+    a: jax.Array
+    b: jax.Array
+    c: jax.Array
+
+
+def pair_terms(seg: Segment, curve, s, u) -> PairTerms:
+    """The Newton kernel: gradient and Hessian of |F_Ri(s) - F_o(u)|^2 / 2
+    (paper eqs. 13-18), the one place where they are written out."""
     r = seg.point(s) - curve.point(u)
     A1, A2 = seg.derivatives(s)
     C1, C2 = curve.derivative(u), curve.second_derivative(u)
-    # Stationarity equations g = 0 and their Jacobian [[a, b], [b, c]].
-    g = jnp.stack([jnp.dot(r, A1), -jnp.dot(r, C1)])
-    # Active set: a coordinate on a bound whose gradient points out of the box
-    # is held there, and Newton runs in the others (projected Newton).
-    lo = jnp.stack([jnp.zeros((), dtype), curve.u_range[0]])
-    hi = jnp.stack([jnp.ones((), dtype), curve.u_range[1]])
-    held = ((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0))
-    free = free & ~held
-    g = jnp.where(free, g, 0.0)
-    a = jnp.where(free[0], jnp.dot(A1, A1) + jnp.dot(r, A2), 1.0)
-    c = jnp.where(free[1], jnp.dot(C1, C1) - jnp.dot(r, C2), 1.0)
-    b = jnp.where(free[0] & free[1], -jnp.dot(A1, C1), 0.0)
-    mu = _psd_shift(a, b, c, dtype)
-    a, c = a + mu, c + mu
-    det = a * c - b * b
-    return -jnp.stack([c * g[0] - b * g[1], a * g[1] - b * g[0]]) / det
+    return PairTerms(
+        r, A1, A2, C1, C2,
+        gs=jnp.dot(r, A1),
+        gu=-jnp.dot(r, C1),
+        a=jnp.dot(A1, A1) + jnp.dot(r, A2),
+        b=-jnp.dot(A1, C1),
+        c=jnp.dot(C1, C1) - jnp.dot(r, C2),
+    )
 
 
-def _newton(seg: _Segment, curve, x0, free, iterations: int):
-    """Box-constrained trust-region Newton from x0 = (s, u) over the free coordinates.
-
-    The Newton step is capped to a trust radius (a fraction of the box); the
-    best of the step lengths 1, 1/2, 1/4 is taken if it lowers f, and the
-    radius then grows (full step) or stays; otherwise the point stays and the
-    radius shrinks fourfold. f never increases and every iterate lies in the box.
-    """
-    dtype = x0.dtype
-    lo = jnp.stack([jnp.zeros((), dtype), curve.u_range[0]])
-    hi = jnp.stack([jnp.ones((), dtype), curve.u_range[1]])
-    width = hi - lo
-    ts = jnp.array([1.0, 0.5, 0.25], dtype)
-
-    def f(x):
-        r = seg.point(x[0]) - curve.point(x[1])
-        return jnp.dot(r, r)
-
-    def body(_, state):
-        x, radius, fx = state
-        step = _newton_step(seg, curve, x, free)
-        size = jnp.max(jnp.abs(step) / width)
-        step = step * jnp.minimum(1.0, radius / jnp.maximum(size, jnp.finfo(dtype).tiny))
-        cands = jnp.clip(x[None, :] + ts[:, None] * step[None, :], lo, hi)
-        fc = jax.vmap(f)(cands)
-        k = jnp.argmin(fc)
-        better = fc[k] < fx
-        radius = jnp.where(better, jnp.where(k == 0, jnp.minimum(2.0 * radius, 1.0), radius), 0.25 * radius)
-        return jnp.where(better, cands[k], x), radius, jnp.where(better, fc[k], fx)
-
-    x0 = jnp.clip(x0, lo, hi)
-    init = (x0, jnp.asarray(0.25, dtype), f(x0))
-    return jax.lax.fori_loop(0, iterations, body, init)[0]
+def trust_region_radius(better, grow, radius):
+    """The trust-region update shared by every Newton loop: an accepted step
+    (``better``) doubles the radius (at most 1, a fraction of the box) where
+    ``grow``, else keeps it; a rejected step shrinks it fourfold."""
+    return jnp.where(better, jnp.where(grow, jnp.minimum(2.0 * radius, 1.0), radius), 0.25 * radius)
 
 
-def _local_minima_1d(vals, k: int):
-    """Indices of the k smallest local minima of a 1-D array (non-minima last)."""
+def trust_region_step_1d(x, step, radius, width, lo, hi):
+    """A 1-D Newton step capped to the trust radius (``radius * width``) and
+    clipped to [lo, hi]. Returns (trial point, whether the step was uncapped)."""
+    cap = radius * width
+    full = jnp.abs(step) <= cap
+    return jnp.clip(x + jnp.clip(step, -cap, cap), lo, hi), full
+
+
+def local_minima_1d(vals, k: int):
+    """Indices (k,) of the k smallest local minima of a 1-D array (non-minima last)."""
     inf = jnp.full((1,), jnp.inf, vals.dtype)
     padded = jnp.concatenate([inf, vals, inf])
     is_min = (vals <= padded[:-2]) & (vals <= padded[2:])
@@ -257,22 +232,7 @@ def _local_minima_1d(vals, k: int):
     return jax.lax.top_k(-score, k)[1]
 
 
-def _local_minima_2d(vals, k: int):
-    """Flat indices of the k smallest 8-neighbour local minima of a 2-D grid."""
-    padded = jnp.pad(vals, 1, constant_values=jnp.inf)
-    n0, n1 = vals.shape
-    is_min = jnp.ones(vals.shape, bool)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            if di == 0 and dj == 0:
-                continue
-            neighbour = padded[1 + di : 1 + di + n0, 1 + dj : 1 + dj + n1]
-            is_min &= vals <= neighbour
-    score = jnp.where(is_min, vals, jnp.inf).reshape(-1)
-    return jax.lax.top_k(-score, k)[1]
-
-
-def _u_grid(curve, n: int):
+def u_samples(curve, n: int):
     """n sorted values of u over [u_min, u_max], both ends included: half evenly
     spaced in u, half evenly spaced in arc length along the curve (from a
     4n-point polyline). A steep or long stretch of the curve gets samples as
@@ -293,94 +253,11 @@ def _u_grid(curve, n: int):
     return jnp.clip(jnp.sort(jnp.concatenate([uniform, by_length])), u_lo, u_hi)
 
 
-def _solve_pair(seg: _Segment, curve, options: SolverOptions):
-    """All three cases for one segment and one curve (no derivatives w.r.t. q).
-
-    Returns (s, u, D^2, converged) of the best candidate.
-    """
-    dtype = seg.q_i.dtype
-    u_lo, u_hi = curve.u_range[0], curve.u_range[1]
-    zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
-    n_s, n_u, ke = options.grid_s, options.grid_u, options.edge_starts
-    s_grid = jnp.linspace(0.0, 1.0, n_s, dtype=dtype)  # uniform in arc length
-    u_grid = _u_grid(curve, n_u)
-    A = jax.vmap(seg.point)(s_grid)  # (n_s, 3)
-    C = jax.vmap(curve.point)(u_grid)  # (n_u, 3)
-    grid = jnp.sum((A[:, None, :] - C[None, :, :]) ** 2, axis=-1)  # (n_s, n_u)
-
-    # Case 1 starts. The grid's 2-D local minima, plus the local minima of two
-    # distance profiles: for each arm sample s_i the distance to the curve
-    # (u from the best grid column, polished by a few 1-D Newton steps), and
-    # for each curve sample u_j the distance to the segment (likewise). A
-    # profile resolves a basin that falls between grid columns where the
-    # curve moves fast, which the raw grid misses.
-    k, proj = options.starts, options.projection_iterations
-    flat = _local_minima_2d(grid, k)
-    x_grid = jnp.stack([s_grid[flat // n_u], u_grid[flat % n_u]], axis=-1)
-    along_u, along_s = jnp.array([False, True]), jnp.array([True, False])
-    x_rows = jnp.stack([s_grid, u_grid[jnp.argmin(grid, axis=1)]], axis=-1)
-    x_rows = jax.vmap(lambda x: _newton(seg, curve, x, along_u, proj))(x_rows)
-    x_cols = jnp.stack([s_grid[jnp.argmin(grid, axis=0)], u_grid], axis=-1)
-    x_cols = jax.vmap(lambda x: _newton(seg, curve, x, along_s, proj))(x_cols)
-    f_of = jax.vmap(lambda x: jnp.sum((seg.point(x[0]) - curve.point(x[1])) ** 2))
-    x_int = jnp.concatenate(
-        [
-            x_grid,
-            x_rows[_local_minima_1d(f_of(x_rows), k)],
-            x_cols[_local_minima_1d(f_of(x_cols), k)],
-        ]
-    )
-    # Case 2 starts: each edge's 1-D local minima, one coordinate free.
-    # u = u_min / u_max: solve dD^2/ds = 0 for s (eqs. 15-16);
-    # s = 0 / 1: solve dD^2/du = 0 for u (eqs. 17-18).
-    s_lo = s_grid[_local_minima_1d(grid[:, 0], ke)]
-    s_hi = s_grid[_local_minima_1d(grid[:, -1], ke)]
-    u_0 = u_grid[_local_minima_1d(grid[0, :], ke)]
-    u_1 = u_grid[_local_minima_1d(grid[-1, :], ke)]
-    full = lambda v: jnp.full((ke,), v, dtype)  # noqa: E731
-    x_edge = jnp.concatenate(
-        [
-            jnp.stack([s_lo, full(u_lo)], -1),
-            jnp.stack([s_hi, full(u_hi)], -1),
-            jnp.stack([full(0.0), u_0], -1),
-            jnp.stack([full(1.0), u_1], -1),
-        ]
-    )
-    free = jnp.concatenate(
-        [
-            jnp.ones((3 * k, 2), bool),
-            jnp.tile(jnp.array([[True, False]]), (2 * ke, 1)),
-            jnp.tile(jnp.array([[False, True]]), (2 * ke, 1)),
-        ]
-    )
-    x_newton = jax.vmap(lambda x, m: _newton(seg, curve, x, m, options.iterations))(
-        jnp.concatenate([x_int, x_edge]), free
-    )
-    # Case 3: the four endpoint pairs.
-    x_corner = jnp.stack(
-        [jnp.stack([zero, u_lo]), jnp.stack([zero, u_hi]), jnp.stack([one, u_lo]), jnp.stack([one, u_hi])]
-    )
-    cands = jnp.concatenate([x_newton, x_corner])
-    d2 = jax.vmap(lambda x: jnp.sum((seg.point(x[0]) - curve.point(x[1])) ** 2))(cands)
-    best = jnp.argmin(d2)
-    x = cands[best]
-    return x[0], x[1], d2[best], _converged(seg, curve, x)
-
-
 # ----------------------------------------------------------------------------
 # The reduced solver: the minimum over s in closed form, Newton in u.
 
 
-def _atan_over_x(w):
-    """atan(w) / w, smooth through w = 0 (series below a dtype threshold)."""
-    small = jnp.abs(w) < (0.02 if w.dtype == jnp.float64 else 0.2)
-    w_safe = jnp.where(small, jnp.ones_like(w), w)
-    w2 = w * w
-    series = 1.0 - w2 * (1.0 / 3.0 - w2 * (1.0 / 5.0 - w2 * (1.0 / 7.0 - w2 / 9.0)))
-    return jnp.where(small, series, jnp.arctan(w_safe) / w_safe)
-
-
-def _project_to_arc(seg: _Segment, p):
+def _project_to_arc(seg: Segment, p):
     """Global minimiser s* in [0, 1] of |F_Ri(s) - p|^2 and its value, in closed form.
 
     A PCC segment is a circular arc (a straight line at theta = 0). With x the
@@ -404,7 +281,7 @@ def _project_to_arc(seg: _Segment, p):
     X = L - x * theta
     pos = X > 0
     X_safe = jnp.where(pos, X, 1.0)
-    s_pos = z / X_safe * _atan_over_x(z * theta / X_safe)
+    s_pos = z / X_safe * atan_over_x(z * theta / X_safe)
     a_star = jnp.arctan2(z * theta, X)
     s_neg = a_star / jnp.where(pos, 1.0, theta)  # theta != 0 when L - x theta <= 0
     s_a = jnp.where(pos, s_pos, s_neg)
@@ -427,7 +304,7 @@ def _project_to_arc(seg: _Segment, p):
     return s_star, jnp.sum((seg.point(s_star) - p) ** 2)
 
 
-def _reduced_newton(seg: _Segment, curve, u0, s0, f0, iterations: int):
+def _reduced_newton(seg: Segment, curve, u0, s0, f0, iterations: int):
     """Trust-region Newton on g(u) = min_s D_i(s, u)^2 / 2 from u0 (s0 = s*(u0)).
 
     Gradient by the envelope theorem, ``g' = -r . F_o'(u)`` with ``r = F_Ri(s*)
@@ -446,24 +323,16 @@ def _reduced_newton(seg: _Segment, curve, u0, s0, f0, iterations: int):
 
     def body(_, state):
         u, s, f, radius = state
-        r = seg.point(s) - curve.point(u)
-        A1, A2 = seg.derivatives(s)
-        C1, C2 = curve.derivative(u), curve.second_derivative(u)
-        gu = -jnp.dot(r, C1)
-        a = jnp.dot(A1, A1) + jnp.dot(r, A2)
-        b = -jnp.dot(A1, C1)
-        c = jnp.dot(C1, C1) - jnp.dot(r, C2)
+        t = pair_terms(seg, curve, s, u)
+        gu, a, b, c = t.gu, t.a, t.b, t.c
         interior = (s > 0.0) & (s < 1.0) & (a > 0.0)
         curv = jnp.where(interior, c - b * b / jnp.where(interior, a, 1.0), c)
-        floor = 10 * jnp.finfo(dtype).eps * (jnp.abs(c) + jnp.dot(C1, C1) + tiny)
+        floor = curvature_floor(jnp.abs(c) + jnp.dot(t.C1, t.C1) + tiny, dtype)
         step = jnp.where(curv > floor, -gu / jnp.where(curv > floor, curv, 1.0), -jnp.sign(gu) * width)
-        cap = radius * width
-        full = jnp.abs(step) <= cap
-        step = jnp.clip(step, -cap, cap)
-        u_t = jnp.clip(u + step, lo, hi)
+        u_t, full = trust_region_step_1d(u, step, radius, width, lo, hi)
         s_t, d2_t = _project_to_arc(seg, curve.point(u_t))
         better = d2_t < f
-        radius = jnp.where(better, jnp.where(full, radius, jnp.minimum(2.0 * radius, 1.0)), 0.25 * radius)
+        radius = trust_region_radius(better, ~full, radius)
         return (jnp.where(better, u_t, u), jnp.where(better, s_t, s), jnp.where(better, d2_t, f), radius)
 
     init = (u0, s0, f0, jnp.asarray(0.05, dtype))
@@ -485,15 +354,13 @@ def _curve_newton(curve, p, u0, iterations: int, radius0: float):
         C1, C2 = curve.derivative(u), curve.second_derivative(u)
         g = jnp.dot(r, C1)
         h = jnp.dot(C1, C1) + jnp.dot(r, C2)
-        ok = h > 10 * jnp.finfo(dtype).eps * (jnp.dot(C1, C1) + jnp.finfo(dtype).tiny)
+        ok = h > curvature_floor(jnp.dot(C1, C1) + jnp.finfo(dtype).tiny, dtype)
         step = jnp.where(ok, -g / jnp.where(ok, h, 1.0), -jnp.sign(g) * width)
-        cap = radius * width
-        full = jnp.abs(step) <= cap
-        u_t = jnp.clip(u + jnp.clip(step, -cap, cap), lo, hi)
+        u_t, full = trust_region_step_1d(u, step, radius, width, lo, hi)
         r_t = p - curve.point(u_t)
         f_t = jnp.dot(r_t, r_t)
         better = f_t < fu
-        radius = jnp.where(better, jnp.where(full, radius, jnp.minimum(2.0 * radius, 1.0)), 0.25 * radius)
+        radius = trust_region_radius(better, ~full, radius)
         return jnp.where(better, u_t, u), jnp.where(better, f_t, fu), radius
 
     r0 = p - curve.point(u0)
@@ -501,7 +368,7 @@ def _curve_newton(curve, p, u0, iterations: int, radius0: float):
     return u, fu
 
 
-def _solve_pair_reduced(seg: _Segment, curve, u_grid, C_grid, options: SolverOptions):
+def _solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOptions):
     """All three cases for one segment and one curve via the reduced problem.
 
     ``min_{s, u} D^2 = min_u g(u)`` with ``g(u) = min_s D^2(s, u)`` exact in
@@ -530,9 +397,9 @@ def _solve_pair_reduced(seg: _Segment, curve, u_grid, C_grid, options: SolverOpt
     u_prof, f_prof = jax.vmap(lambda p, u0: _curve_newton(curve, p, u0, options.projection_iterations, radius0))(
         A, u_grid[near]
     )
-    u_seed = u_prof[_local_minima_1d(f_prof, k)]
+    u_seed = u_prof[local_minima_1d(f_prof, k)]
     s_seed, g_seed = jax.vmap(lambda u: _project_to_arc(seg, curve.point(u)))(u_seed)
-    kg = _local_minima_1d(g_grid, k)
+    kg = local_minima_1d(g_grid, k)
     u0 = jnp.concatenate([u_grid[kg], u_seed])
     s0 = jnp.concatenate([s_grid[kg], s_seed])
     f0 = jnp.concatenate([g_grid[kg], g_seed])
@@ -545,39 +412,34 @@ def _solve_pair_reduced(seg: _Segment, curve, u_grid, C_grid, options: SolverOpt
     f_c = jnp.concatenate([f_n, g_grid[j][None]])
     best = jnp.argmin(f_c)
     x = jnp.stack([s_c[best], u_c[best]])
-    return x[0], x[1], f_c[best], _converged(seg, curve, x)
+    return x[0], x[1], f_c[best], first_order_converged(seg, curve, x)
 
 
-def _converged(seg: _Segment, curve, x):
-    """Projected-gradient test of the first-order conditions at x = (s, u)."""
+def first_order_converged(seg: Segment, curve, x):
+    """Projected-gradient test of the first-order conditions (paper eqs. 13-18)
+    at x = (s, u): () bool, the solver's ``converged``."""
     s, u = x[0], x[1]
     dtype = x.dtype
-    r = seg.point(s) - curve.point(u)
-    A1, _ = seg.derivatives(s)
-    C1 = curve.derivative(u)
-    gs, gu = jnp.dot(r, A1), -jnp.dot(r, C1)
+    t = pair_terms(seg, curve, s, u)
+    A1, C1, gs, gu = t.A1, t.C1, t.gs, t.gu
     # A bound-constrained coordinate is stationary if the gradient pushes outward.
     gs = jnp.where((s <= 0.0) & (gs > 0), 0.0, jnp.where((s >= 1.0) & (gs < 0), 0.0, gs))
     u_lo, u_hi = curve.u_range[0], curve.u_range[1]
     gu = jnp.where((u <= u_lo) & (gu > 0), 0.0, jnp.where((u >= u_hi) & (gu < 0), 0.0, gu))
     scale = 1.0 + safe_norm(seg.point(s)) + safe_norm(curve.point(u))
-    tol = _tolerance(dtype) * scale
+    tol = solver_tolerance(dtype) * scale
     return (jnp.abs(gs) <= tol * (safe_norm(A1) + 1.0)) & (jnp.abs(gu) <= tol * (safe_norm(C1) + 1.0))
 
 
-def _implicit(seg: _Segment, curve, s, u):
+def _implicit(seg: Segment, curve, s, u):
     """(s, u) whose value is the solver's and whose derivative w.r.t. q is the
     implicit-function derivative over the free coordinates."""
     s, u = jax.lax.stop_gradient(s), jax.lax.stop_gradient(u)
-    r = seg.point(s) - curve.point(u)
-    A1, A2 = seg.derivatives(s)
-    C1, C2 = curve.derivative(u), curve.second_derivative(u)
-    g = jnp.stack([jnp.dot(r, A1), -jnp.dot(r, C1)])
-    a = jnp.dot(A1, A1) + jnp.dot(r, A2)
-    b = -jnp.dot(A1, C1)
-    c = jnp.dot(C1, C1) - jnp.dot(r, C2)
+    t = pair_terms(seg, curve, s, u)
+    g = jnp.stack([t.gs, t.gu])
+    a, b, c = t.a, t.b, t.c
     dtype = s.dtype
-    mu = _psd_shift(a, b, c, dtype)
+    mu = psd_shift(a, b, c, dtype)
     a, c = a + mu, c + mu
     free_s = (s > 0.0) & (s < 1.0)
     free_u = (u > curve.u_range[0]) & (u < curve.u_range[1])
@@ -591,20 +453,32 @@ def _implicit(seg: _Segment, curve, s, u):
     return s - (ds - jax.lax.stop_gradient(ds)), u - (du - jax.lax.stop_gradient(du))
 
 
-def _closest_point_curve(q, curve, options: SolverOptions) -> ClosestPoint:
-    """Unvalidated core of :func:`closest_point` for one curve."""
+def curve_closest(q, curve, options: SolverOptions) -> ClosestPoint:
+    """Exact closest pair between the arm and ONE curve (paper §2.3): the
+    traceable core of :func:`closest_point`, without input validation.
+
+    Args:
+      q: (n, 3) configuration.
+      curve: one PolynomialCurve or ParametricCurve (vmap for stacks).
+      options: SolverOptions (static).
+
+    Returns:
+      ClosestPoint (``segment`` int32, ``u`` of q's dtype).
+    """
     curve = curve.astype(q.dtype)
-    R_bases, P_bases, _, _ = _frames(q)
-    segs = _Segment(q, R_bases, P_bases)
+    R_bases, P_bases = segment_frames(q)
+    segs = Segment(q, R_bases, P_bases)
     segs_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
     curve_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, curve)
     if options.method == "reduced":
         # The curve's u-samples and points do not depend on the segment: computed once.
-        u_grid = _u_grid(curve_nograd, options.grid_u)
+        u_grid = u_samples(curve_nograd, options.grid_u)
         C_grid = jax.vmap(curve_nograd.point)(u_grid)
         solve = lambda sg: _solve_pair_reduced(sg, curve_nograd, u_grid, C_grid, options)  # noqa: E731
     else:
-        solve = lambda sg: _solve_pair(sg, curve_nograd, options)  # noqa: E731
+        from .closest_grid import solve_pair_grid  # the paper's 2-D solver, built on this module's kernel
+
+        solve = lambda sg: solve_pair_grid(sg, curve_nograd, options)  # noqa: E731
     s_all, u_all, d2_all, conv_all = jax.vmap(solve)(segs_nograd)
     i = jnp.argmin(d2_all)
     seg = jax.tree_util.tree_map(lambda x: x[i], segs)
@@ -615,14 +489,14 @@ def _closest_point_curve(q, curve, options: SolverOptions) -> ClosestPoint:
     distance = safe_norm(
         seg.point(jax.lax.stop_gradient(s)) - curve.point(jax.lax.stop_gradient(u))
     )
-    return ClosestPoint(distance, i, s, u, arm_point, obstacle_point, conv_all[i])
+    return ClosestPoint(distance, i.astype(jnp.int32), s, u, arm_point, obstacle_point, conv_all[i])
 
 
 @partial(jax.jit, static_argnames="options")
 def _closest_point_jit(q, curve, options):
     if isinstance(curve, PolynomialCurve) and curve.coeffs.ndim == 3:
-        return jax.vmap(lambda c: _closest_point_curve(q, c, options))(curve)
-    return _closest_point_curve(q, curve, options)
+        return jax.vmap(lambda c: curve_closest(q, c, options))(curve)
+    return curve_closest(q, curve, options)
 
 
 def closest_point(q, curve, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoint:
@@ -653,11 +527,21 @@ def closest_point(q, curve, options: SolverOptions = DEFAULT_OPTIONS) -> Closest
 # N-point method and point distances.
 
 
-def _closest_point_to_points(q, points, mask=None, points_per_segment: int = 10) -> ClosestPoint:
-    """Unvalidated core of :func:`closest_point_to_points`; mask (N,) bool."""
-    n = q.shape[0]
+def points_closest(q, points, mask=None, points_per_segment: int = 10) -> ClosestPoint:
+    """The N-point method (paper §3): the traceable core of
+    :func:`closest_point_to_points`, without input validation.
+
+    Args:
+      q: (n, 3) configuration.
+      points: (N, 3) obstacle points.
+      mask: (N,) bool, False for padding points; None: all points.
+      points_per_segment: arm samples per segment (static).
+
+    Returns:
+      ClosestPoint (``segment`` int32, ``u`` the point's index as q's dtype).
+    """
     k = points_per_segment
-    arm = _backbone_points(q, k)  # (n k, 3)
+    arm = backbone_points(q, k)  # (n k, 3)
     diff = arm[:, None, :] - points[None, :, :]
     d2 = jnp.sum(diff * diff, axis=-1)
     if mask is not None:
@@ -666,19 +550,18 @@ def _closest_point_to_points(q, points, mask=None, points_per_segment: int = 10)
     a, p = flat // points.shape[0], flat % points.shape[0]
     segment = a // k
     s = ((a % k) + 1).astype(q.dtype) / k
-    del n
     return ClosestPoint(
         distance=safe_norm(arm[a] - points[p]),
-        segment=segment,
+        segment=segment.astype(jnp.int32),
         s=s,
-        u=p,
+        u=p.astype(q.dtype),
         arm_point=arm[a],
         obstacle_point=points[p],
         converged=jnp.asarray(True),
     )
 
 
-_closest_point_to_points_jit = jax.jit(_closest_point_to_points, static_argnums=3)
+_closest_point_to_points_jit = jax.jit(points_closest, static_argnums=3)
 
 
 def closest_point_to_points(q, points, points_per_segment: int = 10) -> ClosestPoint:
@@ -694,7 +577,7 @@ def closest_point_to_points(q, points, points_per_segment: int = 10) -> ClosestP
 
     Returns:
       :class:`ClosestPoint`; ``u`` is the index of the nearest obstacle point
-      and ``s`` the fraction of the nearest arm sample.
+      (as a float of q's dtype) and ``s`` the fraction of the nearest arm sample.
     """
     q = check_configuration(q)
     points = check_points(points).astype(q.dtype)
@@ -703,8 +586,9 @@ def closest_point_to_points(q, points, points_per_segment: int = 10) -> ClosestP
     return _closest_point_to_points_jit(q, points, None, int(points_per_segment))
 
 
-class _FixedPoint(NamedTuple):
-    """A point as a degenerate curve (u unused), for the 1-D point-to-arm problem."""
+class FixedPoint(NamedTuple):
+    """A point ``p`` (3,) as a degenerate curve (u unused, derivatives zero):
+    lets a curve routine handle the point-to-arm problem of a point set."""
 
     p: jax.Array
 
@@ -721,14 +605,13 @@ class _FixedPoint(NamedTuple):
     second_derivative = derivative
 
 
-def _point_closest(q, p, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoint:
+def _point_closest(q, p) -> ClosestPoint:
     """Exact closest point of the arm backbone to one point p (3,): the
     boundary problem of paper eqs. (15)-(16) with a fixed obstacle point,
     solved per segment in closed form (:func:`_project_to_arc`).
     Returns a ClosestPoint with u = 0."""
-    del options  # the closed form needs no solver settings
-    R_bases, P_bases, _, _ = _frames(q)
-    segs = _Segment(q, R_bases, P_bases)
+    R_bases, P_bases = segment_frames(q)
+    segs = Segment(q, R_bases, P_bases)
     segs_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
     p_ng = jax.lax.stop_gradient(p)
     dtype = q.dtype
@@ -741,26 +624,34 @@ def _point_closest(q, p, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoi
     seg = jax.tree_util.tree_map(lambda x: x[i], segs)
     s = jax.lax.stop_gradient(s_all[i])
     # Implicit derivative of s* over a free s (see _implicit), envelope theorem for the distance.
-    r = seg.point(s) - p
-    A1, A2 = seg.derivatives(s)
-    h = jnp.dot(A1, A1) + jnp.dot(r, A2)
-    h = jnp.where(h > 0, h, jnp.abs(h) + jnp.finfo(dtype).eps)
-    ds = jnp.where((s > 0) & (s < 1), jnp.dot(r, A1) / h, 0.0)
+    t = pair_terms(seg, FixedPoint(p), s, jnp.zeros((), dtype))
+    h = jnp.where(t.a > 0, t.a, jnp.abs(t.a) + jnp.finfo(dtype).eps)
+    ds = jnp.where((s > 0) & (s < 1), t.gs / h, 0.0)
     s_diff = s - (ds - jax.lax.stop_gradient(ds))
     arm_point = seg.point(s_diff)
     distance = safe_norm(seg.point(s) - p)
-    return ClosestPoint(distance, i, s_diff, jnp.zeros((), dtype), arm_point, p, jnp.asarray(True))
+    return ClosestPoint(distance, i.astype(jnp.int32), s_diff, jnp.zeros((), dtype), arm_point, p, jnp.asarray(True))
 
 
-def _point_set_closest(q, points, mask, options: SolverOptions = DEFAULT_OPTIONS) -> ClosestPoint:
-    """Exact closest point between the arm backbone and a masked point set (N, 3)."""
-    cps = jax.vmap(lambda p: _point_closest(q, p, options))(points)
+def point_set_closest(q, points, mask) -> ClosestPoint:
+    """Exact closest pair between the arm backbone and a masked point set
+    (the boundary problem of paper eqs. 15-16 with fixed obstacle points).
+
+    Args:
+      q: (n, 3) configuration.
+      points: (N, 3).
+      mask: (N,) bool, False for padding points.
+
+    Returns:
+      ClosestPoint (``u`` the nearest point's index as q's dtype).
+    """
+    cps = jax.vmap(lambda p: _point_closest(q, p))(points)
     k = jnp.argmin(jnp.where(mask, cps.distance, jnp.inf))
     cp = jax.tree_util.tree_map(lambda x: x[k], cps)
     return cp._replace(u=k.astype(q.dtype))
 
 
-def point_distance(q, points, options: SolverOptions = DEFAULT_OPTIONS):
+def point_distance(q, points):
     """Exact distance from each obstacle point to the arm backbone.
 
     Args:
@@ -772,9 +663,9 @@ def point_distance(q, points, options: SolverOptions = DEFAULT_OPTIONS):
     """
     q = check_configuration(q)
     points = check_points(points).astype(q.dtype)
-    return _point_distances(q, points, options)
+    return _point_distances(q, points)
 
 
-@partial(jax.jit, static_argnames="options")
-def _point_distances(q, points, options=DEFAULT_OPTIONS):
-    return jax.vmap(lambda p: _point_closest(q, p, options).distance)(points)
+@jax.jit
+def _point_distances(q, points):
+    return jax.vmap(lambda p: _point_closest(q, p).distance)(points)

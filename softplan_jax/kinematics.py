@@ -11,8 +11,10 @@ Every function here is pure and composes with ``jit``, ``vmap`` and ``grad``.
 ``(1 - cos x)/x`` and ``sin(x)/x`` come from :mod:`softplan_jax.numerics`, so
 values and derivatives of every order are finite and accurate there.
 
-The public functions validate their input (shapes always, values when not
-traced); the underscored twins do not and are what the solvers call.
+There is one function per operation, plain and traceable: jit at the call
+site. Each validates its input: shapes always (at trace time), values (finite,
+``L > 0``, ``s`` in [0, 1], segment index in range) only when the input is
+concrete, i.e. not a tracer inside ``jit``/``vmap``/``grad``.
 """
 
 from __future__ import annotations
@@ -85,12 +87,8 @@ def _rotation(q_i):
     )
 
 
-def _segment_transform(q_i):
-    return _rotation(q_i), arc_point_local(q_i, jnp.ones_like(q_i[0]))
-
-
-def _frames(q):
-    """Base frames of all n segments and the tip frame (H_n^0 = prod H_i^{i-1}).
+def _chain(q):
+    """Base frames of all n segments and the tip frame (H_n^0 = prod H_i^{i-1}, paper §2.1).
 
     A Python loop over the (static, small) number of segments: straight-line
     code that XLA fuses, cheaper to compile inside the solvers' loops than a scan.
@@ -101,83 +99,15 @@ def _frames(q):
     for i in range(q.shape[0]):
         Rs.append(R)
         Ps.append(P)
-        R_i, P_i = _segment_transform(q[i])
+        R_i, P_i = _rotation(q[i]), arc_point_local(q[i], jnp.ones_like(q[i][0]))
         R, P = R @ R_i, P + R @ P_i
     return jnp.stack(Rs), jnp.stack(Ps), R, P
 
 
-def _segment_point(q, i, s):
-    R_bases, P_bases, _, _ = _frames(q)
-    return P_bases[i] + R_bases[i] @ arc_point_local(q[i], s)
-
-
-def _tip_position(q):
-    return _frames(q)[3]
-
-
-def _point_jacobian(q, i, s):
-    n = q.shape[0]
-    return jax.jacfwd(_segment_point)(q, i, s).reshape(3, 3 * n)
-
-
-def _tip_jacobian(q):
-    n = q.shape[0]
-    return jax.jacfwd(_tip_position)(q).reshape(3, 3 * n)
-
-
-def _points_jacobians(q, segments, s):
-    """Jacobians ``J_si = dP_si/dq`` (m, 3, 3n) of m arm points (segments[k],
-    s[k]) in one forward-mode pass: the frames are computed once, with 3n
-    tangents, instead of once per point. ``s`` is held fixed (the paper's J_si)."""
-    n = q.shape[0]
-
-    def points(q):
-        R_bases, P_bases, _, _ = _frames(q)
-        local = jax.vmap(lambda i, s_k: arc_point_local(q[i], s_k))(segments, s)
-        return P_bases[segments] + jnp.einsum("kab,kb->ka", R_bases[segments], local)
-
-    return jax.jacfwd(points)(q).reshape(segments.shape[0], 3, 3 * n)
-
-
-def _backbone_points(q, points_per_segment: int):
-    """(n * k, 3) arm samples at s = j/k, j = 1..k, of every segment."""
-    R_bases, P_bases, _, _ = _frames(q)
-    s = jnp.arange(1, points_per_segment + 1, dtype=q.dtype) / points_per_segment
-    local = jax.vmap(lambda q_i: jax.vmap(lambda s_j: arc_point_local(q_i, s_j))(s))(q)
-    pts = P_bases[:, None, :] + jnp.einsum("nab,nkb->nka", R_bases, local)
-    return pts.reshape(-1, 3)
-
-
-def _motion_bounds(q_a, dq):
-    """Per-segment bound (n,) on how far any point of segments 0..i moves
-    during the straight-line motion ``q(t) = q_a + t dq``, t in [0, 1].
-
-    See :func:`motion_bound` for the derivation. Pure; differentiable almost
-    everywhere; one cumulative sum over the (static) segment count.
-    """
-    L_bar = jnp.maximum(q_a[:, 0], q_a[:, 0] + dq[:, 0])  # L_j(t) <= L_bar_j on the whole motion
-    dL, dtheta, dphi = jnp.abs(dq[:, 0]), jnp.abs(dq[:, 1]), jnp.abs(dq[:, 2])
-    # S[k] = L_bar_0 + ... + L_bar_k: backbone length from the arm base to the tip of segment k.
-    S = jnp.cumsum(L_bar)
-    S_before = S - L_bar  # backbone length from the arm base to the base of segment k
-    # For a point up to the tip of segment i, summed over j <= i:
-    #   |dL_j| * 1 + |dtheta_j| * (L_bar_j / 2 + (S_i - S_j)) + |dphi_j| * (S_i - S_before_j)
-    # = sum_j (|dL_j| + |dtheta_j| (L_bar_j / 2 - S_j) - |dphi_j| S_before_j) + S_i sum_j (|dtheta_j| + |dphi_j|).
-    own = jnp.cumsum(dL + dtheta * (0.5 * L_bar - S) - dphi * S_before)
-    return own + S * jnp.cumsum(dtheta + dphi)
-
-
 # ----------------------------------------------------------------------------
-# Public, validated entry points: validation on the host, then a jitted core.
-
-_segment_point_jit = jax.jit(_segment_point)
-_tip_position_jit = jax.jit(_tip_position)
-_point_jacobian_jit = jax.jit(_point_jacobian)
-_tip_jacobian_jit = jax.jit(_tip_jacobian)
-_backbone_points_jit = jax.jit(_backbone_points, static_argnums=1)
-_frames_jit = jax.jit(_frames)
-_motion_bounds_jit = jax.jit(_motion_bounds)
-
+# Public functions: one per operation. Each is plain and traceable; jit at the
+# call site. Shapes are checked at trace time, values (finite, L > 0, s in
+# [0, 1], index in range) only when the input is concrete (not a tracer).
 
 def segment_transform(q_i):
     """The paper's ``R_i`` and ``P_i`` of one segment (paper §2.1).
@@ -190,7 +120,8 @@ def segment_transform(q_i):
     """
     if jnp.shape(q_i) != (3,):
         raise ValueError(f"q_i must be one row [L, theta, phi] of shape (3,); got {jnp.shape(q_i)}")
-    return _segment_transform(check_configuration(jnp.reshape(q_i, (1, 3)))[0])
+    q_i = check_configuration(jnp.reshape(q_i, (1, 3)))[0]
+    return _rotation(q_i), arc_point_local(q_i, jnp.ones_like(q_i[0]))
 
 
 def segment_frames(q):
@@ -203,8 +134,7 @@ def segment_frames(q):
       ``(R_bases (n, 3, 3), P_bases (n, 3))``: the paper's ``R_{i-1}^0`` and
       ``P_{i-1}^0`` for i = 1..n (segment 0's base is the identity at the origin).
     """
-    q = check_configuration(q)
-    R_bases, P_bases, _, _ = _frames_jit(q)
+    R_bases, P_bases, _, _ = _chain(check_configuration(q))
     return R_bases, P_bases
 
 
@@ -222,12 +152,13 @@ def segment_point(q, i, s):
     q = check_configuration(q)
     check_segment_index(i, q.shape[0])
     s = check_fraction(s).astype(q.dtype)
-    return _segment_point_jit(q, i, s)
+    R_bases, P_bases, _, _ = _chain(q)
+    return P_bases[i] + R_bases[i] @ arc_point_local(q[i], s)
 
 
 def tip_position(q):
     """Position of the arm tip, the translation of ``H_n^0`` (paper §2.1). (n, 3) -> (3,)."""
-    return _tip_position_jit(check_configuration(q))
+    return _chain(check_configuration(q))[3]
 
 
 def point_jacobian(q, i, s):
@@ -239,12 +170,38 @@ def point_jacobian(q, i, s):
     q = check_configuration(q)
     check_segment_index(i, q.shape[0])
     s = check_fraction(s).astype(q.dtype)
-    return _point_jacobian_jit(q, i, s)
+    return jax.jacfwd(segment_point)(q, i, s).reshape(3, 3 * q.shape[0])
 
 
 def tip_jacobian(q):
     """``J_e``: Jacobian of the tip position, (3, 3n), by ``jax.jacfwd``."""
-    return _tip_jacobian_jit(check_configuration(q))
+    q = check_configuration(q)
+    return jax.jacfwd(tip_position)(q).reshape(3, 3 * q.shape[0])
+
+
+def points_jacobian(q, segments, s):
+    """Jacobians ``J_si = dP_si/dq`` of m arm points in one forward-mode pass (paper §2.2).
+
+    The frames are computed once, with 3n tangents, instead of once per point;
+    ``s`` is held fixed (the paper's J_si). Used by the planner's eq. (9).
+
+    Args:
+      q: (n, 3) configuration.
+      segments: (m,) int segment indices.
+      s: (m,) fractions.
+
+    Returns:
+      (m, 3, 3n) Jacobians (``q`` flattened row-major).
+    """
+    q = check_configuration(q)
+    n = q.shape[0]
+
+    def points(q):
+        R_bases, P_bases, _, _ = _chain(q)
+        local = jax.vmap(lambda i, s_k: arc_point_local(q[i], s_k))(segments, s)
+        return P_bases[segments] + jnp.einsum("kab,kb->ka", R_bases[segments], local)
+
+    return jax.jacfwd(points)(q).reshape(segments.shape[0], 3, 3 * n)
 
 
 def motion_bound(q_a, q_b):
@@ -298,7 +255,17 @@ def motion_bound(q_a, q_b):
     q_b = check_configuration(q_b)
     if q_a.shape != q_b.shape:
         raise ValueError(f"q_a and q_b must have the same shape; got {q_a.shape} and {q_b.shape}")
-    return _motion_bounds_jit(q_a, q_b - q_a)
+    dq = q_b - q_a
+    L_bar = jnp.maximum(q_a[:, 0], q_a[:, 0] + dq[:, 0])  # L_j(t) <= L_bar_j on the whole motion
+    dL, dtheta, dphi = jnp.abs(dq[:, 0]), jnp.abs(dq[:, 1]), jnp.abs(dq[:, 2])
+    # S[k] = L_bar_0 + ... + L_bar_k: backbone length from the arm base to the tip of segment k.
+    S = jnp.cumsum(L_bar)
+    S_before = S - L_bar  # backbone length from the arm base to the base of segment k
+    # For a point up to the tip of segment i, summed over j <= i:
+    #   |dL_j| * 1 + |dtheta_j| * (L_bar_j / 2 + (S_i - S_j)) + |dphi_j| * (S_i - S_before_j)
+    # = sum_j (|dL_j| + |dtheta_j| (L_bar_j / 2 - S_j) - |dphi_j| S_before_j) + S_i sum_j (|dtheta_j| + |dphi_j|).
+    own = jnp.cumsum(dL + dtheta * (0.5 * L_bar - S) - dphi * S_before)
+    return own + S * jnp.cumsum(dtheta + dphi)
 
 
 def backbone_points(q, points_per_segment: int = 10):
@@ -310,4 +277,9 @@ def backbone_points(q, points_per_segment: int = 10):
     q = check_configuration(q)
     if int(points_per_segment) < 1:
         raise ValueError(f"points_per_segment must be >= 1, got {points_per_segment}")
-    return _backbone_points_jit(q, int(points_per_segment))
+    k = int(points_per_segment)
+    R_bases, P_bases, _, _ = _chain(q)
+    s = jnp.arange(1, k + 1, dtype=q.dtype) / k
+    local = jax.vmap(lambda q_i: jax.vmap(lambda s_j: arc_point_local(q_i, s_j))(s))(q)
+    pts = P_bases[:, None, :] + jnp.einsum("nab,nkb->nka", R_bases, local)
+    return pts.reshape(-1, 3)

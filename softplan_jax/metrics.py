@@ -1,4 +1,4 @@
-"""True clearance and collisions.
+"""True clearance and collisions; post-hoc checks of a rollout (DESIGN.md: collision).
 
 The TRUE clearance to an obstacle is the distance from the arm backbone to the
 real obstacle (the curve itself, or the point set), minus the arm radius,
@@ -16,6 +16,10 @@ a pass of the arm through a curve is reported even though both sampled
 configurations are clear, and a collision is never invented. (It could in
 principle miss a dip whose basin neither end's closest pair leads into.)
 
+:func:`apply_collision_checks` adds the true-clearance and between-step
+checks to a planning-only rollout after the fact (vectorised over time).
+Every per-obstacle loop goes through :mod:`softplan_jax.obstacles`.
+
 :func:`dense_trajectory_clearance` is the slow, brute-force check of a whole
 trajectory (dense interpolation in q, dense sampling of arm and curve); the
 tests use it as an independent reference.
@@ -26,47 +30,19 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .closest import (
-    ClosestPoint,
-    SolverOptions,
-    _closest_point_curve,
-    _FixedPoint,
-    _point_set_closest,
-)
-from .kinematics import _backbone_points, _segment_point
-from .numerics import get_epsilon, safe_norm
+from .closest import ClosestPoint, FixedPoint
+from .kinematics import backbone_points, segment_point
+from .numerics import contact_floor, get_epsilon, safe_norm
+from .obstacles import map_obstacles, radius_and_mask, true_closest
+from .status import Status
 
-__all__ = ["true_closest", "between_steps", "dense_trajectory_clearance"]
-
-
-def true_closest(q, scenario, solver: SolverOptions) -> ClosestPoint:
-    """Exact closest pairs to every obstacle slot of a scenario.
-
-    Order: the polynomial curves (m_c), the point sets (m_p), the parametric
-    curves. Returns a ClosestPoint whose fields have a leading axis m.
-    Padding slots are solved too (their values are meaningless; mask them).
-    """
-    parts = []
-    if scenario.curves.coeffs.shape[0]:
-        parts.append(jax.vmap(lambda c: _closest_point_curve(q, c, solver))(scenario.curves))
-    if scenario.points.shape[0]:
-        parts.append(
-            jax.vmap(lambda p, m: _point_set_closest(q, p, m, solver))(scenario.points, scenario.point_mask)
-        )
-    for pc in scenario.parametric:
-        cp = _closest_point_curve(q, pc, solver)
-        parts.append(jax.tree_util.tree_map(lambda x: x[None], cp))
-    if not parts:
-        return empty_closest(q.dtype)
-    parts = [p._replace(segment=p.segment.astype(jnp.int32), u=p.u.astype(q.dtype)) for p in parts]
-    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
-
-
-def empty_closest(dtype) -> ClosestPoint:
-    """A ClosestPoint with zero obstacles (a scene without obstacles)."""
-    z = jnp.zeros((0,), dtype)
-    return ClosestPoint(z, jnp.zeros((0,), jnp.int32), z, z, jnp.zeros((0, 3), dtype), jnp.zeros((0, 3), dtype),
-                        jnp.zeros((0,), bool))
+__all__ = [
+    "true_closest",
+    "between_steps",
+    "contact_tolerance",
+    "apply_collision_checks",
+    "dense_trajectory_clearance",
+]
 
 
 def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
@@ -85,7 +61,7 @@ def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
     ts = jnp.array([1.0, 0.5, 0.25, 0.0], dtype)
 
     def residual(x):
-        return _segment_point(q_a + x[0] * dq, i, x[1]) - curve.point(x[2])
+        return segment_point(q_a + x[0] * dq, i, x[1]) - curve.point(x[2])
 
     def body(_, x):
         r = residual(x)
@@ -112,15 +88,14 @@ def between_steps(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenar
     For every obstacle slot, Gauss-Newton over (tau, s, u) on the segment of
     the closest pair at either end, started from both ends' closest pairs
     (see :func:`_motion_pair_distance`); point sets use the closest point of
-    each end. ``radius_sum`` (m,) = arm radius + obstacle radius.
+    each end. ``truth_a``/``truth_b``: :func:`~softplan_jax.obstacles.true_closest`
+    at q_a and q_b. ``radius_sum`` (m,) = arm radius + obstacle radius.
     """
     q_a, q_b = jax.lax.stop_gradient(q_a), jax.lax.stop_gradient(q_b)
     truth_a, truth_b = jax.lax.stop_gradient(truth_a), jax.lax.stop_gradient(truth_b)
     dq = q_b - q_a
     dtype = q_a.dtype
     zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
-    m_c = scenario.curves.coeffs.shape[0]
-    m_p = scenario.points.shape[0]
 
     ends = jnp.stack([zero, one])
 
@@ -132,30 +107,82 @@ def between_steps(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenar
         d = jax.vmap(lambda i, x, c: _motion_pair_distance(q_a, dq, i, x, c, iterations))(seg, x0, curves)
         return jnp.min(d)
 
-    def pick(truth, a, b):
-        return jax.tree_util.tree_map(lambda x: x[a:b], truth)
+    def on_curve(c, a, b):
+        return from_both_ends(c, c, a, b)
 
-    parts = [jnp.zeros((0,), dtype)]
-    if m_c:
-        ta, tb = pick(truth_a, 0, m_c), pick(truth_b, 0, m_c)
-        parts.append(jax.vmap(lambda c, a, b: from_both_ends(c, c, a, b))(scenario.curves, ta, tb))
-    if m_p:
-        ta, tb = pick(truth_a, m_c, m_c + m_p), pick(truth_b, m_c, m_c + m_p)
-        parts.append(
-            jax.vmap(
-                lambda a, b: from_both_ends(
-                    _FixedPoint(a.obstacle_point), _FixedPoint(b.obstacle_point),
-                    a._replace(u=jnp.zeros_like(a.u)), b._replace(u=jnp.zeros_like(b.u))
-                )
-            )(ta, tb)
+    def on_points(points, mask, a, b):
+        # The closest point of each end, as a fixed point (u unused).
+        return from_both_ends(
+            FixedPoint(a.obstacle_point), FixedPoint(b.obstacle_point),
+            a._replace(u=jnp.zeros_like(a.u)), b._replace(u=jnp.zeros_like(b.u)),
         )
-    for k, pc in enumerate(scenario.parametric):
-        j = m_c + m_p + k
-        at_j = lambda t, j=j: jax.tree_util.tree_map(lambda x: x[j], t)  # noqa: E731
-        parts.append(from_both_ends(pc, pc, at_j(truth_a), at_j(truth_b))[None])
-    found = jnp.concatenate(parts)
+
+    found = map_obstacles(scenario, on_curve, on_points, (truth_a, truth_b), empty=jnp.zeros((0,), dtype))
     D_min = jnp.minimum(found, jnp.minimum(truth_a.distance, truth_b.distance))
     return D_min - radius_sum
+
+
+def contact_tolerance(options, dtype) -> float:
+    """Clearance at or below which a rollout counts as collided: the planner options'
+    ``contact_tolerance``, but never below ten times sqrt(eps) of ``dtype``."""
+    return max(float(options.contact_tolerance), contact_floor(dtype))
+
+
+def apply_collision_checks(r, scenario, options):
+    """Add the true-clearance and between-step checks to a planning-only
+    rollout (``check_collisions=False``), vectorised over time.
+
+    The result equals what the checked rollout gives: the dynamics do not
+    depend on the checks until the first collision, after which the checked
+    rollout freezes, so the trajectory is cut and frozen at the first step
+    whose clearance (at the step, or during the motion to it) is at or below
+    the contact tolerance, or NaN (status non-finite: a NaN clearance never
+    counts as clear). Pure; vmap it over a batch.
+
+    Args:
+      r: an unbatched :class:`~softplan_jax.planner.Rollout` (planning only).
+      scenario: its Scenario.
+      options: its PlanOptions (static: the solver, the contact tolerance).
+
+    Returns:
+      The Rollout with clearance, between-step clearance, status, iterations,
+      converged and the derived fields as a checked rollout has them.
+    """
+
+    radius, mask = radius_and_mask(scenario)
+    contact = contact_tolerance(options, scenario.q0.dtype)
+    truths = jax.vmap(lambda q: true_closest(q, scenario, options.solver))(r.q)
+    c = jnp.where(mask, truths.distance - scenario.arm_radius - radius, jnp.inf)
+    prev = jax.tree_util.tree_map(lambda x: x[:-1], truths)
+    nxt = jax.tree_util.tree_map(lambda x: x[1:], truths)
+    cb = jax.vmap(lambda qa, qb, ta, tb: between_steps(qa, qb, ta, tb, scenario, scenario.arm_radius + radius))(
+        r.q[:-1], r.q[1:], prev, nxt
+    )
+    cb = jnp.concatenate([c[:1], jnp.where(mask, cb, jnp.inf)])
+    steps = jnp.arange(r.q.shape[0], dtype=r.iterations.dtype)
+    nan = jnp.any(jnp.isnan(c), axis=1) | jnp.any(jnp.isnan(cb), axis=1)
+    hit = (jnp.any(c <= contact, axis=1) | jnp.any(cb <= contact, axis=1) | nan) & (steps <= r.iterations)
+    first = jnp.argmax(hit).astype(r.iterations.dtype)
+    collided = jnp.any(hit)
+    end = jnp.where(collided, first, r.iterations)
+    keep = steps <= end
+    q = jnp.where(keep[:, None, None], r.q, r.q[end])
+    tip = jnp.where(keep[:, None], r.tip, r.tip[end])
+    c = jnp.where(keep[:, None], c, c[end])
+    cb = jnp.where(keep[:, None], cb, c[end])
+    status = jnp.where(collided, jnp.where(nan[first], Status.NONFINITE, Status.COLLIDED), r.status)
+    status = status.astype(r.status.dtype)
+    step_scale = jnp.where(steps < end, r.step_scale, 0.0)
+    converged = r.converged & jnp.all(jnp.where(mask, truths.converged, True), axis=1)
+    converged = jnp.where(keep, converged, converged[end])
+    return r._replace(
+        converged=converged,
+        q=q, tip=tip, clearance=c, between=cb, status=status, iterations=end.astype(r.iterations.dtype),
+        step_scale=step_scale,
+        reached=status == Status.REACHED, collided=status == Status.COLLIDED,
+        min_clearance=jnp.minimum(jnp.min(c, initial=jnp.inf), jnp.min(cb, initial=jnp.inf)),
+        final_error=safe_norm(scenario.goal - tip[-1]),
+    )
 
 
 def dense_trajectory_clearance(qs, scenario, substeps: int = 20, arm_samples: int = 200, curve_samples: int = 2000):
@@ -168,10 +195,8 @@ def dense_trajectory_clearance(qs, scenario, substeps: int = 20, arm_samples: in
     """
     from .curves import curve_points
 
-    radius_c = scenario.curves.radius
+    radius, mask = radius_and_mask(scenario)
     taus = jnp.linspace(0.0, 1.0, substeps + 1)
-    curve_pts = jax.vmap(lambda c: curve_points(c, curve_samples))(scenario.curves)  # (m_c, S, 3)
-    par_pts = [curve_points(pc, curve_samples) for pc in scenario.parametric]
 
     def min_dist(arm, pts, mask=None):
         d = jnp.sqrt(jnp.sum((arm[:, None, :] - pts[None, :, :]) ** 2, -1))
@@ -180,19 +205,18 @@ def dense_trajectory_clearance(qs, scenario, substeps: int = 20, arm_samples: in
         return jnp.min(d)
 
     def at(q):
-        arm = _backbone_points(q, arm_samples)
+        arm = backbone_points(q, arm_samples)
         arm = jnp.concatenate([jnp.zeros((1, 3), arm.dtype), arm])
-        dc = jax.vmap(lambda p: min_dist(arm, p))(curve_pts) - radius_c
-        dp = jax.vmap(lambda p, m: min_dist(arm, p, m))(scenario.points, scenario.point_mask) - scenario.point_radius
-        dpar = [min_dist(arm, p) - pc.radius for p, pc in zip(par_pts, scenario.parametric, strict=True)]
-        out = jnp.concatenate([dc, dp, jnp.stack(dpar) if dpar else jnp.zeros((0,), dc.dtype)])
-        return out - scenario.arm_radius
+        d = map_obstacles(
+            scenario,
+            lambda c: min_dist(arm, curve_points(c, curve_samples)),
+            lambda p, m: min_dist(arm, p, m),
+            empty=jnp.zeros((0,), q.dtype),
+        )
+        return d - radius - scenario.arm_radius
 
     def interval(q_a, q_b):
         return jnp.min(jax.vmap(lambda t: at(q_a + t * (q_b - q_a)))(taus), axis=0)
 
     res = jax.lax.map(lambda ab: interval(ab[0], ab[1]), (qs[:-1], qs[1:]))
-    mask = jnp.concatenate(
-        [scenario.curve_mask, jnp.any(scenario.point_mask, -1), jnp.ones((len(scenario.parametric),), bool)]
-    )
     return jnp.where(mask[None, :], res, jnp.inf)

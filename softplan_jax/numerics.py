@@ -1,5 +1,6 @@
-"""Dtype-aware numerics: the PCC kinematics' singular ratios and a damped
-pseudo-inverse.
+"""Dtype-aware numerics: the PCC kinematics' singular ratios, a damped
+pseudo-inverse, and every tolerance and threshold of the solvers (the closest
+point of paper §2.3, the rollout's contact test).
 
 The arc of a PCC segment involves ``(1 - cos x) / x`` and ``sin(x) / x``, which
 are 0/0 at ``x = 0`` (a straight segment).  Both are evaluated with a Taylor
@@ -21,6 +22,7 @@ precision in value and in the first two derivatives:
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 
 __all__ = [
     "get_epsilon",
@@ -29,6 +31,11 @@ __all__ = [
     "sin_over_x",
     "safe_norm",
     "damped_pinv",
+    "atan_over_x",
+    "solver_tolerance",
+    "curvature_floor",
+    "psd_shift",
+    "contact_floor",
 ]
 
 
@@ -102,3 +109,44 @@ def damped_pinv(J, damping):
     A = J @ J.T + (damping * damping) * jnp.eye(m, dtype=J.dtype)
     # A is symmetric positive definite for damping > 0: solve instead of invert.
     return jnp.linalg.solve(A, J).T
+
+
+def atan_series_threshold(dtype) -> float:
+    """|w| below which :func:`atan_over_x` uses its Taylor series (truncation
+    error below w**10 / 11: 1e-18 at 0.02 in float64, 1e-8 at 0.2 in float32)."""
+    return 0.02 if jnp.dtype(dtype) == jnp.float64 else 0.2
+
+
+def atan_over_x(w):
+    """``atan(w) / w`` with value 1 at 0; smooth (series branch and double-where shim)."""
+    small = jnp.abs(w) < atan_series_threshold(w.dtype)
+    w_safe = jnp.where(small, jnp.ones_like(w), w)
+    w2 = w * w
+    series = 1.0 - w2 * (1.0 / 3.0 - w2 * (1.0 / 5.0 - w2 * (1.0 / 7.0 - w2 / 9.0)))
+    return jnp.where(small, series, jnp.arctan(w_safe) / w_safe)
+
+
+def solver_tolerance(dtype):
+    """Relative tolerance of the closest-point solver's first-order test: sqrt(eps)."""
+    return jnp.sqrt(jnp.finfo(dtype).eps)
+
+
+def curvature_floor(scale, dtype):
+    """Smallest curvature a Newton step trusts, relative to ``scale``: 10 eps scale."""
+    return 10 * jnp.finfo(dtype).eps * scale
+
+
+def psd_shift(a, b, c, dtype):
+    """Shift mu >= 0 making the symmetric 2x2 matrix [[a, b], [b, c]] + mu I
+    safely positive definite (smallest eigenvalue at least :func:`curvature_floor`
+    of the matrix's scale)."""
+    half_tr = 0.5 * (a + c)
+    lam_min = half_tr - jnp.sqrt((0.5 * (a - c)) ** 2 + b * b)
+    scale = jnp.abs(a) + jnp.abs(c) + jnp.abs(b) + jnp.finfo(dtype).tiny
+    floor = curvature_floor(scale, dtype)
+    return jnp.where(lam_min > floor, 0.0, floor - lam_min)
+
+
+def contact_floor(dtype) -> float:
+    """Smallest meaningful contact tolerance of ``dtype``: 10 sqrt(eps)."""
+    return 10.0 * float(np.sqrt(np.finfo(dtype).eps))

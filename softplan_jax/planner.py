@@ -42,7 +42,6 @@ used), and checks the motion BETWEEN steps for a pass through an obstacle (see
 
 from __future__ import annotations
 
-import enum
 from functools import partial
 from typing import NamedTuple
 
@@ -50,17 +49,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .closest import (
-    DEFAULT_OPTIONS,
-    ClosestPoint,
-    SolverOptions,
-    _closest_point_to_points,
-)
-from .curves import curve_points
-from .kinematics import _motion_bounds, _points_jacobians, _tip_position
-from .metrics import between_steps, empty_closest, true_closest
+from .closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
+from .kinematics import motion_bound, points_jacobian, tip_position
+from .metrics import apply_collision_checks as apply_collision_checks  # moved to metrics; old import path
+from .metrics import between_steps, contact_tolerance
 from .numerics import damped_pinv, safe_norm
+from .obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
 from .scenarios import Scenario
+from .status import STATUS_NAMES as STATUS_NAMES  # noqa: F401  (re-exported: the old import path)
+from .status import Status, status_name
 
 __all__ = [
     "Gains",
@@ -68,8 +65,6 @@ __all__ = [
     "attraction",
     "repulsion",
     "PlanOptions",
-    "Status",
-    "STATUS_NAMES",
     "PAPER_STEP",
     "planner_step",
     "Rollout",
@@ -199,24 +194,6 @@ class PlanOptions(NamedTuple):
 PAPER_STEP = {"step": "plain", "escapes": 0, "stall_window": 60, "stall_tolerance": 1e-4}
 
 
-class Status(enum.IntEnum):
-    """Rollout status codes (stored as int32 in a :class:`Rollout`;
-    ``Status(code).label`` is the name used in reports and JSON)."""
-
-    RUNNING = 0
-    REACHED = 1
-    COLLIDED = 2
-    STALLED = 3
-    MAX_STEPS = 4
-    NONFINITE = 5
-
-    @property
-    def label(self) -> str:
-        """The report name: "running", "reached", "collided", "stalled", "max_steps", "non_finite"."""
-        return "non_finite" if self is Status.NONFINITE else self.name.lower()
-
-
-STATUS_NAMES = {int(s): s.label for s in Status}
 
 
 def check_options(options: PlanOptions) -> PlanOptions:
@@ -245,60 +222,6 @@ def check_options(options: PlanOptions) -> PlanOptions:
     return options
 
 
-def _planner_closest(q, scenario: Scenario, truth: ClosestPoint, options: PlanOptions):
-    """Closest points as the planner models the obstacles; (m,) ClosestPoint
-    in the obstacle order of :func:`softplan_jax.metrics.true_closest`
-    (polynomial curves, point sets, parametric curves)."""
-    m_c = scenario.curves.coeffs.shape[0]
-    m_p = scenario.points.shape[0]
-    m_par = len(scenario.parametric)
-    k = options.points_per_segment
-    parts = []
-    if options.method == "curve":
-        if m_c:
-            parts.append(jax.tree_util.tree_map(lambda x: x[:m_c], truth))
-    else:
-        N = options.n_points
-        all_true = jnp.ones((N,), bool)
-        if m_c:
-            pts_c = jax.vmap(lambda c: curve_points(c, N))(scenario.curves)
-            parts.append(jax.vmap(lambda p: _closest_point_to_points(q, p, all_true, k))(pts_c))
-    if m_p:
-        n_pts = lambda pts, mask: _closest_point_to_points(q, pts, mask, k)  # noqa: E731
-        parts.append(jax.vmap(n_pts)(scenario.points, scenario.point_mask))
-    if options.method == "curve":
-        if m_par:
-            parts.append(jax.tree_util.tree_map(lambda x: x[m_c + m_p :], truth))
-    else:
-        for pc in scenario.parametric:
-            pcp = _closest_point_to_points(q, curve_points(pc, options.n_points), jnp.ones((options.n_points,), bool), k)
-            parts.append(jax.tree_util.tree_map(lambda x: x[None], pcp))
-    if not parts:
-        return empty_closest(q.dtype)
-    parts = [p._replace(segment=p.segment.astype(jnp.int32), u=p.u.astype(q.dtype)) for p in parts]
-    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
-
-
-def _obstacle_radius_and_mask(scenario: Scenario):
-    radius = jnp.concatenate(
-        [
-            scenario.curves.radius,
-            scenario.point_radius,
-            jnp.stack([pc.radius for pc in scenario.parametric])
-            if scenario.parametric
-            else jnp.zeros((0,), scenario.q0.dtype),
-        ]
-    )
-    mask = jnp.concatenate(
-        [
-            scenario.curve_mask,
-            jnp.any(scenario.point_mask, axis=-1),
-            jnp.ones((len(scenario.parametric),), bool),
-        ]
-    )
-    return radius, mask
-
-
 def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None):
     """Paper eq. (9): qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj).
 
@@ -308,13 +231,13 @@ def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: Pla
     own obstacle model (exact for the curve method), +inf for padding slots.
     """
     n = q.shape[0]
-    V_e = scenario.goal - _tip_position(q)
-    cps = _planner_closest(q, scenario, truth, options)
-    radius, mask = _obstacle_radius_and_mask(scenario)
+    V_e = scenario.goal - tip_position(q)
+    cps = model_closest(q, scenario, truth, options.method, options.n_points, options.points_per_segment)
+    radius, mask = radius_and_mask(scenario)
     # J_e (the tip: s = 1 of the last segment) and every J_sj in one pass.
     segments = jnp.concatenate([jnp.array([n - 1], jnp.int32), cps.segment])
     s = jnp.concatenate([jnp.ones((1,), q.dtype), cps.s])
-    J = _points_jacobians(q, segments, s)
+    J = points_jacobian(q, segments, s)
     pinvs = jax.vmap(lambda J_k: damped_pinv(J_k, gains.damping))(J)  # (1 + m, 3n, 3)
     V_s = cps.obstacle_point - cps.arm_point
     clearance = cps.distance - scenario.arm_radius - radius
@@ -333,10 +256,6 @@ def _apply_step(q, qdot, scenario: Scenario, gains: Gains):
     return q_next.at[:, 0].set(jnp.clip(q_next[:, 0], scenario.L_min, scenario.L_max))
 
 
-def _contact(options: PlanOptions, dtype) -> float:
-    return max(float(options.contact_tolerance), 10.0 * float(np.sqrt(np.finfo(dtype).eps)))
-
-
 def _step_scale(q, q_next, clearance, options: PlanOptions):
     """The safe step's scale alpha in [0, 1] for the motion q -> q_next.
 
@@ -348,10 +267,10 @@ def _step_scale(q, q_next, clearance, options: PlanOptions):
     advancement). ``c`` is the smallest clearance of the planner's model; no
     obstacle (c = inf) gives alpha = 1; NaN propagates (and ends the rollout).
     """
-    floor = 2.0 * _contact(options, q.dtype)
+    floor = 2.0 * contact_tolerance(options, q.dtype)
     c = jnp.min(clearance, initial=jnp.inf)
     allowed = options.safe_fraction * jnp.maximum(c - floor, 0.0)
-    bound = _motion_bounds(q, q_next - q)[-1]
+    bound = motion_bound(q, q_next)[-1]
     # Double-where: a zero bound (no motion) gives alpha = 1 and no 0/0 in either mode.
     moving = bound > 0
     bound_safe = jnp.where(moving, bound, 1.0)
@@ -388,19 +307,8 @@ def planner_step(q, scenario: Scenario, gains: Gains, options: PlanOptions = Pla
     truth = true_closest(q, scenario, options.solver) if options.method == "curve" else None
     if truth is None:
         # The points method never uses the exact solver: a placeholder of the right shape.
-        truth = _placeholder_truth(q, scenario)
+        truth = placeholder_closest(q, scenario)
     return _next_q(q, scenario, gains, truth, options)[0]
-
-
-def _placeholder_truth(q, scenario: Scenario) -> ClosestPoint:
-    m = (
-        scenario.curves.coeffs.shape[0]
-        + scenario.points.shape[0]
-        + len(scenario.parametric)
-    )
-    z = jnp.zeros((m,), q.dtype)
-    return ClosestPoint(z, jnp.zeros((m,), jnp.int32), z, z, jnp.zeros((m, 3), q.dtype),
-                        jnp.zeros((m, 3), q.dtype), jnp.ones((m,), bool))
 
 
 class Rollout(NamedTuple):
@@ -421,6 +329,9 @@ class Rollout(NamedTuple):
       step_scale: (T+1,) the safe step's alpha for the step from q_k (1 for the
         plain step; 0 where no step was taken).
       escapes: () int, random-walk escapes started.
+      converged: (T+1,) bool, every exact closest-point solve of a real
+        obstacle slot at q_k met its Newton tolerance (always True where no
+        exact solve ran: the points method without collision checks).
     """
 
     q: jax.Array
@@ -435,6 +346,7 @@ class Rollout(NamedTuple):
     final_error: jax.Array
     step_scale: jax.Array
     escapes: jax.Array
+    converged: jax.Array
 
 
 class _Carry(NamedTuple):
@@ -476,10 +388,10 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
       scenario, gains, options, max_steps: as :func:`softplan_jax.plan`.
       key: PRNG key of the escapes' random walks (default ``PRNGKey(0)``).
     """
-    radius, mask = _obstacle_radius_and_mask(scenario)
+    radius, mask = radius_and_mask(scenario)
     q0 = scenario.q0
     dtype = q0.dtype
-    contact = _contact(options, dtype)
+    contact = contact_tolerance(options, dtype)
     key = jax.random.PRNGKey(0) if key is None else key
 
     def clearance_of(truth):
@@ -493,7 +405,7 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         if check or options.method == "curve":
             truth = true_closest(q, scenario, options.solver)
         else:
-            truth = _placeholder_truth(q, scenario)
+            truth = placeholder_closest(q, scenario)
         if check:
             c = clearance_of(truth)
             cb = between_steps(carry.q_prev, q, carry.truth_prev, truth, scenario, scenario.arm_radius + radius)
@@ -503,7 +415,7 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         else:
             c = cb = jnp.full(mask.shape, jnp.nan, dtype)
             nan_clearance = hit = jnp.zeros((), bool)
-        err = safe_norm(scenario.goal - _tip_position(q))
+        err = safe_norm(scenario.goal - tip_position(q))
         improved = err < carry.best_error - options.stall_tolerance
         walking = carry.walk_left > 0
         since = jnp.where(improved | carry.first | walking, 0, carry.since_best + 1)
@@ -557,9 +469,10 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
             walk_left=jnp.where(moved, jnp.maximum(walk_left - 1, 0), walk_left).astype(jnp.int32),
             walk_velocity=walk_velocity,
         )
-        return new, (q, _tip_position(q), c, cb, jnp.where(moved, alpha, 0.0).astype(dtype))
+        converged = jnp.all(jnp.where(mask, truth.converged, True))
+        return new, (q, tip_position(q), c, cb, jnp.where(moved, alpha, 0.0).astype(dtype), converged)
 
-    truth_dummy = _placeholder_truth(q0, scenario)
+    truth_dummy = placeholder_closest(q0, scenario)
     carry0 = _Carry(
         q=q0,
         q_prev=q0,
@@ -574,7 +487,7 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         walk_left=jnp.zeros((), jnp.int32),
         walk_velocity=jnp.zeros((3,), dtype),
     )
-    final, (qs, tips, cs, cbs, alphas) = jax.lax.scan(body, carry0, jnp.arange(max_steps + 1))
+    final, (qs, tips, cs, cbs, alphas, converged) = jax.lax.scan(body, carry0, jnp.arange(max_steps + 1))
     status = jnp.where(final.status == Status.RUNNING, Status.MAX_STEPS, final.status)
     return Rollout(
         q=qs,
@@ -589,56 +502,8 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         final_error=safe_norm(scenario.goal - tips[-1]),
         step_scale=alphas,
         escapes=final.escapes,
+        converged=converged,
     )
-
-
-def apply_collision_checks(r: Rollout, scenario: Scenario, options: PlanOptions) -> Rollout:
-    """Add the true-clearance and between-step checks to a planning-only
-    rollout (``check_collisions=False``), vectorised over time.
-
-    The result equals what the checked rollout gives: the dynamics do not
-    depend on the checks until the first collision, after which the checked
-    rollout freezes, so the trajectory is cut and frozen at the first step
-    whose clearance (at the step, or during the motion to it) is at or below
-    the contact tolerance, or NaN (status non-finite: a NaN clearance never
-    counts as clear). Pure; vmap it over a batch.
-    """
-    radius, mask = _obstacle_radius_and_mask(scenario)
-    contact = _contact(options, scenario.q0.dtype)
-    truths = jax.vmap(lambda q: true_closest(q, scenario, options.solver))(r.q)
-    c = jnp.where(mask, truths.distance - scenario.arm_radius - radius, jnp.inf)
-    prev = jax.tree_util.tree_map(lambda x: x[:-1], truths)
-    nxt = jax.tree_util.tree_map(lambda x: x[1:], truths)
-    cb = jax.vmap(lambda qa, qb, ta, tb: between_steps(qa, qb, ta, tb, scenario, scenario.arm_radius + radius))(
-        r.q[:-1], r.q[1:], prev, nxt
-    )
-    cb = jnp.concatenate([c[:1], jnp.where(mask, cb, jnp.inf)])
-    steps = jnp.arange(r.q.shape[0], dtype=r.iterations.dtype)
-    nan = jnp.any(jnp.isnan(c), axis=1) | jnp.any(jnp.isnan(cb), axis=1)
-    hit = (jnp.any(c <= contact, axis=1) | jnp.any(cb <= contact, axis=1) | nan) & (steps <= r.iterations)
-    first = jnp.argmax(hit).astype(r.iterations.dtype)
-    collided = jnp.any(hit)
-    end = jnp.where(collided, first, r.iterations)
-    keep = steps <= end
-    q = jnp.where(keep[:, None, None], r.q, r.q[end])
-    tip = jnp.where(keep[:, None], r.tip, r.tip[end])
-    c = jnp.where(keep[:, None], c, c[end])
-    cb = jnp.where(keep[:, None], cb, c[end])
-    status = jnp.where(collided, jnp.where(nan[first], Status.NONFINITE, Status.COLLIDED), r.status)
-    status = status.astype(r.status.dtype)
-    step_scale = jnp.where(steps < end, r.step_scale, 0.0)
-    return r._replace(
-        q=q, tip=tip, clearance=c, between=cb, status=status, iterations=end.astype(r.iterations.dtype),
-        step_scale=step_scale,
-        reached=status == Status.REACHED, collided=status == Status.COLLIDED,
-        min_clearance=jnp.minimum(jnp.min(c, initial=jnp.inf), jnp.min(cb, initial=jnp.inf)),
-        final_error=safe_norm(scenario.goal - tip[-1]),
-    )
-
-
-def status_name(code) -> str:
-    """Report name of a status code (see :attr:`Status.label`)."""
-    return Status(int(np.asarray(code))).label
 
 
 # ----------------------------------------------------------------------------
@@ -800,7 +665,7 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
 def result_from_rollout(r: Rollout, scenario: Scenario) -> PlanResult:
     """Trim a single (unbatched) Rollout to the steps taken, on the host."""
     it = int(r.iterations)
-    _, mask = _obstacle_radius_and_mask(scenario)
+    _, mask = radius_and_mask(scenario)
     mask = np.asarray(mask)
     return PlanResult(
         reached=bool(r.reached),

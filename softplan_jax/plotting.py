@@ -108,26 +108,9 @@ def _joint_indices(n_segments: int) -> np.ndarray:
 
 def _obstacles(scenario) -> list[dict]:
     """Every real obstacle as a dict(kind "curve" | "points", pts (N, 3), radius)."""
-    from .curves import curve_points
+    from .obstacles import obstacle_samples
 
-    obs = []
-    coeffs = np.asarray(scenario.curves.coeffs, dtype=float)
-    u_range = np.asarray(scenario.curves.u_range, dtype=float)
-    radius = np.asarray(scenario.curves.radius, dtype=float)
-    for k in np.nonzero(np.asarray(scenario.curve_mask))[0]:
-        u = np.linspace(u_range[k, 0], u_range[k, 1], CURVE_SAMPLES)
-        pts = np.stack([np.polynomial.polynomial.polyval(u, coeffs[k, a]) for a in range(3)], axis=-1)
-        obs.append(dict(kind="curve", pts=pts, radius=float(radius[k])))
-    points = np.asarray(scenario.points, dtype=float)
-    point_mask = np.asarray(scenario.point_mask)
-    point_radius = np.asarray(scenario.point_radius, dtype=float)
-    for k in range(points.shape[0]):
-        if point_mask[k].any():
-            obs.append(dict(kind="points", pts=points[k][point_mask[k]], radius=float(point_radius[k])))
-    for pc in scenario.parametric:
-        pts = np.asarray(curve_points(pc, CURVE_SAMPLES), dtype=float)
-        obs.append(dict(kind="curve", pts=pts, radius=float(np.asarray(pc.radius))))
-    return obs
+    return obstacle_samples(scenario, CURVE_SAMPLES)
 
 
 def _view_box(core: np.ndarray, obstacles: list[dict]):
@@ -502,8 +485,7 @@ def animate(scenario, result, path, fps=15, max_frames=200, hold=1.0, title=None
 def plot_clearance(result, scenario=None, ax=None, labels=None, title=None, figsize=(7, 4)):
     """True clearance (surface to surface) to every obstacle vs iteration.
 
-    Obstacles are in the planner's order: polynomial curves, point sets,
-    parametric curves.
+    Obstacles are in the slot order of :mod:`softplan_jax.obstacles`.
 
     Args:
       result: PlanResult, or an unbatched Rollout (padding slots dropped).
@@ -528,13 +510,9 @@ def plot_clearance(result, scenario=None, ax=None, labels=None, title=None, figs
     c = c[: it + 1]
     c = c[:, ~np.all(np.isinf(c), axis=0)]  # padding slots of a Rollout
     if labels is None and scenario is not None:
-        n_c = int(np.asarray(scenario.curve_mask).sum())
-        n_p = int(np.asarray(scenario.point_mask).any(axis=-1).sum())
-        labels = (
-            [f"curve {k + 1}" for k in range(n_c)]
-            + [f"points {k + 1}" for k in range(n_p)]
-            + [f"parametric {k + 1}" for k in range(len(scenario.parametric))]
-        )
+        from .obstacles import obstacle_labels
+
+        labels = obstacle_labels(scenario)
         if len(labels) != c.shape[1]:
             raise ValueError(f"the scenario has {len(labels)} obstacles, the result {c.shape[1]}")
     if labels is None:

@@ -633,3 +633,33 @@ def test_point_distance_matches_dense_sampling():
                                           bounds=(lo, hi), method="bounded", options=dict(xatol=1e-13))
                     best = min(best, d[j], res.fun)
                 assert abs(lib[k] - best) <= 1e-9, (q, p, lib[k], best)
+
+
+@pytest.mark.parametrize("theta", [0.0, 1e-9, 0.05, 1.3])
+def test_newton_kernel_matches_autodiff(theta):
+    """closest.pair_terms (paper eqs. 13-18, the one Newton kernel) against
+    jax.grad / jax.hessian of |F_Ri(s) - F_o(u)|^2 / 2, at and near theta = 0."""
+    from softplan_jax.closest import Segment, pair_terms
+
+    q = jnp.array([[0.9, 0.4, 0.3], [1.1, theta, -0.7]])
+    R, P = sp.segment_frames(q)
+    seg = Segment(q[1], R[1], P[1])
+    curve = sp.PolynomialCurve(jnp.array([[0.2, 0.5, -0.3], [0.1, -0.4, 0.6], [1.5, 0.2, 0.1]]), (0.0, 1.0))
+
+    def f(x):
+        r = seg.point(x[0]) - curve.point(x[1])
+        return 0.5 * jnp.dot(r, r)
+
+    x = jnp.array([0.37, 0.61])
+    t = pair_terms(seg, curve, x[0], x[1])
+    assert_allclose(jnp.stack([t.gs, t.gu]), jax.grad(f)(x), rtol=1e-12, atol=1e-14)
+    assert_allclose(jnp.array([[t.a, t.b], [t.b, t.c]]), jax.hessian(f)(x), rtol=1e-11, atol=1e-13)
+
+
+def test_atan_over_x_both_branches():
+    from softplan_jax.numerics import atan_over_x
+
+    w = jnp.array([0.0, 1e-12, 0.019, 0.021, 0.5, -3.0])
+    ref = np.where(np.asarray(w) == 0, 1.0, np.arctan(np.asarray(w)) / np.where(np.asarray(w) == 0, 1, np.asarray(w)))
+    assert_allclose(atan_over_x(w), ref, rtol=1e-15)
+    assert_finite(jax.vmap(jax.grad(atan_over_x))(w))

@@ -264,7 +264,7 @@ def test_plan_rejects_bad_gains(paper):
 def test_post_hoc_collision_checks_equal_in_scan_checks():
     """apply_collision_checks on a planning-only rollout == the checked rollout,
     on a scene that collides (weak repulsion, a wire across the path) and one that does not."""
-    from softplan_jax.planner import apply_collision_checks
+    from softplan_jax.metrics import apply_collision_checks
 
     q0 = sp.default_start()
     wire = sp.line_segment([0.9, -1.5, 1.2], [0.9, 1.5, 1.9])

@@ -12,7 +12,8 @@ import oracle
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.planner import apply_collision_checks, make_options, rollout_batch, rollout_jit
+from softplan_jax.metrics import apply_collision_checks
+from softplan_jax.planner import make_options, rollout_batch, rollout_jit
 
 PAD = dict(curve_slots=5, degree=2)
 

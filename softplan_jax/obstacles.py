@@ -1,0 +1,211 @@
+"""A scene's obstacles as one padded layout (DESIGN.md: "obstacles").
+
+A :class:`~softplan_jax.scenarios.Scenario` holds three groups of obstacle
+slots: stacked polynomial curves (``curves``, padded, ``curve_mask``), stacked
+point sets (``points`` (m_p, N, 3), padded, ``point_mask``) and parametric
+curves (the tuple ``parametric``). Every per-obstacle array of the library
+(closest points, clearance, radii, masks, the rollout's records) has ONE
+leading axis of ``m = m_c + m_p + m_par`` slots, in that group order. This
+module is the only one that knows that order: planner, metrics and plotting
+ask it for the closest points of a whole scene (:func:`true_closest`,
+:func:`model_closest`), for per-slot radii and masks
+(:func:`radius_and_mask`), for the count (:func:`obstacle_count`) and for
+samples to draw (:func:`obstacle_samples`), or map their own per-obstacle
+function over the slots (:func:`map_obstacles`).
+
+The closest points are the paper's: exact for curves (paper §2.3, eqs. 13-18,
+:mod:`softplan_jax.closest`), exact for point sets (the arm backbone against
+each point), or the N-point model of paper §3 (the arm sampled at
+``points_per_segment`` points per segment against ``n_points`` points of each
+curve) for ``method="points"``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .closest import ClosestPoint, SolverOptions, curve_closest, point_set_closest, points_closest
+from .curves import curve_points
+
+__all__ = [
+    "obstacle_count",
+    "map_obstacles",
+    "radius_and_mask",
+    "empty_closest",
+    "placeholder_closest",
+    "true_closest",
+    "model_closest",
+    "obstacle_samples",
+    "obstacle_labels",
+]
+
+
+def obstacle_count(scenario) -> int:
+    """Number of obstacle slots m (padding included): curves + point sets + parametric."""
+    return scenario.curves.coeffs.shape[-3] + scenario.points.shape[-3] + len(scenario.parametric)
+
+
+def map_obstacles(scenario, on_curve, on_points, slot_args=(), empty=None):
+    """Apply a per-obstacle function to every slot of a scene, in slot order.
+
+    Args:
+      scenario: one Scenario (not batched).
+      on_curve: ``on_curve(curve, *args) -> pytree``, for a polynomial curve
+        (vmapped over the stacked curves) and for each parametric curve.
+      on_points: ``on_points(points (N, 3), mask (N,), *args) -> pytree``, for
+        a point set (vmapped over the stacked point sets).
+      slot_args: a tuple of pytrees with a leading axis m (one entry per
+        slot), passed to the functions entry by entry.
+      empty: what to return for a scene without obstacle slots.
+
+    Returns:
+      The functions' results stacked along a leading axis m.
+    """
+    m_c = scenario.curves.coeffs.shape[0]
+    m_p = scenario.points.shape[0]
+
+    def rows(a, b):
+        return jax.tree_util.tree_map(lambda x: x[a:b], tuple(slot_args))
+
+    parts = []
+    if m_c:
+        parts.append(jax.vmap(on_curve)(scenario.curves, *rows(0, m_c)))
+    if m_p:
+        parts.append(jax.vmap(on_points)(scenario.points, scenario.point_mask, *rows(m_c, m_c + m_p)))
+    for k, pc in enumerate(scenario.parametric):
+        j = m_c + m_p + k
+        out = on_curve(pc, *jax.tree_util.tree_map(lambda x, j=j: x[j], tuple(slot_args)))
+        parts.append(jax.tree_util.tree_map(lambda x: x[None], out))
+    if not parts:
+        return empty
+    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
+
+
+def radius_and_mask(scenario):
+    """Obstacle radius (m,) and mask (m,) bool (False: a padding slot) of every slot."""
+    radius = jnp.concatenate(
+        [
+            scenario.curves.radius,
+            scenario.point_radius,
+            jnp.stack([pc.radius for pc in scenario.parametric])
+            if scenario.parametric
+            else jnp.zeros((0,), scenario.q0.dtype),
+        ]
+    )
+    mask = jnp.concatenate(
+        [
+            scenario.curve_mask,
+            jnp.any(scenario.point_mask, axis=-1),
+            jnp.ones((len(scenario.parametric),), bool),
+        ]
+    )
+    return radius, mask
+
+
+def empty_closest(dtype) -> ClosestPoint:
+    """A ClosestPoint with zero obstacles (a scene without obstacles)."""
+    z = jnp.zeros((0,), dtype)
+    return ClosestPoint(z, jnp.zeros((0,), jnp.int32), z, z, jnp.zeros((0, 3), dtype), jnp.zeros((0, 3), dtype),
+                        jnp.zeros((0,), bool))
+
+
+def placeholder_closest(q, scenario) -> ClosestPoint:
+    """Zeros of the shape of :func:`true_closest` (where no exact pair is needed)."""
+    m = obstacle_count(scenario)
+    z = jnp.zeros((m,), q.dtype)
+    return ClosestPoint(z, jnp.zeros((m,), jnp.int32), z, z, jnp.zeros((m, 3), q.dtype),
+                        jnp.zeros((m, 3), q.dtype), jnp.ones((m,), bool))
+
+
+def true_closest(q, scenario, solver: SolverOptions) -> ClosestPoint:
+    """Exact closest pairs between the arm and every obstacle slot of a scene.
+
+    Curves by the solver of paper §2.3; point sets by the exact closest point
+    of the backbone to each point. Padding slots are solved too (their values
+    are meaningless; mask them with :func:`radius_and_mask`).
+
+    Args:
+      q: (n, 3) configuration.
+      scenario: one Scenario.
+      solver: SolverOptions (static).
+
+    Returns:
+      ClosestPoint whose fields have a leading axis m.
+    """
+    return map_obstacles(
+        scenario,
+        lambda c: curve_closest(q, c, solver),
+        lambda p, m: point_set_closest(q, p, m),
+        empty=empty_closest(q.dtype),
+    )
+
+
+def model_closest(q, scenario, truth: ClosestPoint, method: str, n_points: int,
+                  points_per_segment: int) -> ClosestPoint:
+    """Closest pairs as the planner models the obstacles (paper eq. 9's V_sj).
+
+    ``method="curve"``: a curve's pair is its exact one, taken from ``truth``
+    (:func:`true_closest` at the same q). ``method="points"``: every curve is
+    ``n_points`` points evenly spaced in u (:func:`~softplan_jax.curves.curve_points`).
+    Point sets always use the N-point model: the arm sampled at
+    ``points_per_segment`` points per segment (paper Table 1), brute force.
+
+    Returns:
+      ClosestPoint with a leading axis m.
+    """
+    k = points_per_segment
+
+    def on_points(p, m, t):
+        return points_closest(q, p, m, k)
+
+    if method == "curve":
+        def on_curve(c, t):
+            return t
+    else:
+        all_true = jnp.ones((n_points,), bool)
+
+        def on_curve(c, t):
+            return points_closest(q, curve_points(c, n_points), all_true, k)
+
+    return map_obstacles(scenario, on_curve, on_points, (truth,), empty=empty_closest(q.dtype))
+
+
+def obstacle_labels(scenario) -> list[str]:
+    """Names of the real (unmasked) obstacles in slot order: "curve 1", "points 1", "parametric 1", ..."""
+    n_c = int(np.asarray(scenario.curve_mask).sum())
+    n_p = int(np.asarray(scenario.point_mask).any(axis=-1).sum())
+    return (
+        [f"curve {k + 1}" for k in range(n_c)]
+        + [f"points {k + 1}" for k in range(n_p)]
+        + [f"parametric {k + 1}" for k in range(len(scenario.parametric))]
+    )
+
+
+def obstacle_samples(scenario, samples: int) -> list[dict]:
+    """Every real obstacle, sampled for drawing (host side, NumPy), in slot order.
+
+    Returns:
+      A list of ``dict(kind="curve" | "points", pts (N, 3), radius float)``:
+      curves sampled at ``samples`` values of u evenly spaced (ends included),
+      point sets as their unmasked points.
+    """
+    obs = []
+    coeffs = np.asarray(scenario.curves.coeffs, dtype=float)
+    u_range = np.asarray(scenario.curves.u_range, dtype=float)
+    radius = np.asarray(scenario.curves.radius, dtype=float)
+    for k in np.nonzero(np.asarray(scenario.curve_mask))[0]:
+        u = np.linspace(u_range[k, 0], u_range[k, 1], samples)
+        pts = np.stack([np.polynomial.polynomial.polyval(u, coeffs[k, a]) for a in range(3)], axis=-1)
+        obs.append(dict(kind="curve", pts=pts, radius=float(radius[k])))
+    points = np.asarray(scenario.points, dtype=float)
+    point_mask = np.asarray(scenario.point_mask)
+    point_radius = np.asarray(scenario.point_radius, dtype=float)
+    for k in range(points.shape[0]):
+        if point_mask[k].any():
+            obs.append(dict(kind="points", pts=points[k][point_mask[k]], radius=float(point_radius[k])))
+    for pc in scenario.parametric:
+        pts = np.asarray(curve_points(pc, samples), dtype=float)
+        obs.append(dict(kind="curve", pts=pts, radius=float(np.asarray(pc.radius))))
+    return obs

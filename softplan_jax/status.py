@@ -1,0 +1,37 @@
+"""Rollout statuses: how a planning run ended (reached the goal, collided,
+stalled in a local minimum of the potential field of paper eq. 9, ran out of
+steps, or met a non-finite number).
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+
+__all__ = ["Status", "STATUS_NAMES", "status_name"]
+
+
+class Status(enum.IntEnum):
+    """Rollout status codes (stored as int32 in a :class:`Rollout`;
+    ``Status(code).label`` is the name used in reports and JSON)."""
+
+    RUNNING = 0
+    REACHED = 1
+    COLLIDED = 2
+    STALLED = 3
+    MAX_STEPS = 4
+    NONFINITE = 5
+
+    @property
+    def label(self) -> str:
+        """The report name: "running", "reached", "collided", "stalled", "max_steps", "non_finite"."""
+        return "non_finite" if self is Status.NONFINITE else self.name.lower()
+
+
+STATUS_NAMES = {int(s): s.label for s in Status}
+
+
+def status_name(code) -> str:
+    """Report name of a status code (see :attr:`Status.label`)."""
+    return Status(int(np.asarray(code))).label
