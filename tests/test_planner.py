@@ -57,6 +57,8 @@ def test_scan_equals_python_loop(paper):
     r = rollout_jit(sc, gains, opts, 200)  # the compilation sp.plan made for the paper plans
     steps = int(r.iterations)
     assert r.status == sp.Status.REACHED and steps > 20
+    # The exact solver converged on every real obstacle at every step (the flag the rollout carries).
+    assert r.converged.shape == (201,) and r.converged.dtype == bool and bool(np.all(r.converged))
     q = sc.q0
     for k in range(steps):
         np.testing.assert_allclose(np.asarray(r.q[k]), np.asarray(q), rtol=0, atol=1e-12, err_msg=f"step {k}")
