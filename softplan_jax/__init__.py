@@ -47,6 +47,7 @@ from .planner import planner_step as planner_step
 from .planner import repulsion as repulsion
 from .planner import rollout as rollout
 from .planner import stack_scenarios as stack_scenarios
+from .presets import apply_preset as apply_preset
 from .scenarios import Scenario as Scenario
 from .scenarios import default_start as default_start
 from .scenarios import load_scenario as load_scenario
