@@ -8,8 +8,8 @@ library) and under Webster & Jones' (the effect of the R_i convention).
     python -m benchmarks.paper_presets --quick    # sim1 and sim2 only, NumPy curve and N = 10 only
 
 Cell format: ``r33`` = reached the goal after 33 iterations, ``c21`` =
-collided at iteration 21 (true clearance <= 1e-6; the library also checks the
-motion between steps, the NumPy loop checks at the steps only), ``s``/``m`` =
+collided at iteration 21 (true clearance <= 1e-6 at a step or during the
+motion into it, in both implementations), ``s``/``m`` =
 stalled / out of steps. Writes ``benchmarks/results/paper_presets.{md,json}``.
 """
 
@@ -41,18 +41,50 @@ def cell(status: str, iterations: int) -> str:
         iterations)
 
 
+def _between(nb, q_a, q_b, cp_a, cp_b, curve, radius):
+    """Smallest distance (minus radii) during the straight motion q_a -> q_b to one curve:
+    scipy least_squares over (tau, s, u) in [0, 1]^2 x u_range on the arm segment of either
+    end's closest pair, started from both ends' pairs (the NumPy analogue of
+    softplan_jax.metrics.between_steps)."""
+    from scipy import optimize
+
+    dq = q_b - q_a
+    best = np.inf
+    for tau0, cp in ((0.0, cp_a), (1.0, cp_b)):
+        i = int(cp.segment)
+
+        def res(x, i=i):
+            return nb.segment_point(q_a + x[0] * dq, i, x[1]) - curve.point(x[2])
+
+        x0 = np.array([tau0, cp.s, np.clip(cp.u, curve.u_lo, curve.u_hi)])
+        sol = optimize.least_squares(res, x0, bounds=([0.0, 0.0, curve.u_lo], [1.0, 1.0, curve.u_hi]),
+                                     xtol=1e-14, ftol=1e-14, gtol=1e-14)
+        best = min(best, float(np.linalg.norm(sol.fun)))
+    return best - radius
+
+
 def numpy_run(nb, scenario, method, n_points, gains, max_steps, convention, goal_tolerance=1e-2):
-    """The NumPy planner (numpy_baseline.numpy_step) with a collision check at every step:
-    the true clearance to the real curves (exact closest points). -> (status, iterations, min clearance)."""
+    """The NumPy planner (numpy_baseline.numpy_step) with a collision check at every step
+    (exact closest points to the real curves) and between steps (see :func:`_between`,
+    run when either end is within 0.3 of the curve). -> (status, iterations, min clearance)."""
     sc = nb.to_numpy_scenario(scenario)
     g = nb.numpy_gains(gains)
     prep = nb._prepare(sc, method, n_points, "kdtree")
+    curves = [nb._Curve(co, ur) for co, ur, _ in sc.curves]
     q = sc.q0.copy()
     minc = np.inf
+    prev = None
     with nb.rotation_convention(convention):
         for k in range(max_steps + 1):
             frames = nb.segment_frames(q)
-            c = min(nb.closest_point_curve(q, co, ur, frames).distance - sc.arm_radius - r for co, ur, r in sc.curves)
+            cps = [nb.closest_point_curve(q, co, ur, frames) for co, ur, _ in sc.curves]
+            radii = [sc.arm_radius + r for _, _, r in sc.curves]
+            c = min(cp.distance - r for cp, r in zip(cps, radii, strict=True))
+            if prev is not None:
+                q_prev, cps_prev = prev
+                for cp_a, cp_b, curve, r in zip(cps_prev, cps, curves, radii, strict=True):
+                    if min(cp_a.distance, cp_b.distance) - r < 0.3:
+                        c = min(c, _between(nb, q_prev, q, cp_a, cp_b, curve, r))
             minc = min(minc, c)
             if c <= CONTACT:
                 return "collided", k, minc
@@ -60,6 +92,7 @@ def numpy_run(nb, scenario, method, n_points, gains, max_steps, convention, goal
                 return "reached", k, minc
             if k == max_steps:
                 return "max_steps", k, minc
+            prev = (q, cps)
             q, _ = nb.numpy_step(q, prep, g)
             if not np.all(np.isfinite(q)):
                 return "non_finite", k, minc
@@ -84,6 +117,86 @@ def main(argv=None) -> dict:
     t_all = time.perf_counter()
     machine = machine_info("float64")
     scenes = SCENES[:2] if args.quick else SCENES
+
+    def report(done):
+        finish_machine(machine)
+        total = time.perf_counter() - t_all
+        p = preset("paper")
+        L = ["# The paper's tables, three ways: printed, 'paper' preset, library defaults" + (" (QUICK)" if args.quick
+                                                                                              else ""), ""]
+        L += machine_lines(machine)
+        L += [f"- command: `python -m benchmarks.paper_presets{' --quick' if args.quick else ''}`; wall time "
+              f"{total:.0f} s (shared machine)",
+              f"- 'paper' preset: gains {p.gains}, start theta = {p.start_theta}, phi = {p.start_phi} on every segment, "
+              f"options {p.options} (`sp.apply_preset('paper', scenario)`); 150 steps",
+              "- defaults: `sp.default_gains()`, safe step with escapes, `default_start()` (straight arm); 600 steps",
+              "- cells: r33 = reached after 33 iterations; c21 = collided at iteration 21; s = stalled; "
+              "m = out of steps. "
+              "Paper: iterations as printed, collision as its text says (— = not stated).",
+              "- NumPy: `benchmarks/numpy_baseline.py` (FD Jacobians, scipy least_squares closest points, cKDTree), "
+              "'paper' preset, collision checked at the steps and between them (least squares over the motion); "
+              "*paper R_i* = Rz(phi) Ry(theta) (paper §2.1, as the "
+              "library), *W&J R_i* = Rz(phi) Ry(theta) Rz(-phi) (Webster & Jones 2010), run through "
+              "`numpy_baseline.rotation_convention` (the library's kinematics.py keeps the paper's convention).",
+              ""]
+        for name in done:
+            L += [f"## {name}", "",
+                  "| model | paper (printed) | library, 'paper' preset | library, defaults | NumPy, 'paper' preset, "
+                  "paper R_i | NumPy, 'paper' preset, W&J R_i |",
+                  "|---|---|---|---|---|---|"]
+            for r in (r for r in rows if r["scene"] == name):
+                pc = {True: "collided", False: "no collision", None: "—"}[r["paper_collided"]]
+                pi = f"{r['paper_iterations']} its, {pc}" if r["paper_iterations"] else f"— ({pc})"
+
+                def fmt(d):
+                    if d is None:
+                        return "not run"
+                    return f"{cell(d['status'], d['iterations'])} (min clearance {d['min_clearance']:+.3f})"
+
+                lab = "curve" if r["method"] == "curve" else f"{r['method']} point(s)"
+                L.append(f"| {lab} | {pi} | {fmt(r['lib_paper'])} | {fmt(r['lib_default'])} | "
+                         f"{fmt(r.get('numpy_paper'))} | {fmt(r.get('numpy_webster_jones'))} |")
+            L.append("")
+        agree = [r for r in rows if "numpy_paper" in r]
+        same = sum((r["numpy_paper"]["status"], r["numpy_paper"]["iterations"]) ==
+                   (r["lib_paper"]["status"], r["lib_paper"]["iterations"]) for r in agree)
+        wj_diff = sum((r["numpy_webster_jones"]["status"], r["numpy_webster_jones"]["iterations"]) !=
+                      (r["numpy_paper"]["status"], r["numpy_paper"]["iterations"]) for r in agree)
+        L += ["## Agreement and the R_i convention", "",
+              f"- NumPy (paper R_i) vs the library, 'paper' preset: same status and iterations in {same} of {len(agree)} "
+              "runs.",
+              "- Webster & Jones R_i vs the paper's R_i (NumPy, 'paper' preset): status or iterations differ in "
+              f"{wj_diff} "
+              f"of {len(agree)} runs. At the preset's start (phi = 0 on every segment) both conventions give the same "
+              "arm; they differ once phi moves: W&J(q) has the geometry of paper(q') with phi'_i = phi_i - phi_{i-1}, "
+              "and the planner's minimum-norm pseudo-inverse step is not invariant under that change of coordinates.",
+              "",
+              "## Deviations from the paper, one line each", "",
+              "- Gains, start pose and step rule are not stated in the paper: the 'paper' preset is a calibration that "
+              "reproduces its qualitative findings (Sim2: 1- and 10-point models collide, the curve method reaches), "
+              "not the paper's numbers; the defaults are the library's own (chosen for safety, not to match).",
+              "- Iteration counts differ from the printed ones under both presets (e.g. the paper's Sim1 curve 60 vs "
+              "33 with the 'paper' preset): with unstated gains and start pose, counts are not reproducible; only "
+              "the qualitative pattern is compared.",
+              "- Table 4 (the tree) is garbled after its fourth row and its iteration/time figures are not legible; "
+              "the text says \"six curved obstacles\" but the table has five rows, the fifth row (X = 1, Y = 1, "
+              "Z = ?, u in 0-3) has lost its Z entry and a stray `u - u^2` fragment; we use the four legible "
+              "branches plus the trunk X = 1, Y = 1, Z = u, u in [0, 3] (DESIGN.md) — five obstacles, not six.",
+              "- The paper's collision claims (its text) are reproduced only in part: see the table; with the "
+              "library's defaults (smaller d0, safe step) no N-point model collides on these scenes.",
+              "- R_i: the paper prints Rz(phi) Ry(theta); the constant-curvature literature (Webster & Jones 2010) "
+              "uses Rz(phi) Ry(theta) Rz(-phi). The library keeps the printed form; the NumPy column above shows "
+              "what the other convention changes.",
+              "- Times: the paper's are MATLAB wall times; see paper_tables.md and science.md for this library's "
+              "costs (ratios, not absolute values, are comparable).",
+              ""]
+        md = "\n".join(L) + "\n"
+        out = args.out or os.path.join(RESULTS_DIR, "quick" if args.quick else "", "paper_presets")
+        write_results(out, dict(machine=machine, seconds=total, rows=rows, preset=p._asdict()), md)
+        log(f"wrote {out}.md in {total:.0f} s")
+
+        return md
+
     rows = []
     for name in scenes:
         base = sp.paper_scenario(name)
@@ -108,78 +221,8 @@ def main(argv=None) -> dict:
             log(f"[paper_presets {time.perf_counter() - t_all:5.0f} s] {name} {m}: paper "
                 f"{row['paper_iterations']}, lib/paper {cell(rp.status, rp.iterations)}, lib/default "
                 f"{cell(rd.status, rd.iterations)}, numpy/paper {nps['paper']}, numpy/W&J {nps['webster_jones']}")
-    finish_machine(machine)
-    total = time.perf_counter() - t_all
-    p = preset("paper")
-    L = ["# The paper's tables, three ways: printed, 'paper' preset, library defaults" + (" (QUICK)" if args.quick
-                                                                                          else ""), ""]
-    L += machine_lines(machine)
-    L += [f"- command: `python -m benchmarks.paper_presets{' --quick' if args.quick else ''}`; wall time "
-          f"{total:.0f} s (shared machine)",
-          f"- 'paper' preset: gains {p.gains}, start theta = {p.start_theta}, phi = {p.start_phi} on every segment, "
-          f"options {p.options} (`sp.apply_preset('paper', scenario)`); 150 steps",
-          "- defaults: `sp.default_gains()`, safe step with escapes, `default_start()` (straight arm); 600 steps",
-          "- cells: r33 = reached after 33 iterations; c21 = collided at iteration 21; s = stalled; m = out of steps. "
-          "Paper: iterations as printed, collision as its text says (— = not stated).",
-          "- NumPy: `benchmarks/numpy_baseline.py` (FD Jacobians, scipy least_squares closest points, cKDTree), "
-          "'paper' preset, collision checked at the steps; *paper R_i* = Rz(phi) Ry(theta) (paper §2.1, as the "
-          "library), *W&J R_i* = Rz(phi) Ry(theta) Rz(-phi) (Webster & Jones 2010), run through "
-          "`numpy_baseline.rotation_convention` (the library's kinematics.py keeps the paper's convention).",
-          ""]
-    for name in scenes:
-        L += [f"## {name}", "",
-              "| model | paper (printed) | library, 'paper' preset | library, defaults | NumPy, 'paper' preset, "
-              "paper R_i | NumPy, 'paper' preset, W&J R_i |",
-              "|---|---|---|---|---|---|"]
-        for r in (r for r in rows if r["scene"] == name):
-            pc = {True: "collided", False: "no collision", None: "—"}[r["paper_collided"]]
-            pi = f"{r['paper_iterations']} its, {pc}" if r["paper_iterations"] else f"— ({pc})"
-
-            def fmt(d):
-                if d is None:
-                    return "not run"
-                return f"{cell(d['status'], d['iterations'])} (min clearance {d['min_clearance']:+.3f})"
-
-            lab = "curve" if r["method"] == "curve" else f"{r['method']} point(s)"
-            L.append(f"| {lab} | {pi} | {fmt(r['lib_paper'])} | {fmt(r['lib_default'])} | "
-                     f"{fmt(r.get('numpy_paper'))} | {fmt(r.get('numpy_webster_jones'))} |")
-        L.append("")
-    agree = [r for r in rows if "numpy_paper" in r]
-    same = sum((r["numpy_paper"]["status"], r["numpy_paper"]["iterations"]) ==
-               (r["lib_paper"]["status"], r["lib_paper"]["iterations"]) for r in agree)
-    wj_diff = sum((r["numpy_webster_jones"]["status"], r["numpy_webster_jones"]["iterations"]) !=
-                  (r["numpy_paper"]["status"], r["numpy_paper"]["iterations"]) for r in agree)
-    L += ["## Agreement and the R_i convention", "",
-          f"- NumPy (paper R_i) vs the library, 'paper' preset: same status and iterations in {same} of {len(agree)} "
-          "runs.",
-          f"- Webster & Jones R_i vs the paper's R_i (NumPy, 'paper' preset): status or iterations differ in {wj_diff} "
-          f"of {len(agree)} runs. At the preset's start (phi = 0 on every segment) both conventions give the same "
-          "arm; they differ once phi moves: W&J(q) has the geometry of paper(q') with phi'_i = phi_i - phi_{i-1}, "
-          "and the planner's minimum-norm pseudo-inverse step is not invariant under that change of coordinates.",
-          "",
-          "## Deviations from the paper, one line each", "",
-          "- Gains, start pose and step rule are not stated in the paper: the 'paper' preset is a calibration that "
-          "reproduces its qualitative findings (Sim2: 1- and 10-point models collide, the curve method reaches), "
-          "not the paper's numbers; the defaults are the library's own (chosen for safety, not to match).",
-          "- Iteration counts differ from the printed ones under both presets (e.g. the paper's Sim1 curve 60 vs "
-          "33 with the 'paper' preset): with unstated gains and start pose, counts are not reproducible; only "
-          "the qualitative pattern is compared.",
-          "- Table 4 (the tree) is garbled after its fourth row and its iteration/time figures are not legible; "
-          "the text says \"six curved obstacles\" but the table has five rows, the fifth row (X = 1, Y = 1, "
-          "Z = ?, u in 0-3) has lost its Z entry and a stray `u - u^2` fragment; we use the four legible "
-          "branches plus the trunk X = 1, Y = 1, Z = u, u in [0, 3] (DESIGN.md) — five obstacles, not six.",
-          "- The paper's collision claims (its text) are reproduced only in part: see the table; with the "
-          "library's defaults (smaller d0, safe step) no N-point model collides on these scenes.",
-          "- R_i: the paper prints Rz(phi) Ry(theta); the constant-curvature literature (Webster & Jones 2010) "
-          "uses Rz(phi) Ry(theta) Rz(-phi). The library keeps the printed form; the NumPy column above shows "
-          "what the other convention changes.",
-          "- Times: the paper's are MATLAB wall times; see paper_tables.md and science.md for this library's "
-          "costs (ratios, not absolute values, are comparable).",
-          ""]
-    md = "\n".join(L) + "\n"
-    out = args.out or os.path.join(RESULTS_DIR, "quick" if args.quick else "", "paper_presets")
-    write_results(out, dict(machine=machine, seconds=total, rows=rows, preset=p._asdict()), md)
-    log(f"wrote {out}.md in {total:.0f} s")
+        report(scenes[: scenes.index(name) + 1])
+    md = report(scenes)
     print(md)
     return dict(rows=rows)
 

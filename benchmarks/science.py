@@ -82,6 +82,12 @@ def parse_args(argv=None):
     ap.add_argument("--chunk", type=int, default=None, help="scenes per vmapped call (default 100; quick 8)")
     ap.add_argument("--settings", default="default,grid,grad", help="held-out gain settings")
     ap.add_argument("--skip-paper-figures", action="store_true")
+    ap.add_argument("--no-grid", action="store_true", help="skip the grid search (e.g. a run of --settings grad only)")
+    ap.add_argument("--grid-choice", default=None, metavar="JSON",
+                    help="with --no-grid: the grid's choices of an earlier run, {label: {d0, dt, eta}}")
+    ap.add_argument("--no-grad", action="store_true", help="skip the gradient tuning (e.g. --settings grid only)")
+    ap.add_argument("--merge", nargs="+", metavar="JSON", default=None,
+                    help="merge the held-out settings of these science JSON files into the first (no planning)")
     ap.add_argument("--out", default=None, help="output prefix (default results/science or results/quick/science)")
     args = ap.parse_args(argv)
     q = args.quick
@@ -166,6 +172,8 @@ def gains_dict(g) -> dict:
 
 def main(argv=None) -> dict:
     args = parse_args(argv)
+    if args.merge:
+        return merge(args.merge, argv)
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -197,7 +205,7 @@ def main(argv=None) -> dict:
 
     # ---- 1. grid search on the training seed
     grid_rows, grid_choice, grid_cost = {}, {}, {}
-    for m in args.method_list:
+    for m in [] if args.no_grid else args.method_list:
         rows = []
         t_m = time.perf_counter()
         compile_before = sum(runner.compile_s.values())
@@ -215,13 +223,15 @@ def main(argv=None) -> dict:
         grid_rows[mlabel(m)] = rows
         grid_choice[mlabel(m)] = dict(d0=best["d0"], dt=best["dt"], eta=best["eta"])
         stamp(f"grid choice {mlabel(m)}: {grid_choice[mlabel(m)]} (score {best['score']})")
+    if args.no_grid and args.grid_choice:
+        grid_choice = json.loads(args.grid_choice)
 
     # ---- 2. gradient tuning on the training seed
     grad_choice, grad_info = {}, {}
     sub = jax.tree_util.tree_map(lambda x: x[: args.grad_scenes], train)
     opt = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(args.lr))
     weights = LossWeights()
-    for m in args.method_list:
+    for m in [] if args.no_grad else args.method_list:
         t0 = time.perf_counter()
         note = ""
         try:
@@ -292,8 +302,8 @@ def main(argv=None) -> dict:
                 plan_per_step_min=float(np.min(res["plan_per_step"])) if res["plan_per_step"] else None,
                 seconds=time.perf_counter() - t0))
             stamp(f"held-out {setting}/{mlabel(m)}: " + ", ".join(f"{k} {v}" for k, v in c.items()))
-        if setting != args.setting_list[-1]:
-            write(final=False)
+            if (setting, m) != (args.setting_list[-1], args.method_list[-1]):
+                write(final=False)
     return write(final=True)
 
 
@@ -317,6 +327,60 @@ def paired_of(records) -> list:
                                     diff=list(paired_bootstrap(x, y, n_boot=5000, seed=1)))
             paired.append(row)
     return paired
+
+
+def merge(paths, argv) -> dict:
+    """Merge the held-out settings of later science JSON files into the first one
+    (same held-out seed and size required); rewrite its Markdown, JSON and figures."""
+    import softplan_jax as sp
+
+    with open(paths[0], encoding="utf-8") as fh:
+        rep = json.load(fh)
+    for path in paths[1:]:
+        with open(path, encoding="utf-8") as fh:
+            other = json.load(fh)
+        if other["scenes"]["heldout"] != rep["scenes"]["heldout"]:
+            raise ValueError(f"{path}: a different held-out suite ({other['scenes']['heldout']})")
+        for setting, rec in other["records"].items():
+            if setting in rep["records"]:
+                continue
+            rep["records"][setting] = rec
+            rep["summary"] += [r for r in other["summary"] if r["setting"] == setting]
+            rep["args"]["setting_list"].append(setting)
+        rep.setdefault("merged_from", []).append(dict(path=os.path.relpath(path, HERE), seconds=other["seconds"],
+                                                      args=other["args"]))
+    args = argparse.Namespace(**rep["args"])
+    # A method whose gains in a setting equal its gains in an evaluated setting has the same
+    # held-out result (same scenes, same escape seeds, deterministic): copy it, and say so.
+    for setting in args.setting_list:
+        rec = rep["records"].setdefault(setting, {})
+        for m in args.method_list:
+            lab = mlabel(m)
+            if lab in rec:
+                continue
+            choice = (rep["grid_choice"] if setting == "grid" else rep["grad_choice"]).get(lab)
+            for src in rep["records"]:
+                row = next((r for r in rep["summary"] if r["setting"] == src and r["method"] == lab), None)
+                if row and choice and all(abs(row["gains"][k] - v) <= 1e-12 * abs(v) for k, v in choice.items()):
+                    rec[lab] = rep["records"][src][lab]
+                    rep["summary"].append(dict(row, setting=setting, copied_from=src))
+                    break
+    order = {(s, mlabel(m)): i for i, (s, m) in enumerate((s, m) for s in args.setting_list for m in args.method_list)}
+    rep["summary"].sort(key=lambda r: order.get((r["setting"], r["method"]), 1 << 30))
+    rep["records"] = {s: {mlabel(m): rep["records"][s][mlabel(m)] for m in args.method_list
+                          if mlabel(m) in rep["records"].get(s, {})} for s in args.setting_list}
+    rep["paired"] = paired_of(rep["records"])
+    out = os.path.splitext(paths[0])[0]
+    fig_dir = os.path.join(os.path.dirname(out), "figures")
+    paper = [f for f in rep["figures"] if "science_paper_" in f]
+    rep["figures"] = make_figures(args, rep["summary"], rep["grid"], fig_dir, sp, print, paper=False) + paper
+    rep["complete"] = all(s in rep["records"] for s in args.setting_list)
+    md = markdown(args, rep, rep["args"].get("argv_text"))
+    with open(out + ".json", "w", encoding="utf-8") as fh:
+        json.dump(rep, fh, indent=1, default=_jsonable)
+    with open(out + ".md", "w", encoding="utf-8") as fh:
+        fh.write(md)
+    return rep
 
 
 def _jsonable(x):
@@ -404,11 +468,15 @@ def make_figures(args, summary, grid_rows, fig_dir, sp, stamp, paper: bool = Tru
     save(fig, "science_rates_vs_n.png")
 
     # Heat maps of the collision rate over d0 x dt (training seed, eta = the grid's smallest).
-    d0s = sorted({r["d0"] for rows in grid_rows.values() for r in rows})
-    dts = sorted({r["dt"] for rows in grid_rows.values() for r in rows})
-    eta0 = min(r["eta"] for rows in grid_rows.values() for r in rows)
     shown = [lab for lab in ("curve", "N=10") if lab in grid_rows]
+    d0s = dts = []
+    eta0 = None
+    if not grid_rows:
+        shown = []
     if shown:
+        d0s = sorted({r["d0"] for rows in grid_rows.values() for r in rows})
+        dts = sorted({r["dt"] for rows in grid_rows.values() for r in rows})
+        eta0 = min(r["eta"] for rows in grid_rows.values() for r in rows)
         fig, axes = plt.subplots(1, len(shown), figsize=(5.5 * len(shown), 4.2), squeeze=False)
         for ax, lab in zip(axes[0], shown, strict=True):
             M = np.full((len(d0s), len(dts)), np.nan)
@@ -474,6 +542,13 @@ def markdown(args, rep, argv) -> str:
           "- rates: count (% [95 % Wilson interval]); success = reached the goal without collision; collided = "
           "true clearance <= contact tolerance at a step or between steps (exact check against the real curves)",
           ""]
+    for mf in rep.get("merged_from", []):
+        L.append(f"- merged: the held-out settings {mf['args']['setting_list']} of a parallel run "
+                 f"(`{mf['path']}`, wall time {mf['seconds']:.0f} s, started while this run was under way)")
+    copied = [f"{r['setting']}/{r['method']}" for r in rep["summary"] if r.get("copied_from")]
+    if copied:
+        L += [f"- rows {copied} were not re-run: their gains equal those of another setting for the same "
+              "method, so their held-out records are identical (same scenes and escape seeds) and were copied", ""]
     L += ["## Tuning (training seed)", "",
           f"Grid: d0 x dt x eta = {len(args.grid)} configurations, score = reached - 3 x collided on the training "
           f"scenes. Gradient: {args.grad_updates} adam updates (lr {args.lr}, clipped to global norm 1) of the "
@@ -483,6 +558,8 @@ def markdown(args, rep, argv) -> str:
           "gradient loss first -> last |",
           "|---|---|---|---|---|---|"]
     for lab in rep["grid_choice"]:
+        if lab not in rep["grad_choice"]:
+            continue
         gc, gr = rep["grid_choice"][lab], rep["grad_choice"][lab]
         cost, gi = rep["grid_cost"][lab], rep["grad"][lab]
         loss = f"{gi['losses'][0]:.4f} -> {gi['losses'][-1]:.4f}" if gi["losses"] else gi["note"]
@@ -518,6 +595,8 @@ def markdown(args, rep, argv) -> str:
                  f"{100 * a['diff'][0]:+.1f} [{100 * a['diff'][1]:+.1f}, {100 * a['diff'][2]:+.1f}] | "
                  f"{b['curve_only']} / {b['n_only']}, {b['mcnemar_p']:.2g} | "
                  f"{100 * b['diff'][0]:+.1f} [{100 * b['diff'][1]:+.1f}, {100 * b['diff'][2]:+.1f}] |")
+    if not rep["grid"]:
+        return "\n".join(L) + "\n"
     L += ["", "## Sensitivity (training seed): collision rate over the grid", "",
           "| method | " + " | ".join(f"d0 {r['d0']:g}, dt {r['dt']:g}, eta {r['eta']:g}"
                                      for r in next(iter(rep["grid"].values()))) + " |",
