@@ -359,7 +359,7 @@ def merge(paths, argv) -> dict:
             if lab in rec:
                 continue
             choice = (rep["grid_choice"] if setting == "grid" else rep["grad_choice"]).get(lab)
-            for src in rep["records"]:
+            for src in [x for x in rep["records"] if lab in rep["records"][x]]:
                 row = next((r for r in rep["summary"] if r["setting"] == src and r["method"] == lab), None)
                 if row and choice and all(abs(row["gains"][k] - v) <= 1e-12 * abs(v) for k, v in choice.items()):
                     rec[lab] = rep["records"][src][lab]
@@ -372,10 +372,12 @@ def merge(paths, argv) -> dict:
     rep["paired"] = paired_of(rep["records"])
     out = os.path.splitext(paths[0])[0]
     fig_dir = os.path.join(os.path.dirname(out), "figures")
+    os.makedirs(fig_dir, exist_ok=True)
     paper = [f for f in rep["figures"] if "science_paper_" in f]
     rep["figures"] = make_figures(args, rep["summary"], rep["grid"], fig_dir, sp, print, paper=False) + paper
     rep["complete"] = all(s in rep["records"] for s in args.setting_list)
-    md = markdown(args, rep, rep["args"].get("argv_text"))
+    rep["command"] = "python -m benchmarks.science"
+    md = markdown(args, rep, None)
     with open(out + ".json", "w", encoding="utf-8") as fh:
         json.dump(rep, fh, indent=1, default=_jsonable)
     with open(out + ".md", "w", encoding="utf-8") as fh:
@@ -450,7 +452,8 @@ def make_figures(args, summary, grid_rows, fig_dir, sp, stamp, paper: bool = Tru
             pts = [(n, *rate(rows[f"N={n}"])) for n in ns if f"N={n}" in rows]
             if pts:
                 x, p, lo, hi = map(np.asarray, zip(*pts, strict=True))
-                ax.errorbar(x, p, yerr=[p - lo, hi - p], fmt="o-", color="tab:blue", capsize=4,
+                ax.errorbar(x, p, yerr=[np.maximum(p - lo, 0.0), np.maximum(hi - p, 0.0)], fmt="o-",
+                            color="tab:blue", capsize=4,
                             label="N-point model (95 % Wilson)")
             ax.set_xscale("log")
             ax.set_xticks(ns)
@@ -482,7 +485,7 @@ def make_figures(args, summary, grid_rows, fig_dir, sp, stamp, paper: bool = Tru
             M = np.full((len(d0s), len(dts)), np.nan)
             for r in grid_rows[lab]:
                 if r["eta"] == eta0:
-                    n = sum(r["counts"].values())
+                    n = sum(v for v in r["counts"].values() if v is not None)
                     M[d0s.index(r["d0"]), dts.index(r["dt"])] = r["counts"]["collided"] / n
             im = ax.imshow(M, origin="lower", cmap="Reds", vmin=0, vmax=max(0.05, float(np.nanmax(M))),
                            aspect="auto")
@@ -529,19 +532,23 @@ def make_figures(args, summary, grid_rows, fig_dir, sp, stamp, paper: bool = Tru
 
 def markdown(args, rep, argv) -> str:
     n = args.n_eval
-    cmd = "python -m benchmarks.science" + (" " + " ".join(argv) if argv else " " + " ".join(sys.argv[1:]))
+    cmd = rep.get("command") or (
+        "python -m benchmarks.science" + (" " + " ".join(argv) if argv else " " + " ".join(sys.argv[1:])))
     L = [f"# Curve vs N-point obstacles: tuned per method, held-out evaluation{' (QUICK MODE)' if args.quick else ''}",
          ""]
     if args.quick:
         L += ["**Quick mode: tiny sizes, for checking the pipeline only; no conclusion should be drawn.**", ""]
     L += machine_lines_safe(rep["machine"])
-    L += [f"- command: `{cmd.strip()}`; wall time {rep['seconds']:.0f} s on this machine (compile included)",
+    L += [f"- command: `{cmd.strip()}`; wall time {rep['seconds']:.0f} s on this machine (compile included)"
+          + ("" if rep.get("complete", True) else " — stopped before every setting was evaluated"),
           f"- training seed {args.train_seed} ({args.n_train} scenes, {args.train_steps} steps); held-out seed "
           f"{args.eval_seed} ({n} scenes, {args.max_steps} steps); planner: the library's default (safe step, "
           "escapes); float64",
           "- rates: count (% [95 % Wilson interval]); success = reached the goal without collision; collided = "
           "true clearance <= contact tolerance at a step or between steps (exact check against the real curves)",
           ""]
+    if rep.get("rebuilt_from_log"):
+        L.append(f"- **rebuilt**: {rep['rebuilt_from_log']}")
     for mf in rep.get("merged_from", []):
         L.append(f"- merged: the held-out settings {mf['args']['setting_list']} of a parallel run "
                  f"(`{mf['path']}`, wall time {mf['seconds']:.0f} s, started while this run was under way)")
@@ -549,7 +556,7 @@ def markdown(args, rep, argv) -> str:
     if copied:
         L += [f"- rows {copied} were not re-run: their gains equal those of another setting for the same "
               "method, so their held-out records are identical (same scenes and escape seeds) and were copied", ""]
-    L += ["## Tuning (training seed)", "",
+    L += ["", "## Tuning (training seed)", "",
           f"Grid: d0 x dt x eta = {len(args.grid)} configurations, score = reached - 3 x collided on the training "
           f"scenes. Gradient: {args.grad_updates} adam updates (lr {args.lr}, clipped to global norm 1) of the "
           f"rollout loss on {args.grad_scenes} training scenes, log d0 / log eta / log dt, from the default gains.",
