@@ -346,7 +346,8 @@ def merge(paths, argv) -> dict:
                 continue
             rep["records"][setting] = rec
             rep["summary"] += [r for r in other["summary"] if r["setting"] == setting]
-            rep["args"]["setting_list"].append(setting)
+            if setting not in rep["args"]["setting_list"]:
+                rep["args"]["setting_list"].append(setting)
         rep.setdefault("merged_from", []).append(dict(path=os.path.relpath(path, HERE), seconds=other["seconds"],
                                                       args=other["args"]))
     args = argparse.Namespace(**rep["args"])
@@ -506,7 +507,10 @@ def make_figures(args, summary, grid_rows, fig_dir, sp, stamp, paper: bool = Tru
         save(fig, "science_heatmap_d0_dt.png")
 
     # Cost per step vs N (default gains).
-    rows = {r["method"]: r for r in summary if r["setting"] == settings[0]}
+    # The setting with the most per-step timings (rows rebuilt from a log have none).
+    timed_setting = max(settings, key=lambda st: sum(1 for r in summary if r["setting"] == st
+                                                     and r.get("plan_per_step_median")), default=None)
+    rows = {r["method"]: r for r in summary if r["setting"] == timed_setting}
     if rows and any(r["plan_per_step_median"] for r in rows.values()):
         fig, ax = plt.subplots(figsize=(6, 4))
         pts = [(n, rows[f"N={n}"]["plan_per_step_median"], rows[f"N={n}"]["plan_per_step_min"])
@@ -521,7 +525,8 @@ def make_figures(args, summary, grid_rows, fig_dir, sp, stamp, paper: bool = Tru
         ax.set_yscale("log")
         ax.set_xlabel("N (points per curve)")
         ax.set_ylabel("planning time per scene-step [µs]")
-        ax.set_title("batched planning cost (shared 2-core machine;\ncompile excluded, collision check excluded)",
+        ax.set_title(f"batched planning cost, {timed_setting} gains (shared 2-core machine;\n"
+                     "compile excluded, collision check excluded)",
                      fontsize=10)
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
