@@ -16,6 +16,7 @@ stalled / out of steps. Writes ``benchmarks/results/paper_presets.{md,json}``.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -103,6 +104,10 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--numpy-methods", default=None,
+                    help="comma list of the models the NumPy columns run (default all; quick: curve,10)")
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the scenes already in the output JSON (a run stopped part way) and do the rest")
     args = ap.parse_args(argv)
     import jax
 
@@ -133,13 +138,14 @@ def main(argv=None) -> dict:
               "- cells: r33 = reached after 33 iterations; c21 = collided at iteration 21; s = stalled; "
               "m = out of steps. "
               "Paper: iterations as printed, collision as its text says (— = not stated).",
+              f"- NumPy columns run for the models {numpy_methods} (\"not run\" elsewhere, for time)",
               "- NumPy: `benchmarks/numpy_baseline.py` (FD Jacobians, scipy least_squares closest points, cKDTree), "
               "'paper' preset, collision checked at the steps and between them (least squares over the motion); "
               "*paper R_i* = Rz(phi) Ry(theta) (paper §2.1, as the "
               "library), *W&J R_i* = Rz(phi) Ry(theta) Rz(-phi) (Webster & Jones 2010), run through "
               "`numpy_baseline.rotation_convention` (the library's kinematics.py keeps the paper's convention).",
               ""]
-        for name in done:
+        for name in [x for x in scenes if any(r["scene"] == x for r in rows)]:
             L += [f"## {name}", "",
                   "| model | paper (printed) | library, 'paper' preset | library, defaults | NumPy, 'paper' preset, "
                   "paper R_i | NumPy, 'paper' preset, W&J R_i |",
@@ -191,14 +197,21 @@ def main(argv=None) -> dict:
               "costs (ratios, not absolute values, are comparable).",
               ""]
         md = "\n".join(L) + "\n"
-        out = args.out or os.path.join(RESULTS_DIR, "quick" if args.quick else "", "paper_presets")
         write_results(out, dict(machine=machine, seconds=total, rows=rows, preset=p._asdict()), md)
         log(f"wrote {out}.md in {total:.0f} s")
 
         return md
 
+    numpy_methods = (args.numpy_methods or ("curve,10" if args.quick else "curve,1,10,50,100")).split(",")
+    out = args.out or os.path.join(RESULTS_DIR, "quick" if args.quick else "", "paper_presets")
     rows = []
+    if args.resume and os.path.exists(out + ".json"):
+        with open(out + ".json", encoding="utf-8") as fh:
+            rows = json.load(fh)["rows"]
+        log(f"resumed: {sorted({r['scene'] for r in rows})} from {out}.json")
     for name in scenes:
+        if any(r["scene"] == name for r in rows):
+            continue
         base = sp.paper_scenario(name)
         sc_paper, g_paper, o_paper = sp.apply_preset("paper", base)
         for m in METHODS:
@@ -209,7 +222,7 @@ def main(argv=None) -> dict:
                        paper_collided=PAPER_COLLIDED[name][m],
                        lib_paper=dict(status=rp.status, iterations=rp.iterations, min_clearance=rp.min_clearance),
                        lib_default=dict(status=rd.status, iterations=rd.iterations, min_clearance=rd.min_clearance))
-            if not args.quick or m in ("curve", 10):
+            if str(m) in numpy_methods:
                 for conv in ("paper", "webster_jones"):
                     t0 = time.perf_counter()
                     st, it, mc = numpy_run(nb, sc_paper, method, n, g_paper, 150, conv)
