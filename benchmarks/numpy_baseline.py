@@ -50,6 +50,7 @@ agree.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -83,6 +84,7 @@ __all__ = [
     "closest_point_points",
     "numpy_step",
     "numpy_plan",
+    "rotation_convention",
     "jax_trajectory",
     "compare",
     "closest_point_check",
@@ -202,13 +204,46 @@ def _arc_local(L, theta, phi, s):
     return np.stack([Ls * a * np.cos(phi), Ls * a * np.sin(phi), Ls * b], axis=-1)
 
 
+# The rotation convention of the segment frames: "paper" (R_i = Rz(phi) Ry(theta), paper §2.1, as
+# softplan_jax) or "webster_jones" (R_i = Rz(phi) Ry(theta) Rz(-phi), Webster & Jones 2010, eq. 3).
+# Switch it with ``with rotation_convention("webster_jones"): ...`` (benchmarks/paper_presets.py).
+_CONVENTION = ["paper"]
+
+
+@contextlib.contextmanager
+def rotation_convention(name: str):
+    """Plan with the segment rotation ``name`` ("paper" or "webster_jones") inside the block.
+
+    The arc of segment i in its base frame is the same in both conventions;
+    only the frame handed to segment i + 1 differs (W&J rotates back by
+    -phi_i). So W&J(q) has the geometry of paper(q') with phi'_1 = phi_1,
+    phi'_i = phi_i - phi_{i-1}; the planner's pseudo-inverse step in q is not
+    the same step in q' (the minimum-norm solution depends on the
+    coordinates), so the paths differ."""
+    if name not in ("paper", "webster_jones"):
+        raise ValueError(f"unknown rotation convention {name!r}; choose 'paper' or 'webster_jones'")
+    old = _CONVENTION[0]
+    _CONVENTION[0] = name
+    try:
+        yield
+    finally:
+        _CONVENTION[0] = old
+
+
 def _rotation(theta, phi):
-    """The paper's R_i (§2.1), (..., 3, 3)."""
+    """The paper's R_i (§2.1), (..., 3, 3); Webster & Jones' Rz(phi) Ry(theta) Rz(-phi)
+    inside :func:`rotation_convention` ("webster_jones")."""
     ct, st, cp, sn = np.cos(theta), np.sin(theta), np.cos(phi), np.sin(phi)
     R = np.empty(np.shape(theta) + (3, 3))
     R[..., 0, 0], R[..., 0, 1], R[..., 0, 2] = cp * ct, -sn, cp * st
     R[..., 1, 0], R[..., 1, 1], R[..., 1, 2] = sn * ct, cp, sn * st
     R[..., 2, 0], R[..., 2, 1], R[..., 2, 2] = -st, 0.0, ct
+    if _CONVENTION[0] == "webster_jones":
+        Rz_minus = np.zeros(np.shape(phi) + (3, 3))
+        Rz_minus[..., 0, 0], Rz_minus[..., 0, 1] = cp, sn
+        Rz_minus[..., 1, 0], Rz_minus[..., 1, 1] = -sn, cp
+        Rz_minus[..., 2, 2] = 1.0
+        R = R @ Rz_minus
     return R
 
 
@@ -507,7 +542,8 @@ def repulsion(V_s, clearance: float, g: dict, kind: str = "khatib"):
     d = max(clearance, 1e-3 * g["d0"])
     if kind == "khatib":
         raw = g["eta"] * (1.0 / d - 1.0 / g["d0"]) / (d * d) if d < g["d0"] else 0.0
-        mag = g["rep_max"] * math.tanh(raw / g["rep_max"])
+        # rep_max = inf: no cap (the "paper" preset).
+        mag = raw if math.isinf(g["rep_max"]) else g["rep_max"] * math.tanh(raw / g["rep_max"])
     elif kind == "exponential":
         mag = g["rep_max"] * math.exp(-d / g["d0"])
     else:

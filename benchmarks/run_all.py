@@ -1,6 +1,7 @@
 """Regenerate every benchmark result: the closest-point benchmark and solver sweep,
-the NumPy baseline, the paper's tables, the speed targets, the batched sweep and
-the safe-step sweep (held-out seed 1, float64 and float32), one after the other
+the NumPy baseline, the paper's tables, the speed targets, the batched sweep, the
+paper tables with gain presets (paper_presets), the tuned held-out comparison
+(science) and the safe-step sweep (held-out seed 1, float64 and float32), one after the other
 (each in its own process, so that each sets jax's precision
 and devices itself).
 
@@ -30,7 +31,7 @@ def main(argv=None) -> int:
         "--skip",
         default="",
         help="comma list of scripts to skip: closest, numpy_baseline, paper_tables, speed_targets, batch_sweep, "
-        "safe_step",
+        "paper_presets, science, safe_step",
     )
     ap.add_argument("sweep_args", nargs="*", help="further batch_sweep.py arguments (after --)")
     args = ap.parse_args(argv)
@@ -44,6 +45,8 @@ def main(argv=None) -> int:
         ("speed_targets", quick),
         ("batch_sweep", quick + (["--n", str(args.sweep_n)] if args.sweep_n else []) + args.sweep_args),
     ]
+    runs.append(("paper_presets", quick))
+    runs.append(("science", quick))
     if args.quick:
         runs.append(("safe_step", ["--n", "16", "--max-steps", "60", "--chunk", "16",
                                    "--out", os.path.join(quick_dir, "safe_step")]))

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
@@ -38,6 +37,8 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from stats import fmt_rate, wilson  # noqa: E402  (shared statistics; wilson re-exported for callers)
 
 VARIANTS = ("plain", "safe", "default")
 
@@ -52,22 +53,6 @@ def variant_options(variant: str) -> dict:
         "default": {},  # the library's defaults: safe step, escapes, stall test 30 steps / 0.02
     }[variant]
 STATUSES = ("reached", "collided", "stalled", "max_steps", "non_finite")
-
-
-def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """95 % Wilson score interval of a rate k / n (Wilson 1927)."""
-    if n == 0:
-        return (float("nan"), float("nan"))
-    p = k / n
-    den = 1 + z * z / n
-    mid = (p + z * z / (2 * n)) / den
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
-    return (max(0.0, mid - half), min(1.0, mid + half))
-
-
-def fmt_rate(k: int, n: int) -> str:
-    lo, hi = wilson(k, n)
-    return f"{k} ({100 * k / n:.1f} % [{100 * lo:.1f}, {100 * hi:.1f}])"
 
 
 def parse_args(argv=None):

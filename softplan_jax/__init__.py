@@ -42,6 +42,7 @@ from .planner import (
     rollout_batch,
     rollout_jit,
 )
+from .presets import PRESETS, Preset, apply_preset, preset
 from .scenarios import (
     Scenario,
     default_start,
@@ -126,6 +127,11 @@ __all__ = [
     "result_from_rollout",
     "plan",
     "plan_batch",
+    # gain presets ("paper": the calibration that reproduces the paper; "default")
+    "Preset",
+    "PRESETS",
+    "preset",
+    "apply_preset",
     # metrics
     "true_closest",
     "dense_trajectory_clearance",

@@ -109,9 +109,13 @@ def build_parser() -> argparse.ArgumentParser:
                      "modelled by N points (default: curve)")
     run.add_argument("--n-points", type=int, default=None, metavar="N",
                      help="N of the N-point model, >= 1 (method points only; default 10)")
-    run.add_argument("--step", choices=("safe", "plain"), default="safe",
+    run.add_argument("--gains", choices=("paper", "default"), default="default",
+                     help="gain preset (gains, step options and start pose; softplan_jax.presets): paper: "
+                     "the calibration that reproduces the paper's findings (plain step, start theta 0.1); "
+                     "default: the library's (default)")
+    run.add_argument("--step", choices=("safe", "plain"), default=None,
                      help="safe: the clearance-bounded step, no step can pass through an obstacle the "
-                     "planner models exactly (default); plain: the paper's step")
+                     "planner models exactly (default); plain: the paper's step (default of --gains paper)")
     run.add_argument("--escapes", type=int, default=None, metavar="K",
                      help="random-walk escapes from local minima, >= 0 (default: the planner's)")
     run.add_argument("--seed", type=int, default=0, help="seed of the escapes' random walks (default 0)")
@@ -401,14 +405,18 @@ def _cmd_run(args) -> int:
         jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
 
-    from .planner import default_gains, make_options, result_from_rollout, rollout_jit
+    from .planner import make_options, result_from_rollout, rollout_jit
+    from .presets import apply_preset
 
     paper_names = _paper_names()
     _check_run_args(args, paper_names)
     dtype = jnp.float32 if args.float32 else jnp.float64
     try:
         scenario, label = _load(args, dtype)
-        extra = {"repulsion": args.repulsion, "step": args.step}
+        scenario, gains, extra = apply_preset(args.gains, scenario)
+        extra["repulsion"] = args.repulsion
+        if args.step is not None:
+            extra["step"] = args.step
         if args.escapes is not None:
             extra["escapes"] = args.escapes
         if args.goal_tolerance is not None:
@@ -416,7 +424,6 @@ def _cmd_run(args) -> int:
         options = make_options(args.method, args.n_points, **extra)
     except ValueError as err:
         raise InputError(str(err)) from None
-    gains = default_gains(scenario.q0.dtype)
     max_steps = int(args.max_steps)
 
     if sys.stderr.isatty():
@@ -435,7 +442,8 @@ def _cmd_run(args) -> int:
         "method": args.method,
         "n_points": args.n_points if args.method == "points" else None,
         "repulsion": args.repulsion,
-        "step": args.step,
+        "gains": args.gains,
+        "step": options.step,
         "escapes": int(rollout.escapes),
         "dtype": str(jnp.dtype(scenario.q0.dtype)),
         "status": result.status,
@@ -513,6 +521,7 @@ def _text_summary(s: dict) -> str:
         ("scenario", s["scenario"]),
         ("method", method),
         ("repulsion", s["repulsion"]),
+        ("gains", s["gains"] + (" (preset: the paper calibration)" if s["gains"] == "paper" else " (preset)")),
         ("step", ("safe (clearance-bounded)" if s["step"] == "safe" else "plain (the paper's)")
          + f", {s['escapes']} escape(s) used"),
         ("dtype", s["dtype"]),

@@ -121,7 +121,7 @@ def repulsion(V_s, clearance, gains: Gains, kind: str = "khatib"):
     subtracts it), as a function of the surface clearance.
 
     * ``"khatib"``: ``eta (1/d - 1/d0) / d^2`` for d < d0, 0 beyond (Khatib
-      1986; Ataka et al. 2016), smoothly capped at ``rep_max``;
+      1986; Ataka et al. 2016), smoothly capped at ``rep_max`` (``inf``: no cap);
     * ``"exponential"``: ``rep_max * exp(-d / d0)`` — smooth everywhere, never
       exactly zero.
     ``d`` is floored at ``1e-3 d0`` (contact or penetration still repels).
@@ -130,7 +130,10 @@ def repulsion(V_s, clearance, gains: Gains, kind: str = "khatib"):
     if kind == "khatib":
         raw = gains.eta * (1.0 / d - 1.0 / gains.d0) / (d * d)
         raw = jnp.where(d < gains.d0, raw, 0.0)
-        mag = gains.rep_max * jnp.tanh(raw / gains.rep_max)
+        # rep_max = inf: no cap (Khatib's field as printed); double-where keeps inf out of both modes.
+        uncapped = jnp.isinf(gains.rep_max)
+        cap = jnp.where(uncapped, 1.0, gains.rep_max)
+        mag = jnp.where(uncapped, raw, cap * jnp.tanh(raw / cap))
     elif kind == "exponential":
         mag = gains.rep_max * jnp.exp(-d / gains.d0)
     else:
@@ -625,7 +628,7 @@ def check_gains(gains: Gains | None, dtype) -> Gains:
     vals = {k: np.asarray(v) for k, v in gains._asdict().items()}
     for k, v in vals.items():
         if v.shape != () or not np.isfinite(v) or v <= 0:
-            if not (k == "damping" and v.shape == () and v == 0):
+            if not ((k == "damping" and v.shape == () and v == 0) or (k == "rep_max" and v.shape == () and v == np.inf)):
                 raise ValueError(f"gain {k} must be a finite positive scalar, got {v!r}")
     return Gains(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
 

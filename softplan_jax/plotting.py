@@ -689,3 +689,60 @@ def plot_cloud_fit(points, fit, ax=None, title=None, max_points: int = 6000, fig
     ax.set_title(title, fontsize=10)
     ax.legend(loc="upper left", fontsize=8)
     return fig
+
+
+# ----------------------------------------------------------------------------
+# Snapshot, top view and clearance side by side (issue 10: a 3D perspective alone hides clearance).
+
+
+def plot_snapshots_with_clearance(scenario, result, steps=None, title=None, view=None, figsize=(17, 5.2)):
+    """The 3D snapshots beside a top view (x-y) and the true clearance vs iteration.
+
+    The 3D view is :func:`plot_snapshots`; the top view draws the same arm
+    snapshots, tip path, obstacles and goal projected on the x-y plane; the
+    right panel is :func:`plot_clearance` with the minimum marked.
+
+    Args:
+      scenario: the (unbatched) Scenario that was planned.
+      result: PlanResult (with ``clearance``) or an unbatched Rollout.
+      steps, view: as :func:`plot_snapshots`.
+      title: figure title; default the status, iterations and min clearance.
+      figsize: figure size (inches).
+
+    Returns:
+      The matplotlib Figure.
+    """
+    plt = _pyplot()
+    traj = _trajectory(scenario, result)
+    fig = plt.figure(figsize=figsize)
+    ax3 = fig.add_subplot(1, 3, 1, projection="3d")
+    plot_snapshots(scenario, result, steps=steps, ax=ax3, title="3D view", view=view)
+    ax_top = fig.add_subplot(1, 3, 2)
+    for k, ob in enumerate(_obstacles(scenario)):
+        style = dict(color="0.35", lw=2.0) if ob["kind"] == "curve" else dict(color="0.35", ls="none", marker=".")
+        ax_top.plot(ob["pts"][:, 0], ob["pts"][:, 1], label="obstacles" if k == 0 else None, **style)
+    sel = _resolve_steps(steps, traj["iterations"])
+    for step, color, backbone in zip(sel, _snapshot_colors(len(sel)), _backbones(traj["q"][sel]), strict=True):
+        ax_top.plot(backbone[:, 0], backbone[:, 1], color=color, lw=2.5, label=_step_label(step, traj["iterations"]))
+    ax_top.plot(traj["tip"][:, 0], traj["tip"][:, 1], color="k", lw=0.8, ls=":", label="tip path")
+    goal = np.asarray(scenario.goal, float)
+    ax_top.plot(goal[0], goal[1], marker="*", color="gold", mec="k", ms=14, ls="none", label="goal")
+    ax_top.set_aspect("equal", adjustable="datalim")
+    ax_top.set_xlabel("X")
+    ax_top.set_ylabel("Y")
+    ax_top.grid(alpha=0.3)
+    ax_top.set_title("top view (x-y)", fontsize=11)
+    ax_top.legend(fontsize=7, loc="best")
+    ax_c = fig.add_subplot(1, 3, 3)
+    plot_clearance(result, scenario, ax=ax_c, title="true clearance")
+    if traj["clearance"] is not None and traj["clearance"].size:
+        c = traj["clearance"][: traj["iterations"] + 1]
+        c = c[:, ~np.all(np.isinf(c), axis=0)]
+        if c.size:
+            k_min = int(np.argmin(np.min(c, axis=1)))
+            ax_c.plot(k_min, float(np.min(c)), marker="v", color="crimson", ms=8, ls="none")
+            ax_c.annotate(f"min {float(np.min(c)):.3f}", (k_min, float(np.min(c))), textcoords="offset points",
+                          xytext=(6, 6), fontsize=8, color="crimson")
+    fig.suptitle(_default_title(traj) if title is None else title, fontsize=12)
+    fig.tight_layout()
+    return fig

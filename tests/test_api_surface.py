@@ -37,6 +37,8 @@ PUBLIC = [
     "Gains", "default_gains", "attraction", "repulsion", "PlanOptions", "make_options", "PAPER_STEP",
     "planner_step", "Status", "STATUS_NAMES", "status_name", "Rollout", "rollout", "rollout_jit",
     "rollout_batch", "PlanResult", "result_from_rollout", "plan", "plan_batch",
+    # gain presets
+    "Preset", "PRESETS", "preset", "apply_preset",
     # metrics
     "true_closest", "dense_trajectory_clearance", "apply_collision_checks",
     # tuning

@@ -425,3 +425,23 @@ def test_safe_step_quick_run_writes_its_report(tmp_path):
     saved = json.loads((tmp_path / "ss.json").read_text())
     assert len(saved["records"]["default/curve"]["status"]) == 4
     assert "Wilson" in (tmp_path / "ss.md").read_text()
+
+
+@pytest.mark.slow
+def test_science_quick_run(tmp_path):
+    """The whole science pipeline at toy sizes: tuning, held-out, paired tests, figures, files."""
+    import json
+
+    import science
+
+    out = tmp_path / "science"
+    rep = science.main(["--quick", "--methods", "curve,10", "--grid-d0", "0.07", "--grid-dt", "0.1",
+                        "--grid-eta", "0.001", "--grad-updates", "1", "--settings", "default,grid",
+                        "--skip-paper-figures", "--out", str(out)])
+    saved = json.loads((tmp_path / "science.json").read_text())
+    assert saved["complete"] and set(saved["records"]) == {"default", "grid"}
+    rec = saved["records"]["default"]["curve"]
+    assert len(rec["status"]) == 16 == len(rec["iterations"]) == len(rec["min_clearance"])
+    row = rep["summary"][0]
+    assert row["intervals"]["reached"] == pytest.approx(science.wilson(row["counts"]["reached"], 16))
+    assert (tmp_path / "figures" / "science_rates_vs_n.png").exists()
