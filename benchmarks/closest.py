@@ -76,6 +76,7 @@ from softplan_jax.closest import (  # noqa: E402
     curve_closest,
     points_closest,
 )
+from softplan_jax.closest_grid import GridSolverOptions  # noqa: E402
 from softplan_jax.curves import PolynomialCurve, curve_points  # noqa: E402
 
 TOL = cc.TOL  # the suite's bar, 1e-9
@@ -89,10 +90,10 @@ GRID_FIELDS = ("grid_s", "grid_u")
 def default_candidates_spec() -> str:
     """The default candidate list, made from the SolverOptions defaults read at run time.
 
-    For the default solver (``method="reduced"``): cheaper settings one knob at
+    For the default solver (``SolverOptions``): cheaper settings one knob at
     a time (Newton iterations in u x 1/2 and x 3/4, one start fewer, the grid x
     3/4, the profile's polishing steps halved), one dearer setting (every knob
-    up by half), and the 2-D ``method=grid`` solver with its own defaults as the
+    up by half), and the paper's 2-D solver (``grid``: ``GridSolverOptions()``) as the
     reference. The full run then adds the combination of the cheapest zero-miss
     changes (``combined_candidate``). Each candidate costs ~7 compiles (one per
     arm size n, the helix, the two timed functions): 1-2 min on 2 shared CPUs.
@@ -104,12 +105,8 @@ def default_candidates_spec() -> str:
         if kw and all(v >= 1 for v in kw.values()):
             items.append(",".join(f"{k}={v}" for k, v in kw.items()))
 
-    if _option_defaults().get("method", "grid") == "reduced":
-        its, starts = "reduced_iterations", "reduced_starts"
-        knobs = (its, starts, *GRID_FIELDS, "projection_iterations")
-    else:
-        its, starts = "iterations", "starts"
-        knobs = tuple(d)
+    its, starts = "iterations", "starts"
+    knobs = tuple(d)
     add(**{its: max(1, d[its] // 2)})
     add(**{its: max(1, (3 * d[its]) // 4)})
     add(**{starts: d[starts] - 1})
@@ -120,8 +117,7 @@ def default_candidates_spec() -> str:
         if k not in (its, starts, "edge_starts", *GRID_FIELDS) and d[k] > 1:
             add(**{k: d[k] // 2})
     add(**{k: d[k] + max(1, d[k] // 2) for k in knobs})
-    if _option_defaults().get("method") == "reduced":
-        items.append("method=grid")
+    items.append("grid")
     return "; ".join(items)
 
 
@@ -163,6 +159,12 @@ def parse_candidates(spec: str, strict: bool) -> tuple[list[tuple[str, SolverOpt
     out, notes, seen = [], [], set()
     for item in (s.strip() for s in spec.split(";")):
         if not item:
+            continue
+        if item == "grid":  # the paper's 2-D solver with its defaults
+            opts = GridSolverOptions()
+            if opts not in seen:
+                seen.add(opts)
+                out.append(("grid (the paper's 2-D solver)", opts))
             continue
         overrides = {}
         if item != "default":
@@ -598,6 +600,8 @@ def combined_candidate(rows) -> tuple[str, SolverOptions] | None:
     defaults = SolverOptions()._asdict()
     best = {}
     for r in rows:
+        if set(r["options"]) != set(defaults):  # another solver (the grid's)
+            continue
         diff = {k: v for k, v in r["options"].items() if v != defaults[k]}
         lowered = all(isinstance(v, (int, float)) and v < defaults[k] for k, v in diff.items())
         if r["misses"] or not diff or not lowered:
@@ -607,17 +611,22 @@ def combined_candidate(rows) -> tuple[str, SolverOptions] | None:
     if len(best) < 2:
         return None
     opts = SolverOptions(**{**defaults, **best})
-    if any(SolverOptions(**r["options"]) == opts for r in rows):
+    if any(_options_from_dict(r["options"]) == opts for r in rows):
         return None
     return "combined " + ",".join(f"{k}={v}" for k, v in best.items()), opts
 
 
+def _options_from_dict(opts: dict):
+    """SolverOptions, or GridSolverOptions for the grid solver's fields."""
+    return (GridSolverOptions if "edge_starts" in opts else SolverOptions)(**opts)
+
+
 def _work(opts: dict):
     """Newton iterations per segment-curve pair, if the fields that give it exist."""
-    if opts.get("method") == "reduced":
-        return 2 * opts["reduced_starts"] * opts["reduced_iterations"]
-    if all(k in opts for k in ("starts", "edge_starts", "iterations")):
+    if all(k in opts for k in ("starts", "edge_starts", "iterations")):  # the grid solver
         return (opts["starts"] + 4 * opts["edge_starts"]) * opts["iterations"]
+    if all(k in opts for k in ("starts", "iterations")):
+        return 2 * opts["starts"] * opts["iterations"]
     return None
 
 

@@ -10,6 +10,7 @@ from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
 from importlib.metadata import version as _version
 
 from .closest import ClosestPoint, SolverOptions, closest_point, closest_point_to_points, point_distance
+from .closest_grid import GridSolverOptions
 from .compilation_cache import compilation_cache_dir, enable_compilation_cache
 from .curves import ParametricCurve, PolynomialCurve, curve_points, fit_polynomial_curve, line_segment, stack_curves
 from .fitting import CloudFit, CurveFit, FitWarning, curve_distance, fit_curve, fit_curves, load_cloud, save_fit_scenario
@@ -92,6 +93,7 @@ __all__ = [
     # closest points (paper section 2.3)
     "ClosestPoint",
     "SolverOptions",
+    "GridSolverOptions",
     "closest_point",
     "closest_point_to_points",
     "point_distance",

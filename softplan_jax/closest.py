@@ -106,41 +106,36 @@ class ClosestPoint(NamedTuple):
 
 
 class SolverOptions(NamedTuple):
-    """Static settings of the closest-point solver (hashable; jit-static).
+    """Static settings of the default closest-point solver (hashable; jit-static).
+
+    The minimum over the arc is taken in closed form (a PCC segment is a
+    circular arc) and Newton runs on the curve parameter u alone, from the
+    smallest local minima of two sampled distance profiles; it covers the
+    paper's three cases (see the module docstring). The paper's own 2-D Newton
+    on both stationarity equations is :class:`GridSolverOptions`
+    (``softplan_jax.closest_grid``); either goes wherever a solver is taken
+    (``closest_point(..., options)``, ``plan(..., solver=...)``).
 
     Attributes:
-      grid_s: grid points along each segment (s), ends included.
-      grid_u: grid points along the curve (u), ends included.
-      starts: interior (case 1) Newton starts taken from each of the grid's
-        local minima and the two distance profiles (so 3 x starts in all).
-      edge_starts: Newton starts per boundary problem (case 2).
-      iterations: Newton iterations per start.
+      grid_s: points of the arm-side distance profile along each segment (s).
+      grid_u: samples of the curve (u), ends included.
       projection_iterations: 1-D Newton steps that polish the distance profiles.
-      method: ``"reduced"`` (default): the minimum over s is taken in closed
-        form (a PCC segment is a circular arc) and Newton runs on the curve
-        parameter u alone; ``"grid"``: the paper's 2-D Newton on both
-        stationarity equations from an (s, u) grid
-        (:mod:`softplan_jax.closest_grid`); pick it with
-        ``SolverOptions(method="grid")``, e.g. ``plan(..., solver=...)``. Both cover the paper's three cases (see
-        the module docstring) and both pass the accuracy suite with zero
-        misses. ``"reduced"`` uses ``grid_s`` (arm-side profile points),
-        ``grid_u``, ``projection_iterations``, ``reduced_starts`` and
-        ``reduced_iterations``; ``"grid"`` uses ``grid_s``, ``grid_u``,
-        ``starts``, ``edge_starts``, ``iterations`` and ``projection_iterations``.
-      reduced_starts: Newton starts in u from each of the two seed sources
-        (``"reduced"``; so 2 x reduced_starts in all).
-      reduced_iterations: Newton iterations in u per start (``"reduced"``).
+      starts: Newton starts in u from each of the two seed sources (so 2 x starts in all).
+      iterations: Newton iterations in u per start.
     """
 
     grid_s: int = 10
     grid_u: int = 32
-    starts: int = 3
-    edge_starts: int = 2
-    iterations: int = 12
     projection_iterations: int = 4
-    method: str = "reduced"
-    reduced_starts: int = 2
-    reduced_iterations: int = 8
+    starts: int = 2
+    iterations: int = 8
+
+    def pair_solver(self, curve):
+        """``seg -> (s, u, D^2, converged)`` for one curve (derivatives w.r.t. q not propagated)."""
+        # The curve's u-samples and points do not depend on the segment: computed once.
+        u_grid = u_samples(curve, self.grid_u)
+        C_grid = jax.vmap(curve.point)(u_grid)
+        return lambda seg: _solve_pair_reduced(seg, curve, u_grid, C_grid, self)
 
 
 DEFAULT_OPTIONS = SolverOptions()
@@ -377,8 +372,8 @@ def _solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOpti
     the u-boundary cases and the endpoint pairs (eqs. 15-16, case 3).
 
     Starts for Newton in u (:func:`_reduced_newton`, the stationarity equation
-    dD^2/du = 0 at s*(u), eq. 14): the ``reduced_starts`` smallest local minima of g
-    sampled on ``u_grid`` (both ends included), and the ``reduced_starts`` smallest
+    dD^2/du = 0 at s*(u), eq. 14): the ``starts`` smallest local minima of g
+    sampled on ``u_grid`` (both ends included), and the ``starts`` smallest
     local minima of the arm-side profile — for each of ``grid_s`` points along
     the segment, its nearest curve point (best sample, polished by
     ``projection_iterations`` 1-D Newton steps). The profile finds a basin of
@@ -387,7 +382,7 @@ def _solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOpti
     worse than the grid. Returns (s, u, D^2, converged).
     """
     dtype = seg.q_i.dtype
-    k = options.reduced_starts
+    k = options.starts
     s_grid, g_grid = jax.vmap(lambda c: _project_to_arc(seg, c))(C_grid)
     # Arm-side profile.
     s_arm = jnp.linspace(0.0, 1.0, options.grid_s, dtype=dtype)
@@ -403,7 +398,7 @@ def _solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOpti
     u0 = jnp.concatenate([u_grid[kg], u_seed])
     s0 = jnp.concatenate([s_grid[kg], s_seed])
     f0 = jnp.concatenate([g_grid[kg], g_seed])
-    u_n, s_n, f_n = jax.vmap(lambda a, b, c: _reduced_newton(seg, curve, a, b, c, options.reduced_iterations))(
+    u_n, s_n, f_n = jax.vmap(lambda a, b, c: _reduced_newton(seg, curve, a, b, c, options.iterations))(
         u0, s0, f0
     )
     j = jnp.argmin(g_grid)
@@ -460,7 +455,7 @@ def curve_closest(q, curve, options: SolverOptions) -> ClosestPoint:
     Args:
       q: (n, 3) configuration.
       curve: one PolynomialCurve or ParametricCurve (vmap for stacks).
-      options: SolverOptions (static).
+      options: SolverOptions or GridSolverOptions (static).
 
     Returns:
       ClosestPoint (``segment`` int32, ``u`` of q's dtype).
@@ -470,15 +465,7 @@ def curve_closest(q, curve, options: SolverOptions) -> ClosestPoint:
     segs = Segment(q, R_bases, P_bases)
     segs_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
     curve_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, curve)
-    if options.method == "reduced":
-        # The curve's u-samples and points do not depend on the segment: computed once.
-        u_grid = u_samples(curve_nograd, options.grid_u)
-        C_grid = jax.vmap(curve_nograd.point)(u_grid)
-        solve = lambda sg: _solve_pair_reduced(sg, curve_nograd, u_grid, C_grid, options)  # noqa: E731
-    else:
-        from .closest_grid import solve_pair_grid  # the paper's 2-D solver, built on this module's kernel
-
-        solve = lambda sg: solve_pair_grid(sg, curve_nograd, options)  # noqa: E731
+    solve = options.pair_solver(curve_nograd)  # SolverOptions or closest_grid.GridSolverOptions
     s_all, u_all, d2_all, conv_all = jax.vmap(solve)(segs_nograd)
     i = jnp.argmin(d2_all)
     seg = jax.tree_util.tree_map(lambda x: x[i], segs)

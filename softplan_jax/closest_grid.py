@@ -1,4 +1,5 @@
-"""The paper's 2-D closest-point solver (paper §2.3, eqs. 13-18), ``SolverOptions(method="grid")``.
+"""The paper's 2-D closest-point solver (paper §2.3, eqs. 13-18), picked with
+:class:`GridSolverOptions` wherever a solver is taken.
 
 ``D^2`` is evaluated on a ``grid_s x grid_u`` grid of the (s, u) box (ends
 included; half the u samples evenly spaced in u, half in arc length). Case 1
@@ -16,21 +17,20 @@ Each Newton step solves ``H dx = -g`` with the gradient and Hessian of
 coordinate on a bound whose gradient points outward is held (projected
 Newton), and the step is limited by the shared trust region
 (:func:`softplan_jax.closest.trust_region_radius`) and accepted only if it
-lowers ``D^2``. The default solver (``"reduced"``) is in
-:mod:`softplan_jax.closest`; this one is kept as the paper's formulation and
-as a cross-check (it passes the accuracy suite on the polynomial cases).
-Uses the ``SolverOptions`` fields ``grid_s``, ``grid_u``, ``starts``,
-``edge_starts``, ``iterations`` and ``projection_iterations``.
+lowers ``D^2``. The default solver (:class:`~softplan_jax.closest.SolverOptions`)
+is in :mod:`softplan_jax.closest`; this one is kept as the paper's formulation
+and as a cross-check (it passes the accuracy suite on the polynomial cases).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from .closest import (
     Segment,
-    SolverOptions,
     first_order_converged,
     local_minima_1d,
     pair_terms,
@@ -39,7 +39,33 @@ from .closest import (
 )
 from .numerics import psd_shift
 
-__all__ = ["solve_pair_grid"]
+__all__ = ["GridSolverOptions", "solve_pair_grid"]
+
+
+class GridSolverOptions(NamedTuple):
+    """Static settings of the paper's 2-D solver (hashable; jit-static): pass it
+    where a :class:`~softplan_jax.closest.SolverOptions` goes.
+
+    Attributes:
+      grid_s: grid points along each segment (s), ends included.
+      grid_u: grid points along the curve (u), ends included.
+      starts: interior (case 1) Newton starts taken from each of the grid's
+        local minima and the two distance profiles (so 3 x starts in all).
+      edge_starts: Newton starts per boundary problem (case 2).
+      iterations: Newton iterations per start.
+      projection_iterations: 1-D Newton steps that polish the distance profiles.
+    """
+
+    grid_s: int = 10
+    grid_u: int = 32
+    starts: int = 3
+    edge_starts: int = 2
+    iterations: int = 12
+    projection_iterations: int = 4
+
+    def pair_solver(self, curve):
+        """``seg -> (s, u, D^2, converged)`` for one curve (derivatives w.r.t. q not propagated)."""
+        return lambda seg: solve_pair_grid(seg, curve, self)
 
 
 def _newton_step(seg: Segment, curve, x, free):
@@ -120,10 +146,10 @@ def _local_minima_2d(vals, k: int):
     return jax.lax.top_k(-score, k)[1]
 
 
-def solve_pair_grid(seg: Segment, curve, options: SolverOptions):
+def solve_pair_grid(seg: Segment, curve, options: GridSolverOptions):
     """All three cases of paper §2.3 for one segment and one curve (no
     derivatives w.r.t. q), by 2-D Newton from an (s, u) grid
-    (``SolverOptions(method="grid")``; see the module docstring).
+    (:class:`GridSolverOptions`; see the module docstring).
 
     Returns (s, u, D^2, converged) of the best candidate.
     """

@@ -164,7 +164,8 @@ class PlanOptions(NamedTuple):
         (zero-radius curves that cross meet at a single point, which a
         solver reaches only to rounding). The rollout uses
         ``max(contact_tolerance, 10 sqrt(eps))``: 1e-6 in float64, 3.5e-3 in float32.
-      solver: SolverOptions of the exact closest-point solver.
+      solver: the exact closest-point solver: SolverOptions (default) or
+        GridSolverOptions (the paper's 2-D solver).
       step: "safe" (default): the clearance-bounded step (see the module
         docstring); "plain": the paper's step ``q + dt qdot`` (paper eq. 9).
       safe_fraction: the safe step keeps the motion bound of every step below

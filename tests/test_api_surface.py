@@ -28,7 +28,7 @@ PUBLIC = [
     "fit_polynomial_curve", "CurveFit", "CloudFit", "FitWarning", "fit_curve", "fit_curves",
     "curve_distance", "load_cloud", "save_fit_scenario",
     # closest points (paper section 2.3)
-    "ClosestPoint", "SolverOptions", "closest_point", "closest_point_to_points", "point_distance",
+    "ClosestPoint", "SolverOptions", "GridSolverOptions", "closest_point", "closest_point_to_points", "point_distance",
     # scenarios
     "Scenario", "default_start", "make_scenario", "stack_scenarios", "scenario_warnings",
     "paper_scenario", "random_scenarios", "load_scenario", "save_scenario", "scenario_from_dict",

@@ -340,7 +340,7 @@ HARD_CASES = [
     for c in json.load(open(os.path.join(os.path.dirname(__file__), "data", "hard_closest_cases.json")))
 ]
 
-GRID = SolverOptions(method="grid")
+GRID = sp.GridSolverOptions()
 _pairwise_grid = jax.jit(jax.vmap(lambda q, c: sp.closest_point(q, c, GRID)))
 
 
@@ -357,7 +357,7 @@ def test_known_hard_cases(options):
 
 @pytest.mark.slow  # the non-default solver: ~2 min of compiling
 def test_grid_method_matches_oracle():
-    """The alternative 2-D solver (method="grid") on the main and paper suites."""
+    """The alternative 2-D solver (GridSolverOptions) on the main and paper suites."""
     for which, cases in (("main", cc.main_cases()), ("paper", cc.paper_cases())):
         lib = run_cases(cases, fn=_pairwise_grid)
         errs = [abs(float(r["distance"]) - o.distance) for r, o in zip(lib, oracle_results(which), strict=True)]
