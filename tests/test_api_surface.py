@@ -156,3 +156,15 @@ def test_import_is_light():
                          cwd=REPO, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+def test_every_subpackage_is_installed():
+    """pyproject's package list names every package of the tree (a subpackage left out
+    works in an editable install and is missing from a real one)."""
+    import tomllib
+
+    with open(os.path.join(REPO, "pyproject.toml"), "rb") as fh:
+        listed = set(tomllib.load(fh)["tool"]["setuptools"]["packages"])
+    found = {"softplan_jax"} | {info.name for info in pkgutil.walk_packages([PACKAGE_DIR], prefix="softplan_jax.")
+                                if info.ispkg}
+    assert listed == found, f"pyproject.toml packages {sorted(listed)} != packages in the tree {sorted(found)}"
