@@ -242,6 +242,12 @@ def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: Pla
     segments = jnp.concatenate([jnp.array([n - 1], jnp.int32), cps.segment])
     s = jnp.concatenate([jnp.ones((1,), q.dtype), cps.s])
     J = points_jacobian(q, segments, s)
+    # Padding slots get a full-rank stand-in Jacobian [I 0] (their force is zero): with
+    # damping 0 (the plain pseudo-inverse) their placeholder point's Jacobian is singular
+    # and would give NaN * 0 = NaN (double-where: finite values and gradients).
+    active = jnp.concatenate([jnp.ones((1,), bool), mask])
+    stand_in = jnp.eye(3, 3 * n, dtype=J.dtype)
+    J = jnp.where(active[:, None, None], J, stand_in)
     pinvs = jax.vmap(lambda J_k: damped_pinv(J_k, gains.damping))(J)  # (1 + m, 3n, 3)
     V_s = cps.obstacle_point - cps.arm_point
     clearance = cps.distance - scenario.arm_radius - radius
