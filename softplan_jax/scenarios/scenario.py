@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..curves import ParametricCurve, PolynomialCurve, curve_points, stack_curves
+from ..obstacles import obstacle_count  # re-exported: the layout belongs to obstacles
 from ..validation import as_float_array, check_configuration, check_finite, check_points
 
 __all__ = [
@@ -72,11 +73,6 @@ class Scenario(NamedTuple):
     @property
     def n_segments(self) -> int:
         return self.q0.shape[-2]
-
-
-def obstacle_count(scenario: Scenario) -> int:
-    """Number of obstacle slots (padding included): curves + point sets + parametric."""
-    return scenario.curves.coeffs.shape[-3] + scenario.points.shape[-3] + len(scenario.parametric)
 
 
 def default_start(n_segments: int = 3, length: float = 1.0, dtype=None):
