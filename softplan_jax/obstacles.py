@@ -187,9 +187,10 @@ def obstacle_samples(scenario, samples: int) -> list[dict]:
     """Every real obstacle, sampled for drawing (host side, NumPy), in slot order.
 
     Returns:
-      A list of ``dict(kind="curve" | "points", pts (N, 3), radius float)``:
-      curves sampled at ``samples`` values of u evenly spaced (ends included),
-      point sets as their unmasked points.
+      A list of ``dict(kind="curve" | "points", pts (N, 3), radius float,
+      slot int)``: curves sampled at ``samples`` values of u evenly spaced
+      (ends included), point sets as their unmasked points; ``slot`` is the
+      obstacle's index in the clearance records (padding slots counted).
     """
     obs = []
     coeffs = np.asarray(scenario.curves.coeffs, dtype=float)
@@ -198,14 +199,16 @@ def obstacle_samples(scenario, samples: int) -> list[dict]:
     for k in np.nonzero(np.asarray(scenario.curve_mask))[0]:
         u = np.linspace(u_range[k, 0], u_range[k, 1], samples)
         pts = np.stack([np.polynomial.polynomial.polyval(u, coeffs[k, a]) for a in range(3)], axis=-1)
-        obs.append(dict(kind="curve", pts=pts, radius=float(radius[k])))
+        obs.append(dict(kind="curve", pts=pts, radius=float(radius[k]), slot=int(k)))
     points = np.asarray(scenario.points, dtype=float)
     point_mask = np.asarray(scenario.point_mask)
     point_radius = np.asarray(scenario.point_radius, dtype=float)
     for k in range(points.shape[0]):
         if point_mask[k].any():
-            obs.append(dict(kind="points", pts=points[k][point_mask[k]], radius=float(point_radius[k])))
-    for pc in scenario.parametric:
+            obs.append(dict(kind="points", pts=points[k][point_mask[k]], radius=float(point_radius[k]),
+                            slot=coeffs.shape[0] + k))
+    for k, pc in enumerate(scenario.parametric):
         pts = np.asarray(curve_points(pc, samples), dtype=float)
-        obs.append(dict(kind="curve", pts=pts, radius=float(np.asarray(pc.radius))))
+        obs.append(dict(kind="curve", pts=pts, radius=float(np.asarray(pc.radius)),
+                        slot=coeffs.shape[0] + points.shape[0] + k))
     return obs

@@ -217,6 +217,24 @@ def test_goal_inside_an_obstacle_warns():
         sp.make_scenario([1.0, 0.0, 1.2], [wire])  # 0.2 away: no warning
 
 
+def test_goal_warning_names_the_obstacle_slot():
+    """The message names the slots of the clearance records (padding slots counted),
+    for each kind of obstacle: curve, point set and parametric curve."""
+    wire = sp.line_segment([1.0, -1.0, 1.0], [1.0, 1.0, 1.0], radius=0.05)
+    pts = np.array([[0.5, 0.5, 0.5], [0.6, 0.5, 0.5]])
+    ring = sp.ParametricCurve(lambda u: jnp.stack([jnp.cos(u), jnp.sin(u), jnp.full_like(u, 2.0)]), (0.0, 3.0))
+    far = [0.0, 0.0, 1.5]
+    for goal, slot in (([1.0, 0.0, 1.02], 0), ([0.5, 0.5, 0.5], 2), ([1.0, 0.0, 2.0], 3)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sc = sp.make_scenario(goal, [wire, pts, ring], curve_slots=2)
+        msgs = sp.scenario_warnings(sc)
+        assert len(msgs) == 1 and f"obstacle(s) [{slot}]" in msgs[0], (goal, msgs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert sp.scenario_warnings(sp.make_scenario(far, [wire, pts, ring], curve_slots=2)) == []
+
+
 def test_goal_beyond_reach_warns():
     with pytest.warns(UserWarning, match="farther than the arm reaches"):
         sp.make_scenario([0.0, 0.0, 4.0], [], L_max=1.2)

@@ -26,8 +26,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..curves import ParametricCurve, PolynomialCurve, curve_points, stack_curves
-from ..obstacles import obstacle_count  # re-exported: the layout belongs to obstacles
+from ..curves import ParametricCurve, PolynomialCurve, stack_curves
+from ..obstacles import obstacle_count, obstacle_samples  # obstacle_count re-exported: the layout belongs to obstacles
 from ..validation import as_float_array, check_configuration, check_finite, check_points
 
 __all__ = [
@@ -204,30 +204,16 @@ def scenario_warnings(scenario: Scenario) -> list[str]:
     out = []
     goal = np.asarray(scenario.goal, np.float64)
     arm_r = float(scenario.arm_radius)
-    # Distance sampled on the curves minus half the sample spacing: never larger than the true one.
+    # Every real obstacle in slot order (the layout belongs to obstacles.py). Curves:
+    # the sampled distance minus half the sample spacing, never larger than the true one.
     hits = []
-    m_c = scenario.curves.coeffs.shape[0]
-    # Polynomial curves sampled on the host (NumPy, Horner's rule), all slots at once.
-    coeffs = np.asarray(scenario.curves.coeffs, np.float64)  # (m_c, 3, K)
-    u_range = np.asarray(scenario.curves.u_range, np.float64)
-    t = np.linspace(0.0, 1.0, _GOAL_CHECK_SAMPLES)
-    u = u_range[:, :1] + (u_range[:, 1:] - u_range[:, :1]) * t  # (m_c, S)
-    pts = np.zeros((m_c, 3, t.size))
-    for k in range(coeffs.shape[-1] - 1, -1, -1):
-        pts = pts * u[:, None, :] + coeffs[:, :, k, None]
-    samples = [(k, np.swapaxes(pts[k], 0, 1), float(scenario.curves.radius[k])) for k in range(m_c)
-               if bool(scenario.curve_mask[k])]
-    samples += [(m_c + scenario.points.shape[0] + k, np.asarray(curve_points(pc, _GOAL_CHECK_SAMPLES), np.float64),
-                 float(pc.radius)) for k, pc in enumerate(scenario.parametric)]
-    for k, pts_k, radius in samples:
-        spacing = float(np.max(np.linalg.norm(np.diff(pts_k, axis=0), axis=-1)))
-        d = float(np.min(np.linalg.norm(pts_k - goal, axis=-1))) - 0.5 * spacing
-        if d <= radius + arm_r:
-            hits.append(k)
-    for k in range(scenario.points.shape[0]):
-        pts = np.asarray(scenario.points[k], np.float64)[np.asarray(scenario.point_mask[k])]
-        if pts.size and np.min(np.linalg.norm(pts - goal, axis=-1)) <= float(scenario.point_radius[k]) + arm_r:
-            hits.append(m_c + k)
+    for o in obstacle_samples(scenario, _GOAL_CHECK_SAMPLES):
+        pts = o["pts"]
+        d = float(np.min(np.linalg.norm(pts - goal, axis=-1)))
+        if o["kind"] == "curve":
+            d -= 0.5 * float(np.max(np.linalg.norm(np.diff(pts, axis=0), axis=-1)))
+        if d <= o["radius"] + arm_r:
+            hits.append(o["slot"])
     if hits:
         out.append(f"the goal {goal.tolist()} lies on or inside obstacle(s) {hits} (within the obstacle's "
                    "radius plus the arm's): it cannot be reached without contact")
