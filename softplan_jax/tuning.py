@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import sys
 import time
-from functools import partial
 from typing import NamedTuple
 
 import jax
@@ -86,15 +85,13 @@ def _to_gains(params, fixed):
     return Gains(**{k: (jnp.exp(params[k]) if k in params else v) for k, v in fixed.items()})
 
 
-@partial(jax.jit, static_argnames=("options", "max_steps"))
-def _value_and_grad(params, fixed, scenarios, weights, options, max_steps):
-    """Loss and gradient in the log-gains; module level so that scenes, starting
-    gains and weights are arguments: one compilation per padded shape, reused
-    by every later :func:`tune_gains` call."""
-    return jax.value_and_grad(lambda p: batch_loss(_to_gains(p, fixed), scenarios, options, max_steps, weights))(params)
+# Loss and gradient in the gains: the very program of notebooks/tuning.ipynb and
+# tests/test_planner.py (``jax.jit(jax.value_and_grad(batch_loss))`` with the
+# scenes as an argument), so that they share one compilation through jax's
+# persistent cache. tune_gains applies the chain rule to the log-gains itself.
+_loss_and_grad = jax.jit(jax.value_and_grad(batch_loss), static_argnames=("options", "max_steps"))
 
-
-# AOT-compiled _value_and_grad, keyed by argument structure, shapes, dtypes and statics.
+# AOT-compiled _loss_and_grad, keyed by argument structure, shapes, dtypes and statics.
 _COMPILED: dict = {}
 
 
@@ -136,7 +133,10 @@ def tune_gains(scenarios: Scenario, gains: Gains | None = None, *, steps: int = 
     def to_gains(p):
         return _to_gains(p, fixed)
 
-    args = (params, fixed, scenarios, weights)
+    # The default weights stay out of the arguments (batch_loss's default, baked in as
+    # constants), exactly as in the notebook's call: the same program.
+    extra = () if weights == LossWeights() else (weights,)
+    args = (g0, scenarios) + extra
     leaves, treedef = jax.tree_util.tree_flatten(args)
     # Weak typing is part of the key: a Python float and a float64 array compile differently.
     key = (treedef, tuple((jnp.shape(x), jnp.result_type(x), getattr(x, "weak_type", isinstance(x, float)))
@@ -145,12 +145,15 @@ def tune_gains(scenarios: Scenario, gains: Gains | None = None, *, steps: int = 
     compile_s = 0.0
     if compiled is None:
         t0 = time.perf_counter()
-        compiled = _value_and_grad.lower(*args, options=opts, max_steps=int(max_steps)).compile()
+        compiled = _loss_and_grad.lower(g0, scenarios, opts, int(max_steps), *extra).compile()
         compile_s = time.perf_counter() - t0
         _COMPILED[key] = compiled
 
     def value_and_grad(p):
-        return compiled(p, fixed, scenarios, weights)
+        g = to_gains(p)
+        loss, grad = compiled(g, scenarios, *extra)
+        # Chain rule to the log-gains: d loss / d log g = g * d loss / d g.
+        return loss, {k: getattr(grad, k) * getattr(g, k) for k in p}
 
     opt = optimizer or optax.adam(learning_rate)
     state = opt.init(params)
