@@ -222,7 +222,8 @@ def test_gradient_through_rollout_matches_finite_differences(paper):
     opts = sp.PlanOptions(method="curve")
     # A wider influence distance than the default, so that the repulsion acts
     # within the short horizon (the arm passes 0.3-0.4 from a tree branch early).
-    g = sp.default_gains()._replace(d0=jnp.asarray(0.5))
+    # float64 like the default gains (a weakly typed jnp.asarray(0.5) would be another program).
+    g = sp.default_gains()._replace(d0=jnp.asarray(0.5, jnp.float64))
     steps = 10  # no rollout ends within 10 steps: the loss is smooth in the gains
     # One compilation for the loss and its gradient (the finite differences use its value).
     loss_and_grad = jax.jit(jax.value_and_grad(sp.batch_loss), static_argnames=("options", "max_steps"))
