@@ -1,23 +1,28 @@
-"""The NumPy/SciPy baseline (benchmarks/numpy_baseline.py) against the JAX planner
-and against dense brute force.
+"""The NumPy/SciPy peer (benchmarks/numpy_baseline.py) against the JAX planner,
+against dense brute force and against the closest-point oracle.
 
 Tolerances:
 
 * Trajectories, 1e-8 over 10 steps. Both sides run in float64 and implement
-  the same formulas; the only intended difference is the Jacobian: central
-  finite differences with step eps^(1/3) (~6e-6) in the baseline, ``jacfwd`` in
-  the library. Its error is ~h^2 |P'''| / 6 + eps / h ~ 5e-11, so each step
-  differs by ~dt |qdot| 1e-10 ~ 1e-12 (measured: ~1e-12 over 10 steps, <= 2e-10
-  over 60). 1e-8 leaves a 1000x margin, yet is 6 orders of magnitude below
-  one step's motion (~1e-2), so a wrong gain, sign, clip, closest point or
-  Jacobian column on either side fails.
+  the same formulas; the Jacobians are analytic in the peer and ``jacfwd`` in
+  the library, both exact to rounding, and both closest-point solvers
+  converge to rounding, so each step differs by rounding only (measured:
+  ~1e-14 over 10 steps). 1e-8 is 6 orders of magnitude below one step's
+  motion (~1e-2), so a wrong gain, sign, clip, closest point or Jacobian
+  column on either side fails.
+* Jacobians: against the complex-step oracle (exact to rounding) to 1e-12,
+  and against central finite differences (error ~1e-10) to 2e-9, under both
+  rotation conventions.
 * Closest points, against a dense grid of D(s, u) per segment: the solver
   must be no worse than the grid (up to rounding, 1e-12), and not better than
-  the grid's rigorous Lipschitz bound ``L_i ds/2 + max|F_o'| du/2`` allows.
+  the grid's rigorous Lipschitz bound ``L_i ds/2 + max|F_o'| du/2`` allows;
+  and against the oracle's answers on the paper-obstacle corpus
+  (``closest_cases``, ``TOL`` = 1e-9).
 """
 
 from __future__ import annotations
 
+import closest_cases
 import jax.numpy as jnp
 import numpy as np
 import numpy_baseline as nb  # benchmarks/ is on sys.path (conftest); importing it changes no jax setting
@@ -53,11 +58,14 @@ def _dense_curve_distance(q, coeffs, u_range, n_s=501, n_u=2001):
 
 def _configurations():
     """The straight default start (parallel to the tree's trunk: a continuum of
-    minima) and a seeded random bent arm with one straight segment."""
+    minima) and seeded random bent arms, each with one straight segment."""
     rng = np.random.default_rng(1234)
-    q = np.stack([rng.uniform(0.7, 1.3, 3), rng.uniform(-2.0, 2.0, 3), rng.uniform(-np.pi, np.pi, 3)], 1)
-    q[1, 1] = 0.0
-    return [np.asarray(sp.default_start(dtype=jnp.float64)), q]
+    qs = [np.asarray(sp.default_start(dtype=jnp.float64))]
+    for k in range(3):
+        q = np.stack([rng.uniform(0.7, 1.3, 3), rng.uniform(-2.0, 2.0, 3), rng.uniform(-np.pi, np.pi, 3)], 1)
+        q[(k + 1) % 3, 1] = 0.0
+        qs.append(q)
+    return qs
 
 
 @pytest.mark.parametrize("name", ["sim1", "sim2", "tree"])
@@ -77,11 +85,31 @@ def test_closest_point_matches_dense_grid(name):
             assert 0.0 <= cp.s <= 1.0 and u_range[0] <= cp.u <= u_range[1]
 
 
-@pytest.mark.parametrize("theta", [0.0, 1e-9, 0.3, -2.5])
-def test_fd_jacobian_matches_complex_step(theta):
+def test_closest_point_matches_oracle_corpus():
+    """The oracle's answers for the paper's obstacles (closest_cases "paper": 20 arms each)."""
+    cases = closest_cases.cases("paper")
+    want = closest_cases.oracle_distances("paper")
+    got = np.array([nb.closest_point_curve(c.q, c.coeffs, c.u_range).distance for c in cases])
+    assert np.all(np.abs(got - want) <= closest_cases.TOL), np.max(np.abs(got - want))
+
+
+@pytest.mark.parametrize("theta", [0.0, 1e-9, 1e-4, 0.3, -2.5])
+def test_analytic_jacobians_match_complex_step_and_fd(theta):
     q = np.array([[1.0, theta, 0.4], [0.8, -0.7, 2.1], [1.2, theta, -1.0]])
-    np.testing.assert_allclose(nb.tip_jacobian(q), oracle.tip_jacobian(q), atol=2e-9)
-    np.testing.assert_allclose(nb.point_jacobian(q, 1, 0.37), oracle.point_jacobian(q, 1, 0.37), atol=2e-9)
+    for i, s in [(0, 0.0), (0, 0.6), (1, 0.37), (1, 1.0), (2, 0.2), (2, 1.0)]:
+        np.testing.assert_allclose(nb.point_jacobian(q, i, s), oracle.point_jacobian(q, i, s), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(nb.tip_jacobian(q), oracle.tip_jacobian(q), rtol=0, atol=1e-12)
+    # The oracle knows only the paper's R_i: finite differences for both conventions.
+    for convention in ("paper", "webster_jones"):
+        with nb.rotation_convention(convention):
+            np.testing.assert_allclose(nb.tip_jacobian(q), nb.fd_jacobian(nb.tip_position, q), rtol=0, atol=2e-9)
+            for i, s in [(0, 0.6), (1, 0.37), (2, 0.2)]:
+                fd = nb.fd_jacobian(lambda Q, i=i, s=s: nb.segment_point(Q, i, s), q)
+                np.testing.assert_allclose(nb.point_jacobian(q, i, s), fd, rtol=0, atol=2e-9)
+            # Several points in one call, as the planner step asks for them.
+            Js = nb.point_jacobians(q, [2, 0], [1.0, 0.6])
+            np.testing.assert_allclose(Js[0], nb.tip_jacobian(q), rtol=0, atol=1e-15)
+            np.testing.assert_allclose(Js[1], nb.point_jacobian(q, 0, 0.6), rtol=0, atol=1e-15)
 
 
 def _max_diff(a, b):
