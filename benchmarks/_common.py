@@ -151,8 +151,8 @@ def _json_default(x):
         return int(x)
     if isinstance(x, (np.floating,)):
         return float(x)
-    if isinstance(x, np.ndarray):
-        return x.tolist()
+    if isinstance(x, np.ndarray) or hasattr(x, "__array__"):  # NumPy and jax arrays
+        return np.asarray(x).tolist()
     raise TypeError(f"not JSON serialisable: {type(x).__name__}")
 
 

@@ -179,7 +179,7 @@ def main(argv=None) -> dict:
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
     import optax
-    from _common import FIGURES_DIR, RESULTS_DIR, finish_machine, log, machine_info
+    from _common import FIGURES_DIR, RESULTS_DIR, finish_machine, log, machine_info, write_results
 
     import softplan_jax as sp
     from softplan_jax.tuning import LossWeights, tune_gains
@@ -272,12 +272,7 @@ def main(argv=None) -> dict:
                       scenes=dict(train=dict(seed=args.train_seed, n=args.n_train),
                                   heldout=dict(seed=args.eval_seed, n=args.n_eval)),
                       records=records)
-        md = markdown(args, report, argv)
-        os.makedirs(os.path.dirname(out), exist_ok=True)
-        with open(out + ".json", "w", encoding="utf-8") as fh:
-            json.dump(report, fh, indent=1, default=_jsonable)
-        with open(out + ".md", "w", encoding="utf-8") as fh:
-            fh.write(md)
+        write_results(out, report, markdown(args, report, argv))
         stamp(f"wrote {out}.md and .json ({'complete' if final else 'partial'}) at {total:.0f} s")
         return report
 
@@ -332,6 +327,8 @@ def paired_of(records) -> list:
 def merge(paths, argv) -> dict:
     """Merge the held-out settings of later science JSON files into the first one
     (same held-out seed and size required); rewrite its Markdown, JSON and figures."""
+    from _common import write_results
+
     import softplan_jax as sp
 
     with open(paths[0], encoding="utf-8") as fh:
@@ -378,24 +375,8 @@ def merge(paths, argv) -> dict:
     rep["figures"] = make_figures(args, rep["summary"], rep["grid"], fig_dir, sp, print, paper=False) + paper
     rep["complete"] = all(s in rep["records"] for s in args.setting_list)
     rep["command"] = "python -m benchmarks.science"
-    md = markdown(args, rep, None)
-    with open(out + ".json", "w", encoding="utf-8") as fh:
-        json.dump(rep, fh, indent=1, default=_jsonable)
-    with open(out + ".md", "w", encoding="utf-8") as fh:
-        fh.write(md)
+    write_results(out, rep, markdown(args, rep, None))
     return rep
-
-
-def _jsonable(x):
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (np.floating,)):
-        return float(x)
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, tuple):
-        return list(x)
-    return str(x)
 
 
 def make_figures(args, summary, grid_rows, fig_dir, sp, stamp, paper: bool = True) -> list[str]:
