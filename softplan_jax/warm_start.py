@@ -178,7 +178,8 @@ def _chord_bound(g0, g1, l2):
 def _side_bounds(seg: Segment, curve, data: CurveData, u_i, half, sign: float):
     """Lower bounds on d_i(F_o(u)) over the NODES - 1 pieces of the geometric grid on
     one side of u_i (sign +1: u > u_i + half; -1: u < u_i - half). Returns
-    (bounds (NODES - 1,), whether that side reaches outside the window () bool)."""
+    (bounds (NODES - 1,), whether that side reaches outside the window () bool,
+    the cut points (NODES,), from the window's edge outwards)."""
     lo, hi = curve.u_range[0], curve.u_range[1]
     end = hi if sign > 0 else lo
     extent = sign * (end - u_i)
@@ -195,7 +196,7 @@ def _side_bounds(seg: Segment, curve, data: CurveData, u_i, half, sign: float):
         kappa = jnp.minimum(data.curvature, jax.vmap(lambda a, b: _polynomial_curvature_bound(curve, a, b))(a, b))
     else:
         kappa = data.curvature
-    return jnp.sqrt(jnp.maximum(q, 0.0)) - 0.125 * kappa * (b - a) ** 2, outside
+    return jnp.sqrt(jnp.maximum(q, 0.0)) - 0.125 * kappa * (b - a) ** 2, outside, t
 
 
 class _Pairs(NamedTuple):
@@ -234,7 +235,7 @@ def _polish_and_certify(segs: Segment, curve, data: CurveData, u_prev, solver: S
     def certify(seg, u_i):
         ok = True
         for sign in (1.0, -1.0):
-            bounds, outside = _side_bounds(seg, curve, data, u_i, half, sign)
+            bounds, outside, _ = _side_bounds(seg, curve, data, u_i, half, sign)
             ok = ok & (~outside | jnp.all(bounds >= floor))
         return ok
 
