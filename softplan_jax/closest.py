@@ -219,12 +219,19 @@ def trust_region_step_1d(x, step, radius, width, lo, hi):
 
 
 def local_minima_1d(vals, k: int):
-    """Indices (k,) of the k smallest local minima of a 1-D array (non-minima last)."""
+    """Indices (k,) of the k smallest local minima of a 1-D array (non-minima last, by
+    index; distinct indices). k passes of argmin, not ``lax.top_k`` (a sort on CPU):
+    the same indices, a few per cent off the full solver's step (benchmarks/warm_start.py)."""
     inf = jnp.full((1,), jnp.inf, vals.dtype)
     padded = jnp.concatenate([inf, vals, inf])
     is_min = (vals <= padded[:-2]) & (vals <= padded[2:])
-    score = jnp.where(is_min, vals, jnp.inf)
-    return jax.lax.top_k(-score, k)[1]
+    score = jnp.where(is_min, vals, jnp.finfo(vals.dtype).max)
+    picks = []
+    for _ in range(k):
+        i = jnp.argmin(score)
+        picks.append(i)
+        score = score.at[i].set(jnp.inf)
+    return jnp.stack(picks).astype(jnp.int32)
 
 
 def u_samples(curve, n: int):
