@@ -191,7 +191,8 @@ def main(argv=None):
         log(f"speed: tree single and a batch of {batch} random scenes, {args.steps} steps, {rounds} rounds ...")
         report["speed"] = speed(batch, args.steps, rounds, args.seed)
     finish_machine(machine)
-    cmd = "python benchmarks/warm_start.py" + (" " + " ".join(argv) if argv else "")
+    args_used = sys.argv[1:] if argv is None else list(argv)
+    cmd = "python benchmarks/warm_start.py" + (" " + " ".join(args_used) if args_used else "")
     lines = [
         "# Warm-started, certified closest points (issue 9, item 1)",
         "",

@@ -175,27 +175,29 @@ def _chord_bound(g0, g1, l2):
     return jnp.where(pos, g0 + t * (g1 - g0 - l2) + t * t * l2, jnp.minimum(g0, g1))
 
 
-def _side_bounds(seg: Segment, curve, data: CurveData, u_i, half, sign: float):
-    """Lower bounds on d_i(F_o(u)) over the NODES - 1 pieces of the geometric grid on
-    one side of u_i (sign +1: u > u_i + half; -1: u < u_i - half). Returns
-    (bounds (NODES - 1,), whether that side reaches outside the window () bool,
-    the cut points (NODES,), from the window's edge outwards)."""
+def _piece_bounds(seg: Segment, curve, data: CurveData, u_i, half):
+    """Lower bounds on d_i(F_o(u)) over the pieces of the geometric grid on both sides
+    of u_i (row 0: u > u_i + half, row 1: u < u_i - half). Returns (bounds
+    (2, NODES - 1), whether each side reaches outside the window (2,) bool, the cut
+    points (2, NODES), from the window's edge outwards)."""
     lo, hi = curve.u_range[0], curve.u_range[1]
-    end = hi if sign > 0 else lo
+    dtype = u_i.dtype
+    sign = jnp.array([1.0, -1.0], dtype)
+    end = jnp.stack([hi, lo])
     extent = sign * (end - u_i)
     outside = extent > half
     ratio = jnp.where(outside, extent / half, 1.0)
-    k = jnp.arange(NODES, dtype=u_i.dtype) / (NODES - 1)
-    t = jnp.clip(u_i + sign * half * jnp.exp(k * jnp.log(ratio)), lo, hi)
-    t = jnp.where(k == 1.0, end, t)  # the last piece ends exactly at the range's end
-    P = jax.vmap(curve.point)(t)
-    g = jax.vmap(lambda p: project_to_arc(seg, p)[1])(P)
-    q = _chord_bound(g[:-1], g[1:], jnp.sum((P[1:] - P[:-1]) ** 2, axis=-1))
-    a, b = jnp.minimum(t[:-1], t[1:]), jnp.maximum(t[:-1], t[1:])
+    k = jnp.arange(NODES, dtype=dtype) / (NODES - 1)
+    t = jnp.clip(u_i + sign[:, None] * half * jnp.exp(k[None, :] * jnp.log(ratio)[:, None]), lo, hi)
+    t = jnp.where(k == 1.0, end[:, None], t)  # the last piece ends exactly at the range's end
+    P = jax.vmap(curve.point)(t.reshape(-1)).reshape(2, NODES, 3)
+    g = jax.vmap(lambda p: project_to_arc(seg, p)[1])(P.reshape(-1, 3)).reshape(2, NODES)
+    q = _chord_bound(g[:, :-1], g[:, 1:], jnp.sum((P[:, 1:] - P[:, :-1]) ** 2, axis=-1))
+    a, b = jnp.minimum(t[:, :-1], t[:, 1:]), jnp.maximum(t[:, :-1], t[:, 1:])
+    kappa = data.curvature
     if isinstance(curve, PolynomialCurve):
-        kappa = jnp.minimum(data.curvature, jax.vmap(lambda a, b: _polynomial_curvature_bound(curve, a, b))(a, b))
-    else:
-        kappa = data.curvature
+        local = jax.vmap(lambda a, b: _polynomial_curvature_bound(curve, a, b))(a.reshape(-1), b.reshape(-1))
+        kappa = jnp.minimum(kappa, local.reshape(a.shape))
     return jnp.sqrt(jnp.maximum(q, 0.0)) - 0.125 * kappa * (b - a) ** 2, outside, t
 
 
@@ -233,11 +235,8 @@ def _polish_and_certify(segs: Segment, curve, data: CurveData, u_prev, solver: S
     half = WINDOW * (hi - lo) / (solver.grid_u - 1)
 
     def certify(seg, u_i):
-        ok = True
-        for sign in (1.0, -1.0):
-            bounds, outside, _ = _side_bounds(seg, curve, data, u_i, half, sign)
-            ok = ok & (~outside | jnp.all(bounds >= floor))
-        return ok
+        bounds, outside, _ = _piece_bounds(seg, curve, data, u_i, half)
+        return jnp.all(~outside[:, None] | (bounds >= floor))
 
     certified = jax.vmap(certify)(segs, u_w) & conv
     return _Pairs(s_w, u_w, d2_w, conv), certified

@@ -50,15 +50,13 @@ def _bounds_and_samples(q, curve, u_i):
     half = ws.WINDOW * (curve.u_range[1] - curve.u_range[0]) / (DEFAULT_OPTIONS.grid_u - 1)
 
     def per_segment(seg):
-        out = []
-        for sign in (1.0, -1.0):
-            bounds, outside, t = ws._side_bounds(seg, curve, data, u_i, half, sign)
-            a, b = jnp.minimum(t[:-1], t[1:]), jnp.maximum(t[:-1], t[1:])
-            frac = jnp.linspace(0.0, 1.0, SAMPLES, dtype=q.dtype)
-            us = a[:, None] + (b - a)[:, None] * frac[None, :]
-            d = jax.vmap(jax.vmap(lambda u: project_to_arc(seg, curve.point(u))[1]))(us)
-            out.append((bounds, jnp.sqrt(jnp.min(d, axis=1)), outside))
-        return out
+        bounds, outside, t = ws._piece_bounds(seg, curve, data, u_i, half)
+        a, b = jnp.minimum(t[:, :-1], t[:, 1:]), jnp.maximum(t[:, :-1], t[:, 1:])
+        frac = jnp.linspace(0.0, 1.0, SAMPLES, dtype=q.dtype)
+        us = a[..., None] + (b - a)[..., None] * frac
+        d = jax.vmap(jax.vmap(jax.vmap(lambda u: project_to_arc(seg, curve.point(u))[1])))(us)
+        sampled = jnp.sqrt(jnp.min(d, axis=-1))
+        return bounds, sampled, jnp.broadcast_to(outside[:, None], bounds.shape)
 
     return jax.vmap(per_segment)(segs)
 
@@ -69,12 +67,11 @@ def test_lower_bound_never_exceeds_the_sampled_distance(degree):
     tight = []
     for k in range(qs.shape[0]):
         curve = jax.tree_util.tree_map(lambda x, k=k: x[k], curves)
-        for bounds, sampled, outside in _bounds_and_samples(qs[k], curve, u_i[k]):
-            bounds, sampled = np.asarray(bounds), np.asarray(sampled)
-            assert np.all(np.isfinite(bounds))
-            # The sampled minimum is >= the true one, which the bound must not exceed.
-            assert np.all(bounds <= sampled + 1e-12), (k, bounds - sampled)
-            tight.append((sampled - bounds)[np.asarray(outside)])
+        bounds, sampled, outside = (np.asarray(x) for x in _bounds_and_samples(qs[k], curve, u_i[k]))
+        assert np.all(np.isfinite(bounds))
+        # The sampled minimum is >= the true one, which the bound must not exceed.
+        assert np.all(bounds <= sampled + 1e-12), (k, bounds - sampled)
+        tight.append((sampled - bounds)[outside])
     gap = np.concatenate([g.ravel() for g in tight])
     # Not vacuous: a second-order bound is close on most pieces.
     assert np.median(gap) < 0.05, np.median(gap)
