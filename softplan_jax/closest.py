@@ -17,7 +17,7 @@ solvers do this (``SolverOptions.method``); both pass the accuracy suite of
 the default on all 1,160 cases, ``"grid"`` on the 1,120 polynomial ones.
 
 ``"reduced"`` (the default). A PCC segment is a circular arc, so for a fixed
-obstacle point the minimum over s has a closed form (:func:`_project_to_arc`):
+obstacle point the minimum over s has a closed form (:func:`project_to_arc`):
 ``g(u) = min_s D_i(s, u)^2`` is exact for every u, and
 ``min_{s,u} D^2 = min_u g(u)``. The inner minimum contains the s-boundary
 problems (paper eqs. 17-18: s* = 0 or 1); u = u_min and u = u_max are sampled,
@@ -135,7 +135,7 @@ class SolverOptions(NamedTuple):
         # The curve's u-samples and points do not depend on the segment: computed once.
         u_grid = u_samples(curve, self.grid_u)
         C_grid = jax.vmap(curve.point)(u_grid)
-        return lambda seg: _solve_pair_reduced(seg, curve, u_grid, C_grid, self)
+        return lambda seg: solve_pair_reduced(seg, curve, u_grid, C_grid, self)
 
 
 DEFAULT_OPTIONS = SolverOptions()
@@ -219,12 +219,19 @@ def trust_region_step_1d(x, step, radius, width, lo, hi):
 
 
 def local_minima_1d(vals, k: int):
-    """Indices (k,) of the k smallest local minima of a 1-D array (non-minima last)."""
+    """Indices (k,) of the k smallest local minima of a 1-D array (non-minima last, by
+    index; distinct indices). k passes of argmin, not ``lax.top_k`` (a sort on CPU):
+    the same indices, a few per cent off the full solver's step (benchmarks/warm_start.py)."""
     inf = jnp.full((1,), jnp.inf, vals.dtype)
     padded = jnp.concatenate([inf, vals, inf])
     is_min = (vals <= padded[:-2]) & (vals <= padded[2:])
-    score = jnp.where(is_min, vals, jnp.inf)
-    return jax.lax.top_k(-score, k)[1]
+    score = jnp.where(is_min, vals, jnp.finfo(vals.dtype).max)
+    picks = []
+    for _ in range(k):
+        i = jnp.argmin(score)
+        picks.append(i)
+        score = score.at[i].set(jnp.inf)
+    return jnp.stack(picks).astype(jnp.int32)
 
 
 def u_samples(curve, n: int):
@@ -252,7 +259,7 @@ def u_samples(curve, n: int):
 # The reduced solver: the minimum over s in closed form, Newton in u.
 
 
-def _project_to_arc(seg: Segment, p):
+def project_to_arc(seg: Segment, p):
     """Global minimiser s* in [0, 1] of |F_Ri(s) - p|^2 and its value, in closed form.
 
     A PCC segment is a circular arc (a straight line at theta = 0). With x the
@@ -299,7 +306,7 @@ def _project_to_arc(seg: Segment, p):
     return s_star, jnp.sum((seg.point(s_star) - p) ** 2)
 
 
-def _reduced_newton(seg: Segment, curve, u0, s0, f0, iterations: int):
+def reduced_newton(seg: Segment, curve, u0, s0, f0, iterations: int):
     """Trust-region Newton on g(u) = min_s D_i(s, u)^2 / 2 from u0 (s0 = s*(u0)).
 
     Gradient by the envelope theorem, ``g' = -r . F_o'(u)`` with ``r = F_Ri(s*)
@@ -325,7 +332,7 @@ def _reduced_newton(seg: Segment, curve, u0, s0, f0, iterations: int):
         floor = curvature_floor(jnp.abs(c) + jnp.dot(t.C1, t.C1) + tiny, dtype)
         step = jnp.where(curv > floor, -gu / jnp.where(curv > floor, curv, 1.0), -jnp.sign(gu) * width)
         u_t, full = trust_region_step_1d(u, step, radius, width, lo, hi)
-        s_t, d2_t = _project_to_arc(seg, curve.point(u_t))
+        s_t, d2_t = project_to_arc(seg, curve.point(u_t))
         better = d2_t < f
         radius = trust_region_radius(better, ~full, radius)
         return (jnp.where(better, u_t, u), jnp.where(better, s_t, s), jnp.where(better, d2_t, f), radius)
@@ -338,7 +345,7 @@ def _reduced_newton(seg: Segment, curve, u0, s0, f0, iterations: int):
 def _curve_newton(curve, p, u0, iterations: int, radius0: float):
     """Safeguarded 1-D Newton on |p - F_o(u)|^2 / 2 over u in the curve's range
     from u0 (the point-to-curve half of paper eq. 14), with the trust region of
-    :func:`_reduced_newton`. Returns (u, |p - F_o(u)|^2)."""
+    :func:`reduced_newton`. Returns (u, |p - F_o(u)|^2)."""
     lo, hi = curve.u_range[0], curve.u_range[1]
     width = hi - lo
     dtype = u0.dtype
@@ -363,15 +370,15 @@ def _curve_newton(curve, p, u0, iterations: int, radius0: float):
     return u, fu
 
 
-def _solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOptions):
+def solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOptions):
     """All three cases for one segment and one curve via the reduced problem.
 
     ``min_{s, u} D^2 = min_u g(u)`` with ``g(u) = min_s D^2(s, u)`` exact in
-    closed form (:func:`_project_to_arc`), which already contains the
+    closed form (:func:`project_to_arc`), which already contains the
     s-boundary cases (paper eqs. 17-18: s* = 0 or 1) and, at u = u_min/u_max,
     the u-boundary cases and the endpoint pairs (eqs. 15-16, case 3).
 
-    Starts for Newton in u (:func:`_reduced_newton`, the stationarity equation
+    Starts for Newton in u (:func:`reduced_newton`, the stationarity equation
     dD^2/du = 0 at s*(u), eq. 14): the ``starts`` smallest local minima of g
     sampled on ``u_grid`` (both ends included), and the ``starts`` smallest
     local minima of the arm-side profile — for each of ``grid_s`` points along
@@ -383,7 +390,7 @@ def _solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOpti
     """
     dtype = seg.q_i.dtype
     k = options.starts
-    s_grid, g_grid = jax.vmap(lambda c: _project_to_arc(seg, c))(C_grid)
+    s_grid, g_grid = jax.vmap(lambda c: project_to_arc(seg, c))(C_grid)
     # Arm-side profile.
     s_arm = jnp.linspace(0.0, 1.0, options.grid_s, dtype=dtype)
     A = jax.vmap(seg.point)(s_arm)
@@ -393,12 +400,12 @@ def _solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOpti
         A, u_grid[near]
     )
     u_seed = u_prof[local_minima_1d(f_prof, k)]
-    s_seed, g_seed = jax.vmap(lambda u: _project_to_arc(seg, curve.point(u)))(u_seed)
+    s_seed, g_seed = jax.vmap(lambda u: project_to_arc(seg, curve.point(u)))(u_seed)
     kg = local_minima_1d(g_grid, k)
     u0 = jnp.concatenate([u_grid[kg], u_seed])
     s0 = jnp.concatenate([s_grid[kg], s_seed])
     f0 = jnp.concatenate([g_grid[kg], g_seed])
-    u_n, s_n, f_n = jax.vmap(lambda a, b, c: _reduced_newton(seg, curve, a, b, c, options.iterations))(
+    u_n, s_n, f_n = jax.vmap(lambda a, b, c: reduced_newton(seg, curve, a, b, c, options.iterations))(
         u0, s0, f0
     )
     j = jnp.argmin(g_grid)
@@ -467,6 +474,26 @@ def curve_closest(q, curve, options: SolverOptions) -> ClosestPoint:
     curve_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, curve)
     solve = options.pair_solver(curve_nograd)  # SolverOptions or closest_grid.GridSolverOptions
     s_all, u_all, d2_all, conv_all = jax.vmap(solve)(segs_nograd)
+    return closest_from_pairs(segs, curve, s_all, u_all, d2_all, conv_all)
+
+
+def closest_from_pairs(segs: Segment, curve, s_all, u_all, d2_all, conv_all) -> ClosestPoint:
+    """The closest pair from every segment's solution for one curve: the
+    segment with the smallest D^2, with the derivatives of the module
+    docstring (implicit function theorem for s, u and the points, envelope
+    theorem for the distance). Shared by :func:`curve_closest` and the warm
+    start (:mod:`softplan_jax.warm_start`), so both differentiate alike.
+
+    Args:
+      segs: Segment with a leading axis n (NOT stop_gradient-ed: the
+        derivatives w.r.t. q flow through it).
+      curve: one curve, of q's dtype.
+      s_all, u_all, d2_all, conv_all: (n,) each segment's solution (s, u, D^2,
+        converged), computed without derivatives.
+
+    Returns:
+      ClosestPoint (``segment`` int32).
+    """
     i = jnp.argmin(d2_all)
     seg = jax.tree_util.tree_map(lambda x: x[i], segs)
     s, u = _implicit(seg, curve, s_all[i], u_all[i])
@@ -595,7 +622,7 @@ class FixedPoint(NamedTuple):
 def _point_closest(q, p) -> ClosestPoint:
     """Exact closest point of the arm backbone to one point p (3,): the
     boundary problem of paper eqs. (15)-(16) with a fixed obstacle point,
-    solved per segment in closed form (:func:`_project_to_arc`).
+    solved per segment in closed form (:func:`project_to_arc`).
     Returns a ClosestPoint with u = 0."""
     R_bases, P_bases = segment_frames(q)
     segs = Segment(q, R_bases, P_bases)
@@ -604,7 +631,7 @@ def _point_closest(q, p) -> ClosestPoint:
     dtype = q.dtype
 
     def per_segment(seg):
-        return _project_to_arc(seg, p_ng)
+        return project_to_arc(seg, p_ng)
 
     s_all, d2_all = jax.vmap(per_segment)(segs_ng)
     i = jnp.argmin(d2_all)

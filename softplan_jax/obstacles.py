@@ -28,6 +28,7 @@ import numpy as np
 
 from .closest import ClosestPoint, SolverOptions, curve_closest, point_set_closest, points_closest
 from .curves import curve_points
+from .warm_start import curve_data, warm_curves
 
 __all__ = [
     "obstacle_count",
@@ -37,6 +38,9 @@ __all__ = [
     "placeholder_closest",
     "true_closest",
     "model_closest",
+    "warm_cells",
+    "warm_state",
+    "warm_closest",
     "obstacle_samples",
     "obstacle_labels",
 ]
@@ -140,6 +144,68 @@ def true_closest(q, scenario, solver: SolverOptions) -> ClosestPoint:
         lambda p, m: point_set_closest(q, p, m),
         empty=empty_closest(q.dtype),
     )
+
+
+def _curve_groups(scenario):
+    """The curve slots as stacks: the polynomial stack (if any), then each
+    parametric curve as a stack of one (a leading axis 1 on its array leaves)."""
+    groups = []
+    if scenario.curves.coeffs.shape[0]:
+        groups.append((scenario.curves, scenario.curve_mask))
+    for pc in scenario.parametric:
+        groups.append((jax.tree_util.tree_map(lambda x: x[None], pc), jnp.ones((1,), bool)))
+    return groups
+
+
+def warm_cells(scenario, solver: SolverOptions):
+    """The warm start's per-curve data (:func:`~softplan_jax.warm_start.curve_data`)
+    of every curve slot, one entry per curve stack (polynomial stack, then each
+    parametric curve); computed once per scenario, outside the scan."""
+    dtype = scenario.q0.dtype
+    return tuple(
+        jax.vmap(lambda c: curve_data(c, solver))(curves.astype(dtype)) for curves, _ in _curve_groups(scenario)
+    )
+
+
+def warm_state(scenario):
+    """The warm start's state before the first step: u* = 0 (m_g, n) per curve stack
+    (unused: the first step solves every pair in full)."""
+    n = scenario.q0.shape[0]
+    return tuple(
+        jnp.zeros((curves.u_range.shape[0], n), scenario.q0.dtype) for curves, _ in _curve_groups(scenario)
+    )
+
+
+def warm_closest(q, scenario, solver: SolverOptions, cells, state, fresh):
+    """:func:`true_closest` with the warm start of :mod:`softplan_jax.warm_start`
+    (same results, certified; derivatives the same).
+
+    Args:
+      q: (n, 3) configuration.
+      scenario: one Scenario.
+      solver: SolverOptions (static).
+      cells: :func:`warm_cells` of the scenario.
+      state: the previous step's state (:func:`warm_state` before the first step).
+      fresh: () bool, no warm state yet: every curve pair takes the full solve.
+
+    Returns:
+      ``(ClosestPoint with a leading axis m, the next state, fallbacks () int32:
+      curve-segment pairs that took the full solve)``.
+    """
+    outs = [
+        warm_curves(q, curves, c, u, fresh, active, solver)
+        for (curves, active), c, u in zip(_curve_groups(scenario), cells, state, strict=True)
+    ]
+    parts = [o[0] for o in outs]
+    m_c, m_p = scenario.curves.coeffs.shape[0], scenario.points.shape[0]
+    if m_p:
+        pts = jax.vmap(lambda p, m: point_set_closest(q, p, m))(scenario.points, scenario.point_mask)
+        parts.insert(1 if m_c else 0, pts)
+    fallbacks = sum((o[2] for o in outs), jnp.zeros((), jnp.int32))
+    new_state = tuple(o[1] for o in outs)
+    if not parts:
+        return empty_closest(q.dtype), new_state, fallbacks
+    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts), new_state, fallbacks
 
 
 def model_closest(q, scenario, truth: ClosestPoint, method: str, n_points: int,

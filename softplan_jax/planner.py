@@ -54,7 +54,15 @@ from .kinematics import motion_bound, points_jacobian, tip_position
 from .metrics import apply_collision_checks as apply_collision_checks  # moved to metrics; old import path
 from .metrics import between_steps, contact_tolerance
 from .numerics import damped_pinv, safe_norm
-from .obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
+from .obstacles import (
+    model_closest,
+    placeholder_closest,
+    radius_and_mask,
+    true_closest,
+    warm_cells,
+    warm_closest,
+    warm_state,
+)
 from .scenarios import Scenario
 from .status import STATUS_NAMES as STATUS_NAMES  # noqa: F401  (re-exported: the old import path)
 from .status import Status, status_name
@@ -174,6 +182,13 @@ class PlanOptions(NamedTuple):
       escapes: random-walk escapes from stalls allowed per rollout (0: none;
         a stall then ends the rollout, as in the paper).
       escape_steps: steps of one random walk.
+      warm_start: in a rollout, carry each (segment, curve) pair's closest
+        point from step to step, polish it and certify it the global minimum
+        (:mod:`softplan_jax.warm_start`); only pairs whose certificate fails
+        take the full solve. Same closest points as the full solver, fewer
+        solves. Applies to the default solver (SolverOptions) only; False:
+        the full solve at every step. :func:`planner_step` and the post-hoc
+        checks always use the full solve.
     """
 
     method: str = "curve"
@@ -190,6 +205,7 @@ class PlanOptions(NamedTuple):
     safe_fraction: float = 0.8
     escapes: int = 20
     escape_steps: int = 15
+    warm_start: bool = True
 
 
 # The paper's step (eq. 9, unscaled, no escapes) with the stall test of the earlier
@@ -342,6 +358,10 @@ class Rollout(NamedTuple):
       converged: (T+1,) bool, every exact closest-point solve of a real
         obstacle slot at q_k met its Newton tolerance (always True where no
         exact solve ran: the points method without collision checks).
+      fallbacks: (T+1,) int32, (segment, curve) pairs of real curve slots
+        that took the full closest-point solve at q_k: with the warm start
+        (``PlanOptions.warm_start``) the pairs whose certificate failed (all
+        at k = 0); without it every pair, or 0 where no exact solve ran.
     """
 
     q: jax.Array
@@ -357,6 +377,7 @@ class Rollout(NamedTuple):
     step_scale: jax.Array
     escapes: jax.Array
     converged: jax.Array
+    fallbacks: jax.Array
 
 
 class _Carry(NamedTuple):
@@ -372,6 +393,7 @@ class _Carry(NamedTuple):
     escapes: jax.Array  # escapes started so far
     walk_left: jax.Array  # steps left in the current random walk (0: following the field)
     walk_velocity: jax.Array  # (3,) tip velocity of the current walk
+    warm: tuple  # the warm start's state (obstacles.warm_state), () without it
 
 
 def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, key=None) -> Rollout:
@@ -409,13 +431,22 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
 
     check = options.check_collisions
     walks = options.escapes > 0
+    exact = check or options.method == "curve"
+    warm = exact and options.warm_start and isinstance(options.solver, SolverOptions)
+    cells = warm_cells(scenario, options.solver) if warm else ()
+    n_pairs = q0.shape[0] * (jnp.sum(scenario.curve_mask) + len(scenario.parametric)).astype(jnp.int32)
 
     def body(carry: _Carry, k):
         q = carry.q
-        if check or options.method == "curve":
+        warm_next = carry.warm
+        if warm:
+            truth, warm_next, fallbacks = warm_closest(q, scenario, options.solver, cells, carry.warm, carry.first)
+        elif exact:
             truth = true_closest(q, scenario, options.solver)
+            fallbacks = n_pairs
         else:
             truth = placeholder_closest(q, scenario)
+            fallbacks = jnp.zeros((), jnp.int32)
         if check:
             c = clearance_of(truth)
             cb = between_steps(carry.q_prev, q, carry.truth_prev, truth, scenario, scenario.arm_radius + radius)
@@ -478,9 +509,11 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
             escapes=escapes,
             walk_left=jnp.where(moved, jnp.maximum(walk_left - 1, 0), walk_left).astype(jnp.int32),
             walk_velocity=walk_velocity,
+            warm=warm_next,
         )
         converged = jnp.all(jnp.where(mask, truth.converged, True))
-        return new, (q, tip_position(q), c, cb, jnp.where(moved, alpha, 0.0).astype(dtype), converged)
+        alpha = jnp.where(moved, alpha, 0.0).astype(dtype)
+        return new, (q, tip_position(q), c, cb, alpha, converged, fallbacks)
 
     truth_dummy = placeholder_closest(q0, scenario)
     carry0 = _Carry(
@@ -496,8 +529,11 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         escapes=jnp.zeros((), jnp.int32),
         walk_left=jnp.zeros((), jnp.int32),
         walk_velocity=jnp.zeros((3,), dtype),
+        warm=warm_state(scenario) if warm else (),
     )
-    final, (qs, tips, cs, cbs, alphas, converged) = jax.lax.scan(body, carry0, jnp.arange(max_steps + 1))
+    final, (qs, tips, cs, cbs, alphas, converged, fallbacks) = jax.lax.scan(
+        body, carry0, jnp.arange(max_steps + 1)
+    )
     status = jnp.where(final.status == Status.RUNNING, Status.MAX_STEPS, final.status)
     return Rollout(
         q=qs,
@@ -513,6 +549,7 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         step_scale=alphas,
         escapes=final.escapes,
         converged=converged,
+        fallbacks=fallbacks,
     )
 
 

@@ -1,0 +1,299 @@
+"""Warm-started, certified closest points for the planner's scan (issue 9).
+
+From one planner step to the next the arm moves a little, so each
+(segment, curve) pair's closest point moves a little too. This module carries
+each pair's curve parameter u* from step to step, polishes it with a few
+Newton iterations (:func:`~softplan_jax.closest.reduced_newton`), then
+CERTIFIES with a cheap lower bound that the result is the global minimum over
+the whole curve; only the pairs whose certificate fails are solved again by
+the full solver (:func:`~softplan_jax.closest.solve_pair_reduced`, with the
+same options: a fallback gives exactly the full solver's answer).
+
+The reduced problem. For segment i the squared distance of a point p to the
+arc, ``d_i(p)^2 = min_s |F_Ri(s) - p|^2``, is exact in closed form
+(:func:`~softplan_jax.closest.project_to_arc`), so the pair's minimum is
+``min_u d_i(F_o(u))`` over the curve's range: a 1-D problem in u.
+
+The lower bound on a piece [a, b] of the curve. Let
+``x(t) = (1 - t) F_o(a) + t F_o(b)`` be the chord and ``l = |F_o(b) - F_o(a)|``.
+For ANY set A, ``d_A(x)^2 - |x|^2 = min_{y in A} (|y|^2 - 2 y.x)`` is concave in
+x (a minimum of affine functions), so it lies above its chords; with
+``|x(t)|^2 = (1 - t)|x0|^2 + t|x1|^2 - t (1 - t) l^2`` this gives::
+
+    d_A(x(t))^2 >= (1 - t) d_A(x0)^2 + t d_A(x1)^2 - t (1 - t) l^2
+
+(exact when A is a single point; second order in l, where the Lipschitz bound
+``d_A(centre) - radius`` is first order, too weak for far obstacles). The
+curve leaves its chord by at most ``e = (b - a)^2 / 8 max |F_o''|`` on the
+piece (the linear interpolation error) and ``d_A`` is 1-Lipschitz, so every u
+in the piece has ``d_i(F_o(u)) >= sqrt(min_t [rhs]) - e``; the minimum over t
+of the quadratic is in closed form. ``max |F_o''|``: for a
+:class:`~softplan_jax.curves.PolynomialCurve` a rigorous bound (the Taylor
+expansion of F_o'' at the piece's centre, term by term; exact for degree
+<= 2); for a :class:`~softplan_jax.curves.ParametricCurve` the largest of
+``PARAMETRIC_SAMPLES`` samples over the range times ``PARAMETRIC_SAFETY`` (2),
+computed once per scenario: NOT a proof, a curve whose second derivative
+peaks sharply between samples can defeat it.
+
+The pieces: a geometric grid around each polished u_i. Outside the trusted
+window (below), each side of u_i is cut at ``NODES`` points
+``u_i +- w (R / w)^(k / (NODES - 1))``, k = 0 .. NODES - 1, from the window's
+edge (w: its half-width) to the end of the range (R: the distance to it), so a
+piece is a fixed fraction of its distance from u_i. Then near a minimum where
+the distance grows like ``sin(alpha) |u - u_i|`` (alpha: the angle between arm
+and curve) every piece passes once ``tan(alpha)`` exceeds a fixed fraction
+(scale free), where evenly spaced cells fail near the window whenever the
+curve runs nearly parallel to the arm. Cost: ``2 NODES`` closed-form
+projections per pair and step (measured in ``benchmarks/warm_start.py``:
+pair fallbacks 0.4 % with 8 nodes per side against 3 % with 16 even cells).
+
+The certificate (per obstacle). Each segment i's polished pair gives an
+achievable distance D_i; ``D_w = min_i D_i``. The WINDOW of half-width
+``w = WINDOW (u_max - u_min) / (grid_u - 1)`` around u_i (1.5 mean spacings of
+the full solver's u-grid wide) is trusted to hold no value below D_i when the
+polish converged (the first-order test
+:func:`~softplan_jax.closest.first_order_converged`): THE ASSUMPTION, the one
+the full solver makes inside a cell of its u-grid, that no second, lower
+basin hides within about a grid spacing of a local minimum. Every piece
+outside the window must have a lower bound >= D_w minus a rounding tolerance
+(``TOLERANCE`` eps (1 + the curve's size)). Segment i is certified when its
+polish converged and all its pieces pass; then its true minimum is
+>= min(D_i, D_w), so the obstacle's minimum over segments is D_w. A failed
+segment gets the full solve (keeping the smaller of the full and the polished
+D^2, both achievable); a segment certified against D_w stays certified when a
+fallback lowers D_w, so one pass is enough.
+
+Fallback cost under ``vmap``. The failed pairs are solved one by one in a
+``lax.while_loop`` (flattened over the curves of a stack): a batch pays (the
+batch's largest number of failures) x (one pair solve) per step, not a select
+over every pair. At the first step of a rollout (no warm state) every pair
+fails and takes the full solve.
+
+Derivatives. Everything here runs without derivatives (stop_gradient); the
+winning pair goes through :func:`~softplan_jax.closest.closest_from_pairs`,
+the tail of :func:`~softplan_jax.closest.curve_closest`, so the derivatives
+w.r.t. q (implicit function theorem, envelope theorem) are the full solver's.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from .closest import (
+    Segment,
+    SolverOptions,
+    closest_from_pairs,
+    first_order_converged,
+    project_to_arc,
+    reduced_newton,
+    solve_pair_reduced,
+    u_samples,
+)
+from .curves import PolynomialCurve
+from .kinematics import segment_frames
+
+__all__ = ["CurveData", "curve_data", "warm_curves"]
+
+# Cut points of the lower bound per side of u* (window edge and range end included).
+NODES = 8
+# Newton iterations polishing the previous step's u* (the full solver: 4 starts x 8).
+POLISH_ITERATIONS = 4
+# Half-width of the trusted window around a polished u*, in mean spacings of the full
+# solver's u-grid (u_max - u_min) / (grid_u - 1): the window is 1.5 spacings wide.
+WINDOW = 0.75
+# Rounding tolerance of the certificate: TOLERANCE * eps * (1 + the curve's size).
+TOLERANCE = 64.0
+# ParametricCurve: max |F_o''| from samples over the range, times this factor.
+PARAMETRIC_SAFETY = 2.0
+PARAMETRIC_SAMPLES = 257
+
+
+class CurveData(NamedTuple):
+    """What the warm start precomputes for ONE curve, once per scenario
+    (vmap :func:`curve_data` over a stack; every field then gains a leading axis).
+
+    Attributes:
+      curvature: () a bound on |F_o''| over the whole range (rigorous for a
+        PolynomialCurve, sampled with a safety factor for a ParametricCurve).
+      u_grid: (grid_u,) the full solver's u-samples (:func:`~softplan_jax.closest.u_samples`).
+      C_grid: (grid_u, 3) F_o at them (for the fallback).
+      size: () 1 + max |F_o| over u_grid (the scale of the rounding tolerance).
+    """
+
+    curvature: jax.Array
+    u_grid: jax.Array
+    C_grid: jax.Array
+    size: jax.Array
+
+
+def _polynomial_curvature_bound(curve: PolynomialCurve, a, b):
+    """A bound on |F_o''| over [a, b] for a polynomial curve: the Taylor expansion of
+    F_o'' at the centre c, term by term, ``sum_j |F_o^(2+j)(c)| (h/2)^j / j!`` (h = b - a;
+    exact for degree <= 2, where F_o'' is constant)."""
+    c, r = 0.5 * (a + b), 0.5 * (b - a)
+    derivative = curve.second_derivative
+    bound = jnp.zeros_like(c)
+    fact = 1.0
+    for j in range(max(curve.coeffs.shape[-1] - 2, 0)):
+        bound = bound + jnp.sqrt(jnp.sum(derivative(c) ** 2)) * r**j / fact
+        derivative = jax.jacfwd(derivative)
+        fact *= j + 1
+    return bound
+
+
+def curve_data(curve, solver: SolverOptions) -> CurveData:
+    """The warm start's per-curve data for ONE curve (computed once per scenario).
+
+    Args:
+      curve: one PolynomialCurve or ParametricCurve.
+      solver: the full solver's SolverOptions (static): its grid, for the fallback.
+
+    Returns:
+      :class:`CurveData`.
+    """
+    curve = jax.tree_util.tree_map(jax.lax.stop_gradient, curve)
+    lo, hi = curve.u_range[0], curve.u_range[1]
+    if isinstance(curve, PolynomialCurve):
+        curvature = _polynomial_curvature_bound(curve, lo, hi)
+    else:
+        u = jnp.linspace(0.0, 1.0, PARAMETRIC_SAMPLES, dtype=lo.dtype) * (hi - lo) + lo
+        acc = jax.vmap(curve.second_derivative)(u)
+        curvature = PARAMETRIC_SAFETY * jnp.max(jnp.sqrt(jnp.sum(acc * acc, axis=-1)))
+    u_grid = u_samples(curve, solver.grid_u)
+    C_grid = jax.vmap(curve.point)(u_grid)
+    size = 1.0 + jnp.max(jnp.sqrt(jnp.sum(C_grid * C_grid, axis=-1)))
+    return CurveData(curvature, u_grid, C_grid, size)
+
+
+def _chord_bound(g0, g1, l2):
+    """min over t in [0, 1] of (1 - t) g0 + t g1 - t (1 - t) l2 (see the module docstring)."""
+    pos = l2 > 0
+    t = jnp.clip((l2 + g0 - g1) / (2.0 * jnp.where(pos, l2, 1.0)), 0.0, 1.0)
+    return jnp.where(pos, g0 + t * (g1 - g0 - l2) + t * t * l2, jnp.minimum(g0, g1))
+
+
+def _piece_bounds(seg: Segment, curve, data: CurveData, u_i, half):
+    """Lower bounds on d_i(F_o(u)) over the pieces of the geometric grid on both sides
+    of u_i (row 0: u > u_i + half, row 1: u < u_i - half). Returns (bounds
+    (2, NODES - 1), whether each side reaches outside the window (2,) bool, the cut
+    points (2, NODES), from the window's edge outwards)."""
+    lo, hi = curve.u_range[0], curve.u_range[1]
+    dtype = u_i.dtype
+    sign = jnp.array([1.0, -1.0], dtype)
+    end = jnp.stack([hi, lo])
+    extent = sign * (end - u_i)
+    outside = extent > half
+    ratio = jnp.where(outside, extent / half, 1.0)
+    k = jnp.arange(NODES, dtype=dtype) / (NODES - 1)
+    t = jnp.clip(u_i + sign[:, None] * half * jnp.exp(k[None, :] * jnp.log(ratio)[:, None]), lo, hi)
+    t = jnp.where(k == 1.0, end[:, None], t)  # the last piece ends exactly at the range's end
+    P = jax.vmap(curve.point)(t.reshape(-1)).reshape(2, NODES, 3)
+    g = jax.vmap(lambda p: project_to_arc(seg, p)[1])(P.reshape(-1, 3)).reshape(2, NODES)
+    q = _chord_bound(g[:, :-1], g[:, 1:], jnp.sum((P[:, 1:] - P[:, :-1]) ** 2, axis=-1))
+    a, b = jnp.minimum(t[:, :-1], t[:, 1:]), jnp.maximum(t[:, :-1], t[:, 1:])
+    kappa = data.curvature
+    if isinstance(curve, PolynomialCurve):
+        local = jax.vmap(lambda a, b: _polynomial_curvature_bound(curve, a, b))(a.reshape(-1), b.reshape(-1))
+        kappa = jnp.minimum(kappa, local.reshape(a.shape))
+    return jnp.sqrt(jnp.maximum(q, 0.0)) - 0.125 * kappa * (b - a) ** 2, outside, t
+
+
+class _Pairs(NamedTuple):
+    """Every (curve, segment) pair's solution: arrays (m, n) (or (n,) for one curve)."""
+
+    s: jax.Array
+    u: jax.Array
+    d2: jax.Array
+    converged: jax.Array
+
+
+def _polish_and_certify(segs: Segment, curve, data: CurveData, u_prev, solver: SolverOptions):
+    """Polish every segment's pair with ONE curve from u_prev and certify it.
+
+    Args:
+      segs: Segment with a leading axis n (without derivatives).
+      curve: one curve; data: its CurveData; u_prev: (n,) the previous step's u*.
+      solver: SolverOptions (static): its grid_u sets the window.
+
+    Returns:
+      (_Pairs with arrays (n,), certified (n,) bool).
+    """
+    dtype = u_prev.dtype
+    lo, hi = curve.u_range[0], curve.u_range[1]
+    u_prev = jnp.clip(u_prev, lo, hi)
+
+    def polish(seg, u0):
+        s0, f0 = project_to_arc(seg, curve.point(u0))
+        u, s, f = reduced_newton(seg, curve, u0, s0, f0, POLISH_ITERATIONS)
+        return s, u, f, first_order_converged(seg, curve, jnp.stack([s, u]))
+
+    s_w, u_w, d2_w, conv = jax.vmap(polish)(segs, u_prev)
+    floor = jnp.sqrt(jnp.min(d2_w)) - TOLERANCE * jnp.finfo(dtype).eps * data.size
+    half = WINDOW * (hi - lo) / (solver.grid_u - 1)
+
+    def certify(seg, u_i):
+        bounds, outside, _ = _piece_bounds(seg, curve, data, u_i, half)
+        return jnp.all(~outside[:, None] | (bounds >= floor))
+
+    certified = jax.vmap(certify)(segs, u_w) & conv
+    return _Pairs(s_w, u_w, d2_w, conv), certified
+
+
+def _fallback(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, solver: SolverOptions) -> _Pairs:
+    """The full solve of every failed pair (fail (m, n)), one pair per iteration of a
+    while loop; each failed pair keeps the smaller of its full and polished D^2."""
+    n = fail.shape[1]
+
+    def body(state):
+        p, todo = state
+        flat = jnp.argmax(todo.reshape(-1))
+        k, i = flat // n, flat % n
+        curve = jax.tree_util.tree_map(lambda x: x[k], curves)
+        c = jax.tree_util.tree_map(lambda x: x[k], data)
+        seg = jax.tree_util.tree_map(lambda x: x[i], segs)
+        new = solve_pair_reduced(seg, curve, c.u_grid, c.C_grid, solver)
+        better = new[2] <= p.d2[k, i]
+        p = _Pairs(*(a.at[k, i].set(jnp.where(better, b, a[k, i])) for a, b in zip(p, new, strict=True)))
+        return p, todo.at[k, i].set(False)
+
+    return jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (pairs, fail))[0]
+
+
+def warm_curves(q, curves, data: CurveData, u_prev, fresh, active, solver: SolverOptions):
+    """Closest pairs between the arm and a STACK of curves, warm-started and certified.
+
+    Args:
+      q: (n, 3) configuration (derivatives w.r.t. q as in
+        :func:`~softplan_jax.closest.curve_closest`).
+      curves: a curve stack with leading axis m (a stacked PolynomialCurve, or
+        one curve with a leading axis 1 added to its array leaves).
+      data: CurveData with leading axis m (:func:`curve_data`, vmapped).
+      u_prev: (m, n) each pair's u* at the previous step.
+      fresh: () bool, no warm state (the first step): every pair takes the full solve.
+      active: (m,) bool, False for padding slots (never full-solved; their
+        values are meaningless but finite).
+      solver: SolverOptions (static).
+
+    Returns:
+      ``(ClosestPoint with leading axis m, u (m, n) for the next step,
+      fallbacks () int32: pairs that took the full solve)``.
+    """
+    curves = curves.astype(q.dtype)
+    R_bases, P_bases = segment_frames(q)
+    segs = Segment(q, R_bases, P_bases)
+    segs_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
+    curves_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, curves)
+    data = jax.tree_util.tree_map(jax.lax.stop_gradient, data)
+    u_prev = jax.lax.stop_gradient(u_prev)
+    pairs, certified = jax.vmap(lambda c, d, u: _polish_and_certify(segs_ng, c, d, u, solver))(
+        curves_ng, data, u_prev
+    )
+    fail = (fresh | ~certified) & active[:, None]
+    pairs = _fallback(segs_ng, curves_ng, data, pairs, fail, solver)
+    cps = jax.vmap(lambda c, s, u, d2, conv: closest_from_pairs(segs, c, s, u, d2, conv))(
+        curves, pairs.s, pairs.u, pairs.d2, pairs.converged
+    )
+    return cps, pairs.u, jnp.sum(fail).astype(jnp.int32)
