@@ -50,6 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
+from .compilation_cache import load_or_export
 from .kinematics import motion_bound, points_jacobian, tip_position
 from .metrics import apply_collision_checks as apply_collision_checks  # moved to metrics; old import path
 from .metrics import between_steps, contact_tolerance
@@ -616,6 +617,44 @@ class CompiledRollout:
     def cache_size(self) -> int:
         """Number of compilations so far (one per padded shape, dtype, options, max_steps)."""
         return self._jitted._cache_size()
+
+    def cached(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int):
+        """Compile ahead of time, keeping the TRACED program on disk for the next process
+        (:func:`softplan_jax.compilation_cache.load_or_export`; ``softplan run`` uses it).
+
+        Returns:
+          ``(run, loaded)``: ``run(scenario, gains, seed=0) -> Rollout`` for arguments
+          of these shapes (options and max_steps fixed), and whether the traced
+          program came from disk. Without an artifact (cache off, a ParametricCurve
+          in the scenario, jax.export unavailable) ``run`` is :meth:`lower`'s
+          compiled program and ``loaded`` False; the results are the same.
+        """
+        args = self._args(scenario, gains, options, max_steps, 0)
+        dynamic = (args[0], args[1], args[4])  # scenario, gains, key: options and max_steps are static
+        leaves, treedef = jax.tree_util.tree_flatten(dynamic)
+        out_def = jax.tree_util.tree_structure(Rollout(*([0] * len(Rollout._fields))))
+
+        def flat(*xs):  # arrays in, arrays out: the artifact needs no pytree registrations
+            s, g, k = jax.tree_util.tree_unflatten(treedef, xs)
+            return tuple(jax.tree_util.tree_leaves(self._jitted(s, g, options, max_steps, k)))
+
+        compiled, loaded = (None, False)
+        if not scenario.parametric and not self._batched:
+            compiled, loaded = load_or_export(flat, leaves, (repr(options), str(int(max_steps)), str(treedef)))
+        if compiled is None:
+            plain = self.lower(scenario, gains, options, max_steps).compile()
+
+            def run(scenario, gains, seed=0):
+                s, g, _, _, k = self._args(scenario, gains, options, max_steps, seed)
+                return plain(s, g, k)
+
+            return run, False
+
+        def run(scenario, gains, seed=0):
+            s, g, _, _, k = self._args(scenario, gains, options, max_steps, seed)
+            return jax.tree_util.tree_unflatten(out_def, compiled(*jax.tree_util.tree_leaves((s, g, k))))
+
+        return run, loaded
 
 
 rollout_jit = CompiledRollout(_rollout_jit, batched=False, doc=""":func:`rollout` under ``jit`` (options and

@@ -42,3 +42,43 @@ def test_enable_sets_the_user_cache_and_respects_opt_out_and_user_settings(tmp_p
     mine = str(tmp_path / "mine")
     d, cfg = _enable_in_fresh_process({"JAX_COMPILATION_CACHE_DIR": mine, "XDG_CACHE_HOME": str(tmp_path)})
     assert d == cfg == mine
+
+
+def test_traced_rollout_is_kept_on_disk_and_gives_the_same_result(monkeypatch, tmp_path):
+    """rollout_jit.cached: the first call traces and writes a jax.export artifact, the
+    next loads it (no tracing) -- both bit-identical to rollout_jit; a damaged artifact
+    is traced again; the opt-out writes nothing.
+    (The cheapest program of the suite: points method, no checks, 15 steps.)"""
+    import jax
+    import numpy as np
+
+    import softplan_jax as sp
+    from softplan_jax.planner import make_options, rollout_jit
+
+    monkeypatch.delenv("SOFTPLAN_COMPILATION_CACHE", raising=False)
+    monkeypatch.setenv("SOFTPLAN_CACHE_DIR", str(tmp_path))
+    sc, g = sp.paper_scenario("sim1"), sp.default_gains()
+    opts = make_options("points", 10, check_collisions=False)
+    reference = rollout_jit(sc, g, opts, 15, 2)
+
+    def same(r):
+        return all(np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)
+                   for a, b in zip(jax.tree_util.tree_leaves(r), jax.tree_util.tree_leaves(reference), strict=True))
+
+    run, loaded = rollout_jit.cached(sc, g, opts, 15)
+    files = sorted((tmp_path / "exported").iterdir())
+    assert not loaded and len(files) == 1 and same(run(sc, g, 2))
+    run, loaded = rollout_jit.cached(sc, g, opts, 15)
+    assert loaded and same(run(sc, g, 2))
+    # other goals and seeds: the same program
+    sc2 = sc._replace(goal=sc.goal + 0.01)
+    assert not np.array_equal(np.asarray(run(sc2, g, 2).q), np.asarray(reference.q))
+    # a damaged artifact is traced again (and replaced)
+    files[0].write_bytes(b"not an artifact")
+    run, loaded = rollout_jit.cached(sc, g, opts, 15)
+    assert not loaded and same(run(sc, g, 2)) and files[0].stat().st_size > 1000
+    # the opt-out
+    monkeypatch.setenv("SOFTPLAN_CACHE_DIR", str(tmp_path / "off"))
+    monkeypatch.setenv("SOFTPLAN_COMPILATION_CACHE", "0")
+    run, loaded = rollout_jit.cached(sc, g, opts, 15)
+    assert not loaded and same(run(sc, g, 2)) and not (tmp_path / "off").exists()
