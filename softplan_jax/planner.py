@@ -598,7 +598,15 @@ def _rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_
 
 
 def _batch_keys(seed, batch: int):
-    return jax.random.split(_key(seed), batch)
+    """One key per scenario: ``jax.random.split(key(seed), batch)``, or ``seed`` itself when it
+    already holds one key per scenario (shape (batch, 2) raw keys, or (batch,) typed keys)."""
+    key = _key(seed)
+    typed = jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+    if key.ndim == (1 if typed else 2):
+        if key.shape[0] != batch:
+            raise ValueError(f"seed holds {key.shape[0]} keys for a batch of {batch} scenarios")
+        return key
+    return jax.random.split(key, batch)
 
 
 class CompiledRollout:
@@ -714,13 +722,15 @@ class BatchedRollout(CompiledRollout):
 rollout_batch = BatchedRollout(_rollout_batch, batched=True, doc=""":func:`rollout` vmapped over a batch of
 scenarios of one padded shape (every leaf of ``scenarios`` has a leading batch axis; gains shared),
 jitted: ``rollout_batch(scenarios, gains, options, max_steps, seed=0, devices=None)``. Scenario b's
-escapes use ``jax.random.split(key(seed), B)[b]``. With more than one local device the batch is
-sharded over all of them (``devices``: None = every local device, an int k = the first k, 1 = no
-sharding, or a sequence of jax devices): padded to a multiple of the device count with copies of
-its last scenario (dropped from the result), and each device runs the vmapped rollout on its shard
-(``jax.shard_map``). Statuses and iterations are those of the unsharded call; trajectories agree to
-rounding, not bit for bit (XLA optimises a partitioned program differently). ``.lower`` and
-``.cache_size()`` as :class:`CompiledRollout`.""")
+escapes use ``jax.random.split(key(seed), B)[b]`` (or ``seed[b]`` when ``seed`` holds B keys).
+
+With more than one local device the batch is sharded over all of them (``devices``: None = every
+local device, an int k = the first k, 1 = no sharding, or a sequence of jax devices): padded to a
+multiple of the device count with copies of its last scenario (dropped from the result), each
+device runs the vmapped rollout on its shard (``jax.shard_map``, no cross-device communication).
+The result agrees with the unsharded call to rounding, not bit for bit (XLA optimises a
+partitioned program differently); a rollout that amplifies rounding (a near-tie of the stall or
+contact test) can end differently. ``.lower`` and ``.cache_size()`` as :class:`CompiledRollout`.""")
 
 
 class PlanResult(NamedTuple):
@@ -829,11 +839,15 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
     Args:
       scenarios: a batched Scenario (:func:`stack_scenarios`, or
         :func:`softplan_jax.scenarios.random_scenarios`).
+      seed: int seed or PRNG key; scenario b's escapes use
+        ``jax.random.split(key(seed), B)[b]`` whatever the chunk. Or one key per
+        scenario (B raw keys (B, 2), or B typed keys): then scenario b uses
+        ``seed[b]`` (a share of a larger suite keeps the suite's keys, see the
+        README's "Many scenarios, several devices").
       chunk: scenarios per call (None: the whole batch in one call). Rounded up
         to a multiple of the device count; the last chunk is padded with copies
         of the last scenario, so every call has the same shape and compiles
-        once. Scenario b's escapes use ``jax.random.split(key(seed), B)[b]``
-        whatever the chunk.
+        once.
       devices: None (every local device), an int k (the first k local devices;
         1: no sharding) or a sequence of local jax devices. With more than one,
         every chunk is split over them (see :data:`rollout_batch`).
