@@ -194,3 +194,73 @@ def test_two_host_devices_match_one():
     assert out["dq"] < 1e-9 and out["dclear"] < 1e-9, out  # close, not bit for bit (see above)
     assert out["chunked_equal"] and out["recompiled"] == 0, out
     assert "plan_batch: 1/1 chunks, 3/3 scenarios on 2 devices" in p.stderr
+
+
+def test_batch_keys_per_scenario():
+    from softplan_jax.planner import _batch_keys
+
+    keys = jax.random.split(jax.random.PRNGKey(4), 5)
+    np.testing.assert_array_equal(np.asarray(_batch_keys(4, 5)), np.asarray(keys))
+    # A share of a suite keeps the suite's keys.
+    np.testing.assert_array_equal(np.asarray(_batch_keys(keys[2:4], 2)), np.asarray(keys[2:4]))
+    typed = jax.random.split(jax.random.key(4), 3)
+    assert _batch_keys(typed, 3) is typed
+    assert _batch_keys(jax.random.key(4), 3).shape == (3,)
+    batch = sp.stack_scenarios([sp.paper_scenario("sim1", **PAD)] * 2)
+    with pytest.raises(ValueError, match="3 keys for a batch of 2"):
+        sp.plan_batch(batch, max_steps=5, seed=jax.random.split(jax.random.PRNGKey(0), 3))
+
+
+DISTRIBUTED = textwrap.dedent(
+    """
+    import json, sys
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    jax.distributed.initialize(coordinator_address=sys.argv[1], num_processes=2, process_id=int(sys.argv[2]))
+    import numpy as np
+    from jax.experimental import multihost_utils
+    import softplan_jax as sp
+
+    # The README's recipe: every process builds the same suite and keys, plans its own share.
+    n = 6
+    suite = sp.random_scenarios(0, n)
+    keys = jax.random.split(jax.random.PRNGKey(0), n)
+    share = np.array_split(np.arange(n), jax.process_count())[jax.process_index()]
+    mine = jax.tree_util.tree_map(lambda x: x[share], suite)
+    r = sp.plan_batch(mine, max_steps=100, seed=keys[share])
+    summary = np.stack([np.asarray(r.status), np.asarray(r.iterations)], axis=1)
+    gathered = np.asarray(multihost_utils.process_allgather(summary)).reshape(-1, 2)
+    local = sp.plan_batch(suite, max_steps=100, devices=1)  # the whole suite, here, for comparison
+    print(json.dumps(dict(process=jax.process_index(), count=jax.process_count(),
+                          devices=len(jax.devices()), local_devices=len(jax.local_devices()),
+                          gathered=gathered.tolist(),
+                          whole=np.stack([np.asarray(local.status), np.asarray(local.iterations)], 1).tolist())))
+    jax.distributed.shutdown()
+    """
+)
+
+
+@pytest.mark.slow
+def test_distributed_two_processes_one_host():
+    """The README's jax.distributed recipe, run as 2 processes on this machine (CPU,
+    1 device each): every process plans its share, the summaries are gathered, and
+    they are the whole suite's (statuses and iterations). Not a test on real
+    multi-host hardware."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        port = s.getsockname()[1]
+    env = subprocess_env()
+    env["XLA_FLAGS"] = " ".join(f for f in env.get("XLA_FLAGS", "").split()
+                                if "xla_force_host_platform_device_count" not in f)
+    procs = [subprocess.Popen([sys.executable, "-c", DISTRIBUTED, f"localhost:{port}", str(i)], cwd=ROOT, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
+    outs = []
+    for p in procs:
+        stdout, stderr = p.communicate(timeout=900)
+        assert p.returncode == 0, stderr[-3000:]
+        outs.append(json.loads(stdout.strip().splitlines()[-1]))
+    for out in outs:
+        assert (out["count"], out["devices"], out["local_devices"]) == (2, 2, 1), out
+        assert out["gathered"] == outs[0]["whole"], out
