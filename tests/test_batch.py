@@ -157,6 +157,11 @@ TWO_DEVICES = textwrap.dedent(
     compiled = sp.rollout_batch.cache_size()
     # The chunked path over the mesh (one chunk of 4, shown with progress): the same program.
     again = sp.plan_batch(batch, max_steps=200, chunk=4, progress=True)
+    # No cross-device communication in the partitioned program (jit's automatic partitioning
+    # of the same vmapped rollout all-reduces the warm start's while-loop predicate instead).
+    text = sp.rollout_batch.lower(batch, sp.default_gains(), sp.make_options("curve"), 200).compile().as_text()
+    collectives = [op for op in ("all-reduce", "all-gather", "all-to-all", "collective-permute", "reduce-scatter")
+                   if op + "(" in text or op + "-start(" in text]
     out = dict(
         shape=list(two.q.shape),
         sharding=str(two.q.sharding) if hasattr(two.q, "sharding") else "",
@@ -167,6 +172,8 @@ TWO_DEVICES = textwrap.dedent(
         chunked_equal=all(np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)
                           for a, b in zip(two, again)),
         recompiled=sp.rollout_batch.cache_size() - compiled,
+        collectives=collectives,
+        partitions=text.count("num_partitions=2") + text.count("mesh['batch'=2]"),
     )
     print(json.dumps(out))
     """
@@ -180,7 +187,10 @@ def test_two_host_devices_match_one():
     XLA compiles a partitioned program (num_partitions = 2) through its SPMD pipeline,
     whose early CSE lets the algebraic simplifier rewrite a different graph (measured:
     68 dot ops left against 89 in the 1-device program), and the rollout amplifies the
-    1e-16 differences. The chunked path over the mesh reuses the program bit for bit."""
+    1e-16 differences. The chunked path over the mesh reuses the program bit for bit, and
+    the compiled program has no collective (jit's automatic partitioning of the same
+    vmapped rollout puts an all-reduce in the warm start's fallback while loop, whose
+    predicate is an "any" over the batch: every iteration would synchronise the devices)."""
     env = subprocess_env()
     flags = [f for f in env.get("XLA_FLAGS", "").split() if "xla_force_host_platform_device_count" not in f]
     env["XLA_FLAGS"] = " ".join(flags + ["--xla_force_host_platform_device_count=2"])
@@ -193,6 +203,7 @@ def test_two_host_devices_match_one():
     assert out["iterations"][0] == out["iterations"][1], out
     assert out["dq"] < 1e-9 and out["dclear"] < 1e-9, out  # close, not bit for bit (see above)
     assert out["chunked_equal"] and out["recompiled"] == 0, out
+    assert out["partitions"] > 0 and out["collectives"] == [], out  # the 2-device program, no collectives
     assert "plan_batch: 1/1 chunks, 3/3 scenarios on 2 devices" in p.stderr
 
 
