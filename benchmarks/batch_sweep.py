@@ -8,10 +8,11 @@ slots, degree 2) so that ONE compilation per method serves every scenario.
 
 For each method (``curve`` and N points, N in 1, 5, 10, 20, 50, 100, 200):
 
-1. **plan**: ``rollout`` vmapped over the batch (as ``rollout_batch``) with a
-   planning-only option set (``check_collisions=False``), compiled ahead with
-   ``.lower(...).compile()`` (compile time reported apart), run chunk by chunk
-   with ``block_until_ready``;
+1. **plan**: :func:`softplan_jax.plan_batch` with a planning-only option set
+   (``check_collisions=False``), in chunks of one padded shape (``--chunk``),
+   sharded over every device, with progress on stderr; compiled ahead
+   (``rollout_batch.lower(...).compile()`` on one chunk: compile time reported
+   apart);
 2. **check**: ``apply_collision_checks`` vmapped over the batch (one
    compilation shared by every method) — the true clearance to the real curves
    at every step and during the motion between steps; the rollout is cut at
@@ -19,19 +20,20 @@ For each method (``curve`` and N points, N in 1, 5, 10, 20, 50, 100, 200):
 3. **report**: success rate (reached without collision), collision rate,
    stalled / max-steps rates, mean iterations over successes, collisions the
    planner did not notice (planning-only "reached" that the check turns into
-   "collided"), per-scenario-step time of planning and of checking =
-   median over chunks of chunk time / (chunk size x scan steps), compile apart.
+   "collided"), per-scenario-step time of planning (wall time of the chunked
+   plan_batch / (scenarios x scan steps), padding included in the work but
+   not in the count) and of checking, compile apart.
 
-The batch axis is sharded over all devices: a ``Mesh`` over ``jax.devices()``,
-``NamedSharding(mesh, PartitionSpec("batch"))``, ``jax.device_put`` of each
-chunk (the batch is padded to a multiple of the chunk, and the chunk to a
-multiple of the device count, by repeating the last scenario; padding is
-dropped from every statistic); ``jax.shard_map`` runs the vmapped planning
-rollout on each device's shard with no cross-device communication. The
-collision checks (step 2) run on one device: sharded, they hung on a 2-device
-CPU in our runs (a known issue, see the comment at ``check_jit``). On a CPU, ``--host-devices K`` (or
+Devices: plan_batch splits every chunk over ``jax.devices()`` (``jax.shard_map``,
+no cross-device communication; the chunk is rounded up to a multiple of the
+device count, padding dropped from every statistic). The checks run sharded the
+same way (their own ``shard_map``: apply_collision_checks has no batched entry
+point in the library). On a CPU, ``--host-devices K`` (or
 ``XLA_FLAGS=--xla_force_host_platform_device_count=K``) splits the host into K
-devices so that the shards run on K cores.
+devices so that the shards run on K cores. (Sharded runs on 2 host devices used
+to hang: jaxlib's batched LAPACK solve waited on XLA's intra-op thread pool that
+the devices' programs occupied; the library's 3x3 solves no longer call LAPACK,
+see ``softplan_jax.numerics.solve_small``.)
 
 Writes ``benchmarks/results/batch_sweep.{md,json}`` and the figure
 ``benchmarks/results/figures/sweep_collision_vs_cost.png`` (collision rate
@@ -177,6 +179,7 @@ def main(argv=None) -> dict:
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
     import softplan_jax as sp
+    from softplan_jax.batching import pad_batch, round_chunk
     from softplan_jax.metrics import apply_collision_checks
     from softplan_jax.planner import Status, make_options, rollout
 
@@ -194,22 +197,19 @@ def main(argv=None) -> dict:
     host = jax.tree_util.tree_map(np.asarray, suite)
     n_obstacles = host.curve_mask.sum(axis=1)
 
-    # Sharding: the batch axis over every device; chunks a multiple of the device count.
+    # Chunks: a multiple of the device count; the suite padded to whole chunks for the checks
+    # (plan_batch pads its own last chunk the same way: copies of the last scenario).
     devices = jax.devices()
     n_dev = len(devices)
     mesh = Mesh(np.array(devices), ("batch",))
     batch_sharding = NamedSharding(mesh, PartitionSpec("batch"))
-    replicated = NamedSharding(mesh, PartitionSpec())
-    chunk = math.ceil(min(args.chunk, args.n) / n_dev) * n_dev
+    chunk = round_chunk(args.chunk, args.n, n_dev)
     n_chunks = math.ceil(args.n / chunk)
     n_pad = n_chunks * chunk
     pad = n_pad - args.n
-    padded = jax.tree_util.tree_map(lambda x: np.concatenate([x, np.repeat(x[-1:], pad, axis=0)]), host)
-    chunks = [
-        jax.device_put(jax.tree_util.tree_map(lambda x, a=a: x[a : a + chunk], padded), batch_sharding)
-        for a in range(0, n_pad, chunk)
-    ]
-    gains = jax.device_put(sp.default_gains(dtype), replicated)
+    padded = pad_batch(host, n_pad)
+    first = jax.tree_util.tree_map(lambda x: x[:chunk], padded)
+    gains = sp.default_gains(dtype)
     T = int(args.max_steps)
     scan_steps = T + 1
     log(
@@ -218,36 +218,32 @@ def main(argv=None) -> dict:
     )
 
     check_opts = make_options("curve", check_collisions=True)
-    batch, shared = PartitionSpec("batch"), PartitionSpec()
-
-    def per_shard(fn, in_specs):
-        # shard_map: every device runs the vmapped function on its own shard of the
-        # batch; scenarios are independent, so no cross-device communication at all.
-        # (Plain jit on NamedSharding inputs lets the SPMD partitioner choose, and it
-        # all-gathers the batch for the closest-point solver's top_k: redundant work,
-        # and we saw a 2-device CPU run hang in it.)
-        # check_vma=False: the library's scans start from constant (unvarying) carries.
-        return jax.jit(jax.shard_map(fn, mesh=mesh, in_specs=in_specs, out_specs=batch, check_vma=False))
-
-    # The collision checks run on ONE device (plain jit, inputs on jax.devices()[0]): on a
-    # 2-device CPU (--xla_force_host_platform_device_count=2) the shard_map'ed check of
-    # device_put inputs hung in XLA's runtime in our runs (block_until_ready never
-    # returned; the sharded planning rollouts, the expensive part, do not). Known issue.
-    check_jit = jax.jit(lambda r, s: jax.vmap(lambda r1, s1: apply_collision_checks(r1, s1, check_opts))(r, s))
-    check_device = jax.sharding.SingleDeviceSharding(devices[0])
+    batch = PartitionSpec("batch")
+    # The checks, sharded like plan_batch's rollouts: every device checks its own shard.
+    check_jit = jax.jit(
+        jax.shard_map(
+            lambda r, s: jax.vmap(lambda r1, s1: apply_collision_checks(r1, s1, check_opts))(r, s),
+            mesh=mesh,
+            in_specs=(batch, batch),
+            out_specs=batch,
+            check_vma=False,
+        )
+    )
     lengths = check_lengths(scan_steps, args.check_buckets)
     check_exes, check_compile = {}, {}
 
-    def check_exe_for(length, r_shapes, sc):
+    def check_exe_for(length, r_shapes):
         """The compiled check for rollouts cut to ``length`` time steps (one compile per length)."""
         if length not in check_exes:
             shapes = jax.tree_util.tree_map(
                 lambda x: jax.ShapeDtypeStruct(
-                    (x.shape[0], length, *x.shape[2:]) if x.ndim >= 2 else x.shape, x.dtype, sharding=check_device
+                    (x.shape[0], length, *x.shape[2:]) if x.ndim >= 2 else x.shape, x.dtype, sharding=batch_sharding
                 ),
                 r_shapes,
             )
-            check_exes[length], check_compile[length] = compile_timed(check_jit, shapes, jax.device_put(sc, check_device))
+            check_exes[length], check_compile[length] = compile_timed(
+                check_jit, shapes, jax.device_put(first, batch_sharding)
+            )
         return check_exes[length]
 
     rows, dump = [], {}
@@ -259,18 +255,16 @@ def main(argv=None) -> dict:
             else make_options("points", method, check_collisions=False)
         )
         log(f"{label}: compiling the planning-only batch rollout ...")
-        plan_jit = per_shard(lambda s, g, opts=opts: jax.vmap(lambda s1: rollout(s1, g, opts, T))(s), (batch, shared))
-        plan_exe, plan_compile = compile_timed(plan_jit, chunks[0], gains)
-        r_shapes = jax.eval_shape(plan_jit, chunks[0], gains)
-        bar = ProgressBar(2 * n_chunks, label=f"{label:>6s}")
-        # 1. Plan, chunk by chunk.
-        plan_times, planned = [], []
-        for sc in chunks:
-            r, dt = timed(plan_exe, sc, gains)
-            plan_times.append(dt)
-            planned.append(jax.tree_util.tree_map(np.asarray, r))
-            bar.update(1, f"plan {fmt_s(dt)}")
-        planned = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *planned)
+        first_j = jax.tree_util.tree_map(jnp.asarray, first)
+        _, plan_compile = compile_timed(sp.rollout_batch, first_j, gains, opts, T)
+        r_shapes = jax.eval_shape(lambda s, o=opts: jax.vmap(lambda s1: rollout(s1, gains, o, T))(s), first_j)
+        # 1. Plan: plan_batch, chunk by chunk (compiled above: no compilation inside the timing).
+        t0 = time.perf_counter()
+        planned = sp.plan_batch(suite, gains=gains, max_steps=T, seed=0, chunk=chunk, progress=True, **opts._asdict())
+        planned = jax.tree_util.tree_map(np.asarray, planned)
+        plan_s = time.perf_counter() - t0
+        planned = pad_batch(planned, n_pad)
+        bar = ProgressBar(len(check_groups(planned.iterations, chunk, lengths)), label=f"{label:>6s} check")
         # 2. Check, in groups of similar length (see check_groups).
         check_times, check_steps = [], 0
         res = dict(
@@ -282,10 +276,10 @@ def main(argv=None) -> dict:
         if args.dump:
             res["q"] = np.empty_like(planned.q)
         for idx, length in check_groups(planned.iterations, chunk, lengths):
-            exe = check_exe_for(length, r_shapes, chunks[0])
+            exe = check_exe_for(length, r_shapes)
             cut = jax.tree_util.tree_map(lambda x, idx=idx, L=length: x[idx][:, :L] if x.ndim >= 2 else x[idx], planned)
             sc = jax.tree_util.tree_map(lambda x, idx=idx: x[idx], padded)
-            cut, sc = jax.device_put((cut, sc), check_device)
+            cut, sc = jax.device_put((cut, sc), batch_sharding)
             rc, dt = timed(exe, cut, sc)
             check_times.append(dt)
             check_steps += chunk * length
@@ -300,7 +294,6 @@ def main(argv=None) -> dict:
         status = res["status"]
         success = status == Status.REACHED
         collided = status == Status.COLLIDED
-        per_plan = [t / (chunk * scan_steps) for t in plan_times]
         row = dict(
             method="curve" if method == "curve" else "points",
             n_points=None if method == "curve" else method,
@@ -318,9 +311,8 @@ def main(argv=None) -> dict:
                 int(k): float(collided[n_obstacles == k].mean()) for k in np.unique(n_obstacles)
             },
             min_clearance_median=float(np.median(res["min_clearance"])),
-            plan_per_step_s=float(np.median(per_plan)),
-            plan_total_s=float(sum(plan_times)),
-            plan_chunk_times_s=plan_times,
+            plan_per_step_s=plan_s / (args.n * scan_steps),
+            plan_total_s=plan_s,
             check_total_s=float(sum(check_times)),
             check_per_step_s=float(sum(check_times) / check_steps),
             check_steps_fraction=check_steps / (n_pad * scan_steps),
@@ -410,15 +402,16 @@ def markdown(report: dict) -> str:
         f"obstacle counts {report['obstacle_count_histogram']} (generated in {report['generation_s']:.1f} s)",
         f"- {report['chunks']} chunk(s) of {report['chunk']} scenarios "
         f"(+{report['padding']} padding, dropped "
-        f"from the statistics), batch axis sharded over {report['devices']} device(s); max_steps "
+        f"from the statistics), batch axis sharded over {report['devices']} device(s) (plan_batch; the checks "
+        f"by their own shard_map); max_steps "
         f"{report['max_steps']} ({report['scan_steps']} scan steps); gains `default_gains()`; contact "
         f"tolerance {report['contact_tolerance']:.2g}",
         "- compile: `apply_collision_checks` (vmapped, shared by every method) for time lengths "
         + ", ".join(f"{k}: {fmt_s(v)}" for k, v in report["check_compile_s"].items())
         + "; each method's planning rollout in the table. Compile is excluded from every per-step figure.",
         "",
-        "*plan / scenario-step* = median over chunks of (chunk wall time) / (chunk size x scan steps) of the "
-        "planning-only batched rollout, `block_until_ready`. *check*: the vmapped `apply_collision_checks` on "
+        "*plan / scenario-step* = wall time of the chunked, sharded `plan_batch` (planning only, compiled "
+        "ahead, results copied to the host) / (scenarios x scan steps). *check*: the vmapped `apply_collision_checks` on "
         "its output; finished rollouts are grouped by length and checked only up to their last step (exact: "
         "the tail is frozen), so its figure is per CHECKED scenario-step, with the fraction of the scan's "
         "steps that were checked. Success = reached the goal without collision; collided = true clearance "

@@ -148,7 +148,46 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("path", metavar="PATH", help="output .json file")
     export.add_argument("--force", action="store_true", help="overwrite PATH if it exists")
     _add_fit_parser(sub)
+    _add_batch_parser(sub)
     return parser
+
+
+def _add_batch_parser(sub) -> None:
+    batch = sub.add_parser(
+        "batch",
+        help="plan a seeded suite of random scenarios, sharded over the devices, with progress",
+        description="Plan random_scenarios(SEED, N) (reachable goals, 1-8 curves across the path, one "
+        "padded shape) with plan_batch: in chunks of one shape (one compilation), every chunk split over "
+        "the local devices, one progress line per chunk on stderr. Prints the outcome counts and the "
+        "speed (scenario-steps per second, compile apart).",
+        epilog="Exit codes: 0 planning finished; 2 bad input. On a CPU, --host-devices K splits the "
+        "host into K devices (XLA_FLAGS=--xla_force_host_platform_device_count=K, set before jax starts).",
+    )
+    batch.add_argument("--n", type=int, default=1000, help="number of scenarios, >= 1 (default 1000)")
+    batch.add_argument("--seed", type=int, default=0,
+                       help="seed of the suite and of the escapes' random walks (default 0)")
+    batch.add_argument("--obstacles", type=int, nargs=2, default=(1, 8), metavar=("LO", "HI"),
+                       help="curves per scenario, drawn from LO..HI (default 1 8)")
+    batch.add_argument("--slots", type=int, default=8, metavar="K",
+                       help="curve slots every scenario is padded to, >= HI (default 8)")
+    batch.add_argument("--method", choices=("curve", "points"), default="curve",
+                       help="curve (the paper's method) or points (default: curve)")
+    batch.add_argument("--n-points", type=int, default=None, metavar="N",
+                       help="N of the N-point model, >= 1 (method points only; default 10)")
+    batch.add_argument("--max-steps", type=int, default=600, metavar="N",
+                       help="most planner steps, >= 1 (default 600)")
+    batch.add_argument("--chunk", type=int, default=512, metavar="C",
+                       help="scenarios per call, >= 1, rounded up to a multiple of the device count (default 512)")
+    batch.add_argument("--devices", type=int, default=None, metavar="K",
+                       help="use the first K local devices (default: all)")
+    batch.add_argument("--host-devices", type=int, default=None, metavar="K",
+                       help="split the CPU into K XLA devices (default: jax's, 1)")
+    batch.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
+    batch.add_argument("--out", metavar="FILE.npz",
+                       help="save per-scenario status, iterations, min clearance, final error, escapes (NumPy)")
+    batch.add_argument("--force", action="store_true", help="let --out replace an existing FILE")
+    batch.add_argument("--json", action="store_true", help="print the summary as JSON")
+    batch.add_argument("--float32", action="store_true", help="plan in float32 (default float64)")
 
 
 def _add_fit_parser(sub) -> None:
@@ -517,6 +556,131 @@ def _cmd_run(args) -> int:
     return EXIT_OK
 
 
+def _cmd_batch(args) -> int:
+    if args.n < 1:
+        raise InputError(f"--n must be >= 1, got {args.n}")
+    if args.max_steps < 1:
+        raise InputError(f"--max-steps must be >= 1, got {args.max_steps}")
+    if args.chunk < 1:
+        raise InputError(f"--chunk must be >= 1, got {args.chunk}")
+    if args.host_devices is not None:
+        if args.host_devices < 1:
+            raise InputError(f"--host-devices must be >= 1, got {args.host_devices}")
+        if "jax" in sys.modules:  # main() called in a process that already started jax
+            import jax
+
+            if jax.local_device_count() != args.host_devices:
+                raise InputError("--host-devices: jax is already running in this process (set XLA_FLAGS="
+                                 f"--xla_force_host_platform_device_count={args.host_devices} before it starts)")
+        else:
+            flags = [f for f in os.environ.get("XLA_FLAGS", "").split()
+                     if "xla_force_host_platform_device_count" not in f]
+            flags.append(f"--xla_force_host_platform_device_count={args.host_devices}")
+            os.environ["XLA_FLAGS"] = " ".join(flags)
+    if args.method == "points":
+        args.n_points = 10 if args.n_points is None else args.n_points
+        if args.n_points < 1:
+            raise InputError(f"--n-points must be >= 1, got {args.n_points}")
+    elif args.n_points is not None:
+        raise InputError("--n-points applies to --method points only")
+    if args.out is not None:
+        if not args.out.endswith(".npz"):
+            raise InputError(f"--out: use a .npz file, got {args.out!r}")
+        if os.path.exists(args.out) and not args.force:
+            raise InputError(f"--out: {args.out} exists (use --force to replace it)")
+        _check_output_path(args.out, "--out")
+    import jax
+
+    from .compilation_cache import enable_compilation_cache
+
+    enable_compilation_cache()
+    if not args.float32:
+        jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp
+    import numpy as np
+
+    from .batching import pad_batch, round_chunk
+    from .planner import default_gains, make_options, plan_batch, rollout_batch
+    from .scenarios import random_scenarios
+    from .status import STATUS_NAMES, Status
+
+    dtype = jnp.float32 if args.float32 else jnp.float64
+    try:
+        n_dev = len(jax.local_devices()) if args.devices is None else int(args.devices)
+        options = make_options(args.method, args.n_points or 10)
+        t0 = time.perf_counter()
+        suite = random_scenarios(args.seed, args.n, obstacles=tuple(args.obstacles), curve_slots=args.slots,
+                                 dtype=dtype)
+        generation_time = time.perf_counter() - t0
+        gains = default_gains(dtype)
+        size = round_chunk(args.chunk, args.n, max(n_dev, 1))
+        first = pad_batch(jax.tree_util.tree_map(lambda x: x[:size], suite), size)
+        t0 = time.perf_counter()
+        rollout_batch.lower(first, gains, options, args.max_steps, args.seed, devices=args.devices).compile()
+        compile_time = time.perf_counter() - t0
+    except ValueError as err:
+        raise InputError(str(err)) from None
+    t0 = time.perf_counter()
+    r = plan_batch(suite, gains=gains, max_steps=args.max_steps, seed=args.seed, chunk=args.chunk,
+                   devices=args.devices, progress=not args.no_progress, **options._asdict())
+    r = jax.tree_util.tree_map(np.asarray, r)
+    run_time = time.perf_counter() - t0
+    status = r.status
+    reached = status == Status.REACHED
+    summary = {
+        "scenarios": args.n,
+        "seed": args.seed,
+        "method": args.method,
+        "n_points": args.n_points if args.method == "points" else None,
+        "max_steps": args.max_steps,
+        "devices": n_dev,
+        "chunk": size,
+        "dtype": str(jnp.dtype(dtype)),
+        "status_counts": {STATUS_NAMES[int(k)]: int((status == k).sum()) for k in np.unique(status)},
+        "success_rate": float(reached.mean()),
+        "collision_rate": float((status == Status.COLLIDED).mean()),
+        "mean_iterations_reached": float(r.iterations[reached].mean()) if reached.any() else None,
+        "min_clearance": float(np.min(r.min_clearance)),
+        "generation_time_s": generation_time,
+        "compile_time_s": compile_time,
+        "run_time_s": run_time,
+        # Every scan step runs for every scenario, finished or not.
+        "scenario_steps_per_s": args.n * (args.max_steps + 1) / run_time,
+        "out": None,
+    }
+    if args.out is not None:
+        try:
+            np.savez_compressed(args.out, status=status, iterations=r.iterations, min_clearance=r.min_clearance,
+                                final_error=r.final_error, escapes=r.escapes, reached=r.reached,
+                                collided=r.collided)
+        except OSError as err:
+            raise InputError(f"cannot write output: {err}") from None
+        summary["out"] = os.path.abspath(args.out)
+    if args.json:
+        clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()}
+        print(json.dumps(clean, indent=2))
+    else:
+        s = summary
+        method = s["method"] + (f" (N = {s['n_points']} points per curve)" if s["method"] == "points" else "")
+        rows = [
+            ("scenarios", f"{s['scenarios']:,} (random_scenarios(seed={s['seed']}), {s['dtype']})"),
+            ("method", method),
+            ("devices", f"{s['devices']}, chunks of {s['chunk']}"),
+            ("outcomes", ", ".join(f"{k} {v:,}" for k, v in s["status_counts"].items())),
+            ("success / collided", f"{100 * s['success_rate']:.1f} % / {100 * s['collision_rate']:.1f} %"),
+            ("mean iterations (reached)", "-" if s["mean_iterations_reached"] is None
+             else f"{s['mean_iterations_reached']:.1f} (max steps {s['max_steps']})"),
+            ("min true clearance", f"{s['min_clearance']:.4f}"),
+            ("compile time", _fmt_seconds(s["compile_time_s"])),
+            ("run time", f"{_fmt_seconds(s['run_time_s'])}: {s['scenario_steps_per_s']:,.0f} scenario-steps/s"),
+        ]
+        if s["out"]:
+            rows.append(("results", s["out"]))
+        width = max(len(k) for k, _ in rows)
+        print("\n".join(f"{k:<{width}}  {v}" for k, v in rows))
+    return EXIT_OK
+
+
 def _text_summary(s: dict) -> str:
     method = s["method"] + (f" (N = {s['n_points']} points per curve)" if s["method"] == "points" else "")
     rows = [
@@ -712,6 +876,8 @@ def main(argv=None) -> int:
             return _cmd_scenarios(args)
         if args.command == "fit":
             return _cmd_fit(args)
+        if args.command == "batch":
+            return _cmd_batch(args)
         return _cmd_export(args)
     except InputError as err:
         msg = " ".join(str(err).split())  # one line

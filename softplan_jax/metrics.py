@@ -32,7 +32,7 @@ import jax.numpy as jnp
 
 from .closest import ClosestPoint, FixedPoint
 from .kinematics import backbone_points, segment_point
-from .numerics import contact_floor, get_epsilon, safe_norm
+from .numerics import contact_floor, get_epsilon, safe_norm, solve_small
 from .obstacles import map_obstacles, radius_and_mask, true_closest
 from .status import Status
 
@@ -70,7 +70,7 @@ def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
         # Levenberg-Marquardt damping relative to the dtype (1e-10 vanishes in float32, where a
         # rank-deficient H, e.g. a straight arm's base point, then solved to NaN).
         H = H + (get_epsilon(dtype) * jnp.trace(H) + jnp.finfo(dtype).tiny) * jnp.eye(3, dtype=dtype)
-        step = -jnp.linalg.solve(H, J.T @ r)
+        step = -solve_small(H, J.T @ r)  # no LAPACK call: see solve_small (sharded batches)
         step = jnp.where(jnp.all(jnp.isfinite(step)), step, 0.0)  # never a NaN candidate
         cands = jnp.clip(x[None, :] + ts[:, None] * step[None, :], lo, hi)
         f = jax.vmap(lambda c: jnp.sum(residual(c) ** 2))(cands)

@@ -31,6 +31,7 @@ __all__ = [
     "sin_over_x",
     "safe_norm",
     "damped_pinv",
+    "solve_small",
     "atan_over_x",
     "solver_tolerance",
     "curvature_floor",
@@ -108,7 +109,64 @@ def damped_pinv(J, damping):
     m = J.shape[0]
     A = J @ J.T + (damping * damping) * jnp.eye(m, dtype=J.dtype)
     # A is symmetric positive definite for damping > 0: solve instead of invert.
-    return jnp.linalg.solve(A, J).T
+    return solve_small(A, J).T
+
+
+# Largest system solve_small unrolls; larger ones go to jnp.linalg.solve (LAPACK on CPU).
+SOLVE_SMALL_MAX = 4
+
+
+def solve_small(A, B):
+    """Solve ``A X = B`` for a small square ``A`` (n x n, n <= 4) by Gaussian
+    elimination with partial pivoting, unrolled into element-wise jax operations.
+
+    Why not ``jnp.linalg.solve``: on CPU that is a LAPACK custom call
+    (``getrf``), and jaxlib's batched LAPACK kernels split a large batch over
+    XLA's intra-op thread pool and block until the pieces finish. When every
+    thread of that pool is already running a device's program -- a batch
+    sharded over as many CPU devices as the pool has threads (e.g.
+    ``--xla_force_host_platform_device_count=2`` on 2 cores) -- nothing is left
+    to run the pieces and the program deadlocks (observed in the planner's
+    sharded rollouts and collision checks). Unrolled, the solve is plain
+    arithmetic that XLA fuses and vectorises over a vmapped batch. Same
+    algorithm as LAPACK (pivot: the first largest ``|a_ik|``); a singular
+    ``A`` gives inf/NaN, as there.
+
+    Args:
+      A: (n, n); n > 4 falls back to ``jnp.linalg.solve``.
+      B: (n,) or (n, k).
+
+    Returns:
+      X with the shape of B.
+    """
+    n = A.shape[-1]
+    if A.ndim != 2 or A.shape[0] != n or B.shape[0] != n:
+        raise ValueError(f"solve_small takes A (n, n) and B (n,) or (n, k), got {A.shape} and {B.shape}")
+    if n > SOLVE_SMALL_MAX:
+        return jnp.linalg.solve(A, B)
+    vector = B.ndim == 1
+    M = jnp.concatenate([A, B[:, None] if vector else B], axis=1)
+    rows = [M[i] for i in range(n)]
+    for k in range(n):
+        # Partial pivoting: bring the row with the largest |a_ik| (i >= k) to row k.
+        p = jnp.argmax(jnp.stack([jnp.abs(rows[i][k]) for i in range(k, n)]))
+        pivot_row = rows[k]
+        for j in range(1, n - k):
+            pivot_row = jnp.where(p == j, rows[k + j], pivot_row)
+        for j in range(1, n - k):
+            rows[k + j] = jnp.where(p == j, rows[k], rows[k + j])
+        rows[k] = pivot_row
+        for i in range(k + 1, n):
+            rows[i] = rows[i] - (rows[i][k] / pivot_row[k]) * pivot_row
+    # Back substitution on the upper triangle.
+    X = [None] * n
+    for i in reversed(range(n)):
+        acc = rows[i][n:]
+        for j in range(i + 1, n):
+            acc = acc - rows[i][j] * X[j]
+        X[i] = acc / rows[i][i]
+    X = jnp.stack(X)
+    return X[:, 0] if vector else X
 
 
 def atan_series_threshold(dtype) -> float:

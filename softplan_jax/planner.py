@@ -42,6 +42,8 @@ used), and checks the motion BETWEEN steps for a pass through an obstacle (see
 
 from __future__ import annotations
 
+import math
+import time
 from functools import partial
 from typing import NamedTuple
 
@@ -49,6 +51,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .batching import BATCH_AXIS, Progress, batch_mesh, pad_batch, round_chunk, shard_batch
 from .closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
 from .compilation_cache import load_or_export
 from .kinematics import motion_bound, points_jacobian, tip_position
@@ -578,13 +581,32 @@ def _rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_ste
     return rollout(scenario, gains, options, max_steps, key)
 
 
-@partial(jax.jit, static_argnames=("options", "max_steps"))
-def _rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, keys) -> Rollout:
-    return jax.vmap(lambda sc, k: rollout(sc, gains, options, max_steps, k))(scenarios, keys)
+@partial(jax.jit, static_argnames=("options", "max_steps", "mesh"))
+def _rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, keys,
+                   mesh=None) -> Rollout:
+    def vmapped(scenarios, gains, keys):
+        return jax.vmap(lambda sc, k: rollout(sc, gains, options, max_steps, k))(scenarios, keys)
+
+    if mesh is None:
+        return vmapped(scenarios, gains, keys)
+    # Every device runs the vmapped rollout on its own shard of the batch: the scenarios are
+    # independent, so there is no cross-device communication. check_vma=False: the scan's
+    # carries start from constants (unvarying over the mesh), its outputs vary.
+    batch, shared = jax.sharding.PartitionSpec(BATCH_AXIS), jax.sharding.PartitionSpec()
+    return jax.shard_map(vmapped, mesh=mesh, in_specs=(batch, shared, batch), out_specs=batch,
+                         check_vma=False)(scenarios, gains, keys)
 
 
 def _batch_keys(seed, batch: int):
-    return jax.random.split(_key(seed), batch)
+    """One key per scenario: ``jax.random.split(key(seed), batch)``, or ``seed`` itself when it
+    already holds one key per scenario (shape (batch, 2) raw keys, or (batch,) typed keys)."""
+    key = _key(seed)
+    typed = jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
+    if key.ndim == (1 if typed else 2):
+        if key.shape[0] != batch:
+            raise ValueError(f"seed holds {key.shape[0]} keys for a batch of {batch} scenarios")
+        return key
+    return jax.random.split(key, batch)
 
 
 class CompiledRollout:
@@ -642,7 +664,7 @@ class CompiledRollout:
         if not scenario.parametric and not self._batched:
             compiled, loaded = load_or_export(flat, leaves, (repr(options), str(int(max_steps)), str(treedef)))
         if compiled is None:
-            plain = self.lower(scenario, gains, options, max_steps).compile()
+            plain = self._jitted.lower(*self._args(scenario, gains, options, max_steps, 0)).compile()
 
             def run(scenario, gains, seed=0):
                 s, g, _, _, k = self._args(scenario, gains, options, max_steps, seed)
@@ -663,10 +685,52 @@ padded scenario shape, dtype, options and max_steps; new goals, obstacles, gain 
 it. ``seed``: an int or a PRNG key for the escapes. ``rollout_jit.lower(...)`` lowers ahead of time;
 ``rollout_jit.cache_size()`` counts compilations (see :class:`CompiledRollout`).""")
 
-rollout_batch = CompiledRollout(_rollout_batch, batched=True, doc=""":func:`rollout` vmapped over a batch of
+class BatchedRollout(CompiledRollout):
+    """The batched, jitted rollout, sharded over devices (see :data:`rollout_batch`).
+
+    Call it as ``f(scenarios, gains, options, max_steps, seed=0, devices=None)``;
+    ``f.lower`` takes the same arguments; ``f.cache_size()`` counts the
+    compilations (one per batch shape, dtype, options, max_steps and device set).
+    """
+
+    def _sharded_args(self, scenarios, gains, options, max_steps, seed, devices):
+        s, g, o, T, keys = self._args(scenarios, gains, options, max_steps, seed)
+        mesh = batch_mesh(devices)
+        if mesh is None:
+            return (s, g, o, T, keys, None), 0
+        batch = s.q0.shape[0]
+        size = round_chunk(None, batch, mesh.size)
+        (s, keys), g = shard_batch(mesh, pad_batch((s, keys), size), g)
+        return (s, g, o, T, keys, mesh), size - batch
+
+    def __call__(self, scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0,
+                 devices=None) -> Rollout:
+        args, pad = self._sharded_args(scenarios, gains, options, max_steps, seed, devices)
+        r = self._jitted(*args)
+        if pad:
+            batch = scenarios.q0.shape[0]
+            r = jax.tree_util.tree_map(lambda x: x[:batch], r)
+        return r
+
+    def lower(self, scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0,
+              devices=None):
+        """``jax.jit(...).lower`` of the batched rollout for these arguments (the batch
+        padded to a multiple of the device count)."""
+        return self._jitted.lower(*self._sharded_args(scenarios, gains, options, max_steps, seed, devices)[0])
+
+
+rollout_batch = BatchedRollout(_rollout_batch, batched=True, doc=""":func:`rollout` vmapped over a batch of
 scenarios of one padded shape (every leaf of ``scenarios`` has a leading batch axis; gains shared),
-jitted: ``rollout_batch(scenarios, gains, options, max_steps, seed=0)``. Scenario b's escapes use
-``jax.random.split(key(seed), B)[b]``. ``.lower`` and ``.cache_size()`` as :class:`CompiledRollout`.""")
+jitted: ``rollout_batch(scenarios, gains, options, max_steps, seed=0, devices=None)``. Scenario b's
+escapes use ``jax.random.split(key(seed), B)[b]`` (or ``seed[b]`` when ``seed`` holds B keys).
+
+With more than one local device the batch is sharded over all of them (``devices``: None = every
+local device, an int k = the first k, 1 = no sharding, or a sequence of jax devices): padded to a
+multiple of the device count with copies of its last scenario (dropped from the result), each
+device runs the vmapped rollout on its shard (``jax.shard_map``, no cross-device communication).
+The result agrees with the unsharded call to rounding, not bit for bit (XLA optimises a
+partitioned program differently); a rollout that amplifies rounding (a near-tie of the stall or
+contact test) can end differently. ``.lower`` and ``.cache_size()`` as :class:`CompiledRollout`.""")
 
 
 class PlanResult(NamedTuple):
@@ -767,21 +831,102 @@ def result_from_rollout(r: Rollout, scenario: Scenario) -> PlanResult:
 
 
 def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
-               max_steps: int = 600, seed=0, **options) -> Rollout:
-    """Plan a batch of scenarios in one vmapped, jitted call.
+               max_steps: int = 600, seed=0, *, chunk: int | None = None, devices=None, progress: bool = False,
+               **options) -> Rollout:
+    """Plan a batch of scenarios: vmapped and jitted, sharded over the local
+    devices, in chunks of one shape.
 
     Args:
       scenarios: a batched Scenario (:func:`stack_scenarios`, or
         :func:`softplan_jax.scenarios.random_scenarios`).
+      seed: int seed or PRNG key; scenario b's escapes use
+        ``jax.random.split(key(seed), B)[b]`` whatever the chunk. Or one key per
+        scenario (B raw keys (B, 2), or B typed keys): then scenario b uses
+        ``seed[b]`` (a share of a larger suite keeps the suite's keys, see the
+        README's "Many scenarios, several devices").
+      chunk: scenarios per call (None: the whole batch in one call). Rounded up
+        to a multiple of the device count; the last chunk is padded with copies
+        of the last scenario, so every call has the same shape and compiles
+        once.
+      devices: None (every local device), an int k (the first k local devices;
+        1: no sharding) or a sequence of local jax devices. With more than one,
+        every chunk is split over them (see :data:`rollout_batch`).
+      progress: write one line per finished chunk to stderr (chunks done,
+        scenarios, elapsed time, estimated time left, compile time).
       Other arguments as :func:`plan`.
 
     Returns:
-      A batched :class:`Rollout` (leading axis: scenario; time padded to max_steps + 1).
+      A batched :class:`Rollout` (leading axis: scenario; time padded to
+      max_steps + 1). In one call its arrays are jax arrays; in several chunks
+      they are NumPy arrays assembled on the host, so the devices hold about
+      two chunks at a time. Size: about ``(max_steps + 1) * (8 * (13 + 2 m) + 5)``
+      bytes per scenario in float64 (m obstacle slots): 142 kB for 600 steps and
+      8 slots, 1.4 GB for 10^4 such scenarios.
+
+    Rounding: a vmapped program's rounding depends on its batch shape and on
+    the device count, so results agree with another chunk size or device count
+    to rounding (not bit for bit); a rollout that amplifies rounding (a
+    near-tie of the stall test or of the contact test) can end differently.
     """
     if not isinstance(scenarios, Scenario) or scenarios.q0.ndim != 3:
         raise ValueError("plan_batch takes a batched Scenario (see stack_scenarios)")
     if int(max_steps) < 1:
         raise ValueError(f"max_steps must be >= 1, got {max_steps}")
+    if chunk is not None and (isinstance(chunk, (bool, np.bool_)) or not isinstance(chunk, (int, np.integer))
+                              or chunk < 1):
+        raise ValueError(f"chunk must be None or an int >= 1, got {chunk!r}")
+    if not isinstance(progress, (bool, np.bool_)):
+        raise ValueError(f"progress must be True or False, got {progress!r}")
     opts = make_options(method, n_points, **options)
-    g = check_gains(gains, scenarios.q0.dtype)
-    return rollout_batch(scenarios, g, opts, int(max_steps), seed)
+    dtype = scenarios.q0.dtype
+    g = _strong_gains(check_gains(gains, dtype), dtype)
+    T = int(max_steps)
+    mesh = batch_mesh(devices)
+    n_dev = 1 if mesh is None else mesh.size
+    batch = scenarios.q0.shape[0]
+    size = round_chunk(chunk, batch, n_dev)
+    n_chunks = math.ceil(batch / size)
+    bar = Progress(n_chunks, batch, n_dev) if progress else None
+    if n_chunks == 1 and bar is None:
+        return rollout_batch(scenarios, g, opts, T, seed, devices=devices)
+
+    keys = _batch_keys(seed, batch)
+    host = jax.tree_util.tree_map(np.asarray, scenarios)
+    out, done = None, 0
+
+    def call(a):
+        part = pad_batch(jax.tree_util.tree_map(lambda x: x[a : a + size], (host, keys)), size)
+        if mesh is None:
+            (s, k), g_dev = jax.device_put(part), g  # jax arrays, as rollout_batch's: one jit signature
+        else:
+            (s, k), g_dev = shard_batch(mesh, part, g)
+        return _rollout_batch(s, g_dev, opts, T, k, mesh)
+
+    def collect(a, r):
+        nonlocal out, done
+        n = min(size, batch - a)
+        if n_chunks == 1:
+            out = jax.tree_util.tree_map(lambda x: x[:n], r) if n < size else r
+        else:
+            r = jax.device_get(r)
+            if out is None:
+                out = jax.tree_util.tree_map(lambda x: np.empty((batch, *x.shape[1:]), x.dtype), r)
+            for o, x in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(r), strict=True):
+                o[a : a + n] = x[:n]
+        done += 1
+        if bar is not None:
+            jax.block_until_ready(out)
+            bar.update(done, a + n)
+
+    # Dispatch chunk i + 1 before fetching chunk i: the devices stay busy while the host copies.
+    pending = None
+    for i, a in enumerate(range(0, batch, size)):
+        t0 = time.perf_counter()
+        r = call(a)
+        if i == 0 and bar is not None:
+            bar.compiled(time.perf_counter() - t0)
+        if pending is not None:
+            collect(*pending)
+        pending = (a, r)
+    collect(*pending)
+    return out

@@ -4,13 +4,10 @@
   run in subprocesses (outputs written to a temporary directory): they must
   finish, and their Markdown, JSON and figures must exist and parse. No timing
   is asserted (timings belong in the benchmarks).
-* The sweep's sharding: the same quick sweep on 2 host devices
-  (``XLA_FLAGS=--xla_force_host_platform_device_count=2``, batch axis sharded)
-  must give the same statuses and iterations as on 1 device, and q to 1e-3
-  (rounding differs between the per-device programs and rollouts amplify it).
-  The three subprocesses run at once (each spends most of its time compiling;
+* The two subprocesses run at once (each spends most of its time compiling;
   they share the suite's persistent compilation cache (conftest.py), so a rerun
-  of the suite is much faster).
+  of the suite is much faster). Sharding over 2 host devices is tested on
+  plan_batch itself (tests/test_batch.py), which the sweep calls.
 * ``random_scenarios``: seeded and deterministic, the requested shapes, each
   entry equal to ``make_scenario`` of its own obstacles, goals reachable (an
   independent least-squares inverse kinematics finds a configuration within
@@ -57,7 +54,7 @@ def _env(devices: int | None):
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory, request):
-    """Start the three quick benchmark runs at once; wait for all; return their outputs."""
+    """Start the quick benchmark runs at once; wait for all; return their outputs."""
     d = tmp_path_factory.mktemp("bench")
     py = sys.executable
     specs = {
@@ -82,24 +79,8 @@ def runs(tmp_path_factory, request):
                 str(d / "sweep1"),
                 "--figure",
                 str(d / "sweep1.png"),
-                "--dump",
-                str(d / "sweep1.npz"),
             ],
             1,
-        ),
-        "sweep2": (
-            [
-                py,
-                os.path.join(BENCH, "batch_sweep.py"),
-                "--quick",
-                "--out",
-                str(d / "sweep2"),
-                "--figure",
-                "",
-                "--dump",
-                str(d / "sweep2.npz"),
-            ],
-            2,
         ),
     }
     procs = {}
@@ -185,34 +166,10 @@ def test_batch_sweep_quick(runs):
         rates = [r[k] for k in ("success_rate", "collision_rate", "stalled_rate", "max_steps_rate", "nonfinite_rate")]
         assert all(0.0 <= x <= 1.0 for x in rates) and abs(sum(rates) - 1.0) < 1e-9, r
         assert r["plan_per_step_s"] > 0 and r["check_per_step_s"] > 0 and r["compile_plan_s"] > 0
-        assert len(r["plan_chunk_times_s"]) == report["chunks"]
     assert report["check_compile_s"] and all(v > 0 for v in report["check_compile_s"].values())
     for key in ("| method | success | collided", "CPUs", f"jax {jax.__version__}", "float64", "QUICK MODE"):
         assert key in md, key
     assert (d / "sweep1.png").stat().st_size > 10_000
-
-
-def test_sharded_sweep_matches_single_device(runs):
-    _ok(runs["sweep1"])
-    _ok(runs["sweep2"])
-    d = runs["dir"]
-    assert json.loads((d / "sweep2.json").read_text())["devices"] == 2
-    one, two = np.load(d / "sweep1.npz"), np.load(d / "sweep2.npz")
-    assert sorted(one.files) == sorted(two.files)
-    for method in ("curve", "N=10"):
-        for key in ("status", "plan_status", "iterations"):
-            np.testing.assert_array_equal(one[f"{method}/{key}"], two[f"{method}/{key}"], err_msg=f"{method}/{key}")
-        q1, q2 = one[f"{method}/q"], two[f"{method}/q"]
-        assert q1.shape == (30, 61, 3, 3) and np.all(np.isfinite(q1))
-        # Not bit-identical: each device runs its own compiled program on its shard,
-        # whose rounding differs from the 1-device program's, and rollouts near
-        # obstacles amplify rounding. The safe step (a min over clearances) and the
-        # escapes (a stall test that starts a random walk) are discrete decisions that
-        # amplify it further: measured with them, 1 of 30 curve rollouts differs by
-        # 7e-3 after 60 steps, the others within 1e-3. Outcomes (above) must be identical.
-        per_rollout = np.max(np.abs(q2 - q1), axis=(1, 2, 3))
-        assert np.sum(per_rollout > 1e-3) <= 2, (method, per_rollout)
-        np.testing.assert_allclose(q2, q1, rtol=0, atol=2e-2, err_msg=method)
 
 
 # ----------------------------------------------------------------------------

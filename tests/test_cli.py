@@ -3,8 +3,9 @@ subprocess run of ``python -m softplan_jax.cli`` for the entry point).
 
 Compilation dominates the cost, so every planning run here uses ONE compiled
 shape: a sim1-shaped scenario (one degree-1 curve, no point sets), the curve
-method with default options, float64 and --max-steps 80. The bad-input cases
-fail before anything is compiled.
+method with default options, float64 and --max-steps 80 (``softplan batch``:
+tests/test_warm_start.py's suite and steps). The bad-input cases fail before
+anything is compiled.
 
 The last section smoke-tests the plotting functions the command uses on a
 hand-made result (no planning).
@@ -254,6 +255,16 @@ def _bad_cases(tmp: str, scenario_file: str):
         ("export existing file", ["export", "sim1", scenario_file]),
         ("export to missing directory", ["export", "sim1", j(tmp, "no", "x.json")]),
         ("export to a directory", ["export", "sim1", tmp]),
+        ("batch n 0", ["batch", "--n", "0"]),
+        ("batch chunk 0", ["batch", "--n", "4", "--chunk", "0"]),
+        ("batch max-steps 0", ["batch", "--n", "4", "--max-steps", "0"]),
+        ("batch n-points with curve", ["batch", "--n", "4", "--n-points", "5"]),
+        ("batch n-points 0", ["batch", "--n", "4", "--method", "points", "--n-points", "0"]),
+        ("batch out not npz", ["batch", "--n", "4", "--out", j(tmp, "r.json")]),
+        ("batch out existing file", ["batch", "--n", "4", "--out", scenario_file]),
+        ("batch more obstacles than slots", ["batch", "--n", "4", "--obstacles", "1", "9"]),
+        ("batch too many devices", ["batch", "--n", "4", "--devices", "64"]),
+        ("batch host devices after jax started", ["batch", "--n", "4", "--host-devices", "3"]),
     ]
 
 
@@ -290,6 +301,28 @@ def test_bad_file_message_names_the_field(tmp_path, capsys):
     code, _, err = run_main(capsys, "run", bad)
     assert code == 2
     assert "goal" in err.replace(str(bad), "")
+
+
+def test_batch_command(tmp_path, capsys):
+    """``softplan batch``: plan_batch over a random suite, progress on stderr, summary and
+    per-scenario results. The suite and steps are test_warm_start's (one compiled program)."""
+    out = tmp_path / "batch.npz"
+    code, stdout, err = run_main(capsys, "batch", "--n", 3, "--seed", 3, "--obstacles", 1, 5, "--slots", 5,
+                                 "--max-steps", 200, "--chunk", 3, "--json", "--out", out)
+    assert code == 0, err
+    s = json.loads(stdout)
+    assert (s["scenarios"], s["devices"], s["chunk"], s["max_steps"]) == (3, 1, 3, 200)
+    assert sum(s["status_counts"].values()) == 3 and s["scenario_steps_per_s"] > 0
+    assert "plan_batch: 1/1 chunks, 3/3 scenarios on 1 device" in err
+    saved = np.load(out)
+    ref = sp.plan_batch(sp.random_scenarios(3, 3, obstacles=(1, 5), curve_slots=5), max_steps=200, seed=3)
+    np.testing.assert_array_equal(saved["status"], np.asarray(ref.status))
+    np.testing.assert_array_equal(saved["iterations"], np.asarray(ref.iterations))
+    assert s["success_rate"] == float(np.mean(np.asarray(ref.reached)))
+    # Text summary, no progress.
+    code, stdout, err = run_main(capsys, "batch", "--n", 3, "--seed", 3, "--obstacles", 1, 5, "--slots", 5,
+                                 "--max-steps", 200, "--no-progress")
+    assert code == 0 and err == "" and "scenario-steps/s" in stdout
 
 
 # ----------------------------------------------------------------------------

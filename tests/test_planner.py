@@ -194,6 +194,32 @@ def test_plan_batch_matches_single(paper):
         np.testing.assert_allclose(np.asarray(rb.q[b]), np.asarray(single.q), atol=1e-10)
 
 
+def test_plan_batch_chunks_one_shape_one_compilation(paper, capsys):
+    """plan_batch in chunks: every chunk has the same padded shape (the last one padded
+    with copies of the last scenario), so chunks of 3 reuse the compilation of a batch
+    of 3, and they give that batch's rollouts bit for bit (the same program on the
+    same inputs; no escape starts, so the per-scenario keys do not matter)."""
+    scenes = list(paper.values())
+    rb = sp.plan_batch(sp.stack_scenarios(scenes), max_steps=200, devices=1)
+    assert np.all(np.asarray(rb.escapes) == 0) and np.all(np.asarray(rb.reached))
+    before = sp.rollout_batch.cache_size()
+    # 5 scenarios in chunks of 3: sim1 sim2 tree | sim1 sim2 + a padding copy of sim2.
+    five = sp.stack_scenarios(scenes + scenes[:2])
+    rc = sp.plan_batch(five, max_steps=200, chunk=3, devices=1, progress=True)
+    assert sp.rollout_batch.cache_size() == before
+    assert rc.q.shape == (5, 201, 3, 3) and isinstance(rc.q, np.ndarray)
+    for field, got in rc._asdict().items():
+        ref = np.asarray(getattr(rb, field))
+        np.testing.assert_array_equal(got, np.concatenate([ref, ref[:2]]), err_msg=field)
+    err = capsys.readouterr().err
+    assert "plan_batch: 1/2 chunks, 3/5 scenarios on 1 device" in err
+    assert "plan_batch: 2/2 chunks, 5/5 scenarios on 1 device" in err
+    # Off by default.
+    sp.plan_batch(five, max_steps=200, chunk=3, devices=1)
+    assert capsys.readouterr().err == ""
+    assert sp.rollout_batch.cache_size() == before
+
+
 def test_mixed_obstacles_both_methods():
     helix = sp.ParametricCurve(lambda u: jnp.stack([0.3 * jnp.cos(u) + 1.4, 0.3 * jnp.sin(u), 0.15 * u]),
                                (0.0, 12.0))
