@@ -58,7 +58,12 @@ def enable() -> str | None:
 
     d = compilation_cache_dir()
     if d is None:
+        # The library's own on-disk caches (softplan run's traced rollouts) off as well.
+        os.environ.setdefault("SOFTPLAN_COMPILATION_CACHE", "0")
         return None
+    # The library's on-disk caches (softplan run keeps traced rollouts in <root>/exported)
+    # beside the suite's, never in the user's ~/.cache; subprocesses inherit it.
+    os.environ.setdefault("SOFTPLAN_CACHE_DIR", os.path.dirname(d))
     os.makedirs(d, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", d)
     # cache every program: the suite compiles many small ones

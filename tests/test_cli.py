@@ -30,7 +30,7 @@ STEPS = "80"
 SUMMARY_FIELDS = {
     "scenario", "method", "n_points", "repulsion", "gains", "step", "escapes", "dtype", "status", "iterations",
     "max_steps", "reached", "collided", "min_clearance", "final_error", "goal_tolerance", "compile_time_s", "run_time_s",
-    "time_per_scan_step_s", "plot", "gif", "out",
+    "time_per_scan_step_s", "plot", "gif", "out", "program_from_cache",
 }
 
 
