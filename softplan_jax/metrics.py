@@ -61,7 +61,7 @@ __all__ = [
 PROOF_TOLERANCE = 64.0
 # Gauss-Newton iterations of the between-step search (per start).
 SEARCH_ITERATIONS = 8
-# (motion, slot) entries searched at once by apply_collision_checks (the rollout: one).
+# (motion, slot) entries searched at once by apply_collision_checks (the rollout: one); not tuned.
 POST_HOC_CHUNK = 16
 
 
