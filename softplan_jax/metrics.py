@@ -16,6 +16,17 @@ a pass of the arm through a curve is reported even though both sampled
 configurations are clear, and a collision is never invented. (It could in
 principle miss a dip whose basin neither end's closest pair leads into.)
 
+The search is skipped where a proof makes it pointless (:func:`swept_clear`):
+:func:`~softplan_jax.kinematics.motion_bound` B bounds how far any arm point
+moves during the motion and the distance to an obstacle is 1-Lipschitz in the
+arm point, so the clearance stays >= c_a - B throughout (c_a: the exact
+clearance at q_a); where that exceeds the contact tolerance no collision is
+possible and the search could only report an achieved value above it. The
+skipped slots record min(c_a, c_b), also an achieved clearance. The rollout
+and :func:`apply_collision_checks` search the remaining (motion, slot) entries
+in a while loop (:func:`_evaluate_where`), so that under vmap a batch pays its
+largest number of them, not a select over all.
+
 :func:`apply_collision_checks` adds the true-clearance and between-step
 checks to a planning-only rollout after the fact (vectorised over time).
 Every per-obstacle loop goes through :mod:`softplan_jax.obstacles`.
@@ -31,18 +42,27 @@ import jax
 import jax.numpy as jnp
 
 from .closest import ClosestPoint, FixedPoint
-from .kinematics import backbone_points, segment_point
+from .kinematics import backbone_points, motion_bound, segment_point
 from .numerics import contact_floor, get_epsilon, safe_norm, solve_small
-from .obstacles import map_obstacles, radius_and_mask, true_closest
+from .obstacles import map_obstacle_groups, map_obstacles, radius_and_mask, true_closest
 from .status import Status
 
 __all__ = [
     "true_closest",
     "between_steps",
+    "swept_clear",
     "contact_tolerance",
     "apply_collision_checks",
     "dense_trajectory_clearance",
 ]
+
+
+# Rounding margin of the swept proof (:func:`swept_clear`): PROOF_TOLERANCE eps (1 + the scene's size).
+PROOF_TOLERANCE = 64.0
+# Gauss-Newton iterations of the between-step search (per start).
+SEARCH_ITERATIONS = 8
+# (motion, slot) entries searched at once by apply_collision_checks (the rollout: one); not tuned.
+POST_HOC_CHUNK = 16
 
 
 def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
@@ -81,8 +101,87 @@ def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
     return safe_norm(residual(x))
 
 
+def _slot_motion_distance(q_a, q_b, ta: ClosestPoint, tb: ClosestPoint, curve, iterations: int):
+    """Smallest distance found during the motion q_a -> q_b for ONE obstacle slot:
+    Gauss-Newton over (tau, s, u) (:func:`_motion_pair_distance`) on the segment of
+    each end's closest pair, started from both ends' closest pairs. ``curve``: the
+    slot's curve, or None for a point set (the closest point of each end, fixed)."""
+    dq = q_b - q_a
+    dtype = q_a.dtype
+    if curve is None:
+        curve_a, curve_b = FixedPoint(ta.obstacle_point), FixedPoint(tb.obstacle_point)
+        ta, tb = ta._replace(u=jnp.zeros_like(ta.u)), tb._replace(u=jnp.zeros_like(tb.u))
+    else:
+        curve_a = curve_b = curve
+    # Stacked starts (tau, s, u) at tau = 0 and tau = 1, each on its own segment.
+    seg = jnp.stack([ta.segment, tb.segment])
+    ends = jnp.array([0.0, 1.0], dtype)
+    x0 = jnp.stack([ends, jnp.stack([ta.s, tb.s]), jnp.stack([ta.u, tb.u])], axis=-1)
+    curves = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), curve_a, curve_b)
+    d = jax.vmap(lambda i, x, c: _motion_pair_distance(q_a, dq, i, x, c, iterations))(seg, x0, curves)
+    return jnp.min(d)
+
+
+def _evaluate_where(todo, fn, chunk: int, dtype):
+    """``out[p] = fn(p)`` where ``todo[p]``, +inf elsewhere; todo (P,) bool.
+
+    ``fn`` runs on ``chunk`` flat indices at a time (vmapped), in a
+    ``lax.while_loop`` over the entries still to do: the cost is
+    ceil(#todo / chunk) iterations, and under ``vmap`` (a batch) the batch's
+    largest number of iterations, not a select over all P entries (what a
+    ``lax.cond`` becomes under vmap). ``fn(p) -> ()`` must accept any index in
+    [0, P) (chunk slots left over run on index P - 1 and are dropped).
+    """
+    P = todo.shape[0]
+
+    def body(state):
+        out, left = state
+        idx = jnp.nonzero(left, size=chunk, fill_value=P)[0]
+        vals = jax.vmap(fn)(jnp.minimum(idx, P - 1))
+        return out.at[idx].set(vals, mode="drop"), left.at[idx].set(False, mode="drop")
+
+    out0 = jnp.full((P,), jnp.inf, dtype)
+    return jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (out0, todo))[0]
+
+
+def _searched_motions(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenario, search,
+                      iterations: int, chunk: int):
+    """The between-step search of T motions q_a[t] -> q_b[t], run only for the
+    (motion, slot) entries where ``search`` (T, m) is True: smallest distance found
+    (T, m), +inf where not searched. Per group of slots of one kind
+    (:func:`~softplan_jax.obstacles.map_obstacle_groups`), the entries to search
+    go through :func:`_evaluate_where`, ``chunk`` at a time."""
+    T = q_a.shape[0]
+
+    def take(tree, t, j):
+        return jax.tree_util.tree_map(lambda x: x[t, j], tree)
+
+    def group(curves, ta, tb, todo):
+        # ta, tb: ClosestPoint (g, T); todo (g, T) -- the group's rows of the (m, T) slot args.
+        g = todo.shape[0]
+
+        def one(p):
+            j, t = p // T, p % T
+            curve = None if curves is None else jax.tree_util.tree_map(lambda x: x[j], curves)
+            return _slot_motion_distance(q_a[t], q_b[t], take(ta, j, t), take(tb, j, t), curve, iterations)
+
+        return _evaluate_where(todo.reshape(-1), one, chunk, q_a.dtype).reshape(g, T)
+
+    no_grad = jax.lax.stop_gradient
+    # Slot args with the slot axis first (map_obstacle_groups splits the leading axis m).
+    slot_first = jax.tree_util.tree_map(lambda x: jnp.swapaxes(x, 0, 1), (truth_a, truth_b, search))
+    found = map_obstacle_groups(
+        scenario,
+        lambda curves, ta, tb, todo: group(jax.tree_util.tree_map(no_grad, curves), ta, tb, todo),
+        lambda points, mask, ta, tb, todo: group(None, ta, tb, todo),
+        slot_first,
+        empty=jnp.zeros((0, T), q_a.dtype),
+    )
+    return jnp.swapaxes(found, 0, 1)
+
+
 def between_steps(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenario, radius_sum,
-                  iterations: int = 8):
+                  iterations: int = SEARCH_ITERATIONS, search=None):
     """Smallest clearance found (m,) during the motion from q_a to q_b.
 
     For every obstacle slot, Gauss-Newton over (tau, s, u) on the segment of
@@ -90,36 +189,55 @@ def between_steps(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenar
     (see :func:`_motion_pair_distance`); point sets use the closest point of
     each end. ``truth_a``/``truth_b``: :func:`~softplan_jax.obstacles.true_closest`
     at q_a and q_b. ``radius_sum`` (m,) = arm radius + obstacle radius.
+
+    ``search`` (m,) bool, optional: search only these slots, one after the
+    other in a while loop (the rollout passes the slots that
+    :func:`swept_clear` cannot prove clear); the others get the smaller of
+    the two ends' clearances, also an achieved clearance. None (default):
+    every slot, vectorised.
     """
     q_a, q_b = jax.lax.stop_gradient(q_a), jax.lax.stop_gradient(q_b)
     truth_a, truth_b = jax.lax.stop_gradient(truth_a), jax.lax.stop_gradient(truth_b)
-    dq = q_b - q_a
     dtype = q_a.dtype
-    zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
-
-    ends = jnp.stack([zero, one])
-
-    def from_both_ends(curve_a, curve_b, ta, tb):
-        # Stacked starts (tau, s, u) at tau = 0 and tau = 1, each on its own segment.
-        seg = jnp.stack([ta.segment, tb.segment])
-        x0 = jnp.stack([ends, jnp.stack([ta.s, tb.s]), jnp.stack([ta.u, tb.u])], axis=-1)
-        curves = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), curve_a, curve_b)
-        d = jax.vmap(lambda i, x, c: _motion_pair_distance(q_a, dq, i, x, c, iterations))(seg, x0, curves)
-        return jnp.min(d)
-
-    def on_curve(c, a, b):
-        return from_both_ends(c, c, a, b)
-
-    def on_points(points, mask, a, b):
-        # The closest point of each end, as a fixed point (u unused).
-        return from_both_ends(
-            FixedPoint(a.obstacle_point), FixedPoint(b.obstacle_point),
-            a._replace(u=jnp.zeros_like(a.u)), b._replace(u=jnp.zeros_like(b.u)),
+    if search is None:
+        found = map_obstacles(
+            scenario,
+            lambda c, a, b: _slot_motion_distance(q_a, q_b, a, b, c, iterations),
+            lambda points, mask, a, b: _slot_motion_distance(q_a, q_b, a, b, None, iterations),
+            (truth_a, truth_b),
+            empty=jnp.zeros((0,), dtype),
         )
-
-    found = map_obstacles(scenario, on_curve, on_points, (truth_a, truth_b), empty=jnp.zeros((0,), dtype))
+    else:
+        found = _searched_motions(q_a[None], q_b[None], *jax.tree_util.tree_map(lambda x: x[None], (truth_a, truth_b)),
+                                  scenario, search[None], iterations, chunk=1)[0]
     D_min = jnp.minimum(found, jnp.minimum(truth_a.distance, truth_b.distance))
     return D_min - radius_sum
+
+
+def swept_clear(q_a, q_b, truth_a: ClosestPoint, clearance_a, contact):
+    """(m,) bool: the motion q_a -> q_b provably keeps every obstacle slot's
+    clearance above ``contact``, so the between-step search cannot find a collision there.
+
+    :func:`~softplan_jax.kinematics.motion_bound` B bounds how far any arm point
+    moves during the straight-line motion, and the distance to a set is
+    1-Lipschitz, so the clearance to obstacle j stays >= c_a[j] - B at every
+    instant (c_a: the exact clearance at q_a). Proven where
+    ``c_a[j] - B > contact + margin`` and the exact solve at q_a converged; the
+    margin ``PROOF_TOLERANCE eps (1 + sum_i max(L_i) + D_a[j])`` covers rounding.
+    With the safe step (``PlanOptions.step = "safe"``) the planner keeps
+    ``B <= f (c_min - 2 contact)``, so this holds at almost every step of the
+    curve method. NaN gives False.
+
+    Args:
+      q_a, q_b: (n, 3) the motion's ends.
+      truth_a: ClosestPoint (leading axis m) at q_a.
+      clearance_a: (m,) its clearance (distance minus radii; +inf: padding).
+      contact: the contact tolerance (:func:`contact_tolerance`).
+    """
+    bound = motion_bound(q_a, q_b)[-1]
+    arm = jnp.sum(jnp.maximum(q_a[:, 0], q_b[:, 0]))
+    margin = PROOF_TOLERANCE * jnp.finfo(q_a.dtype).eps * (1.0 + arm + jnp.abs(truth_a.distance))
+    return truth_a.converged & (clearance_a - bound > contact + margin)
 
 
 def contact_tolerance(options, dtype) -> float:
@@ -139,26 +257,48 @@ def apply_collision_checks(r, scenario, options):
     the contact tolerance, or NaN (status non-finite: a NaN clearance never
     counts as clear). Pure; vmap it over a batch.
 
+    With ``options.swept_proof`` (the default) the between-step search runs,
+    as in the checked rollout, only for the (motion, obstacle) entries that
+    :func:`swept_clear` cannot prove clear, ``POST_HOC_CHUNK`` entries at a
+    time in a while loop; False: every motion of the rollout, vectorised.
+
     Args:
       r: an unbatched :class:`~softplan_jax.planner.Rollout` (planning only).
       scenario: its Scenario.
-      options: its PlanOptions (static: the solver, the contact tolerance).
+      options: its PlanOptions (static: the solver, the contact tolerance,
+        swept_proof).
 
     Returns:
       The Rollout with clearance, between-step clearance, status, iterations,
-      converged and the derived fields as a checked rollout has them.
+      converged, between_searched and the derived fields as a checked rollout
+      has them.
     """
 
     radius, mask = radius_and_mask(scenario)
+    radius_sum = scenario.arm_radius + radius
     contact = contact_tolerance(options, scenario.q0.dtype)
     truths = jax.vmap(lambda q: true_closest(q, scenario, options.solver))(r.q)
-    c = jnp.where(mask, truths.distance - scenario.arm_radius - radius, jnp.inf)
+    c = jnp.where(mask, truths.distance - radius_sum, jnp.inf)
     prev = jax.tree_util.tree_map(lambda x: x[:-1], truths)
     nxt = jax.tree_util.tree_map(lambda x: x[1:], truths)
-    cb = jax.vmap(lambda qa, qb, ta, tb: between_steps(qa, qb, ta, tb, scenario, scenario.arm_radius + radius))(
-        r.q[:-1], r.q[1:], prev, nxt
-    )
+    steps = jnp.arange(r.q.shape[0], dtype=r.iterations.dtype)
+    moved = (steps[1:] <= r.iterations)[:, None] & mask  # (T, m): the motions the rollout made
+    if options.swept_proof:
+        # As the checked rollout: search only the motions the motion bound does not prove clear.
+        q_ng, prev_ng, nxt_ng = jax.lax.stop_gradient((r.q, prev, nxt))
+        proven = jax.vmap(lambda qa, qb, ta, ca: swept_clear(qa, qb, ta, ca, contact))(q_ng[:-1], q_ng[1:], prev_ng,
+                                                                                       c[:-1])
+        search = moved & ~proven
+        found = _searched_motions(q_ng[:-1], q_ng[1:], prev_ng, nxt_ng, scenario, search, SEARCH_ITERATIONS,
+                                  chunk=POST_HOC_CHUNK)
+        cb = jnp.minimum(found, jnp.minimum(prev_ng.distance, nxt_ng.distance)) - radius_sum
+    else:
+        search = moved
+        cb = jax.vmap(lambda qa, qb, ta, tb: between_steps(qa, qb, ta, tb, scenario, radius_sum))(
+            r.q[:-1], r.q[1:], prev, nxt
+        )
     cb = jnp.concatenate([c[:1], jnp.where(mask, cb, jnp.inf)])
+    searched = jnp.concatenate([jnp.zeros_like(search[:1]), search])
     steps = jnp.arange(r.q.shape[0], dtype=r.iterations.dtype)
     nan = jnp.any(jnp.isnan(c), axis=1) | jnp.any(jnp.isnan(cb), axis=1)
     hit = (jnp.any(c <= contact, axis=1) | jnp.any(cb <= contact, axis=1) | nan) & (steps <= r.iterations)
@@ -170,6 +310,7 @@ def apply_collision_checks(r, scenario, options):
     tip = jnp.where(keep[:, None], r.tip, r.tip[end])
     c = jnp.where(keep[:, None], c, c[end])
     cb = jnp.where(keep[:, None], cb, c[end])
+    searched = searched & keep[:, None]
     status = jnp.where(collided, jnp.where(nan[first], Status.NONFINITE, Status.COLLIDED), r.status)
     status = status.astype(r.status.dtype)
     step_scale = jnp.where(steps < end, r.step_scale, 0.0)
@@ -178,6 +319,7 @@ def apply_collision_checks(r, scenario, options):
     return r._replace(
         converged=converged,
         q=q, tip=tip, clearance=c, between=cb, status=status, iterations=end.astype(r.iterations.dtype),
+        between_searched=searched,
         step_scale=step_scale,
         reached=status == Status.REACHED, collided=status == Status.COLLIDED,
         min_clearance=jnp.minimum(jnp.min(c, initial=jnp.inf), jnp.min(cb, initial=jnp.inf)),

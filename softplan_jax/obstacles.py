@@ -11,7 +11,8 @@ ask it for the closest points of a whole scene (:func:`true_closest`,
 :func:`model_closest`), for per-slot radii and masks
 (:func:`radius_and_mask`), for the count (:func:`obstacle_count`) and for
 samples to draw (:func:`obstacle_samples`), or map their own per-obstacle
-function over the slots (:func:`map_obstacles`).
+function over the slots (:func:`map_obstacles`) or per-group function over
+the groups of slots of one kind (:func:`map_obstacle_groups`).
 
 The closest points are the paper's: exact for curves (paper §2.3, eqs. 13-18,
 :mod:`softplan_jax.closest`), exact for point sets (the arm backbone against
@@ -33,6 +34,7 @@ from .warm_start import curve_data, warm_curves
 __all__ = [
     "obstacle_count",
     "map_obstacles",
+    "map_obstacle_groups",
     "radius_and_mask",
     "empty_closest",
     "placeholder_closest",
@@ -82,6 +84,47 @@ def map_obstacles(scenario, on_curve, on_points, slot_args=(), empty=None):
         j = m_c + m_p + k
         out = on_curve(pc, *jax.tree_util.tree_map(lambda x, j=j: x[j], tuple(slot_args)))
         parts.append(jax.tree_util.tree_map(lambda x: x[None], out))
+    if not parts:
+        return empty
+    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
+
+
+def map_obstacle_groups(scenario, on_curves, on_point_sets, slot_args=(), empty=None):
+    """Apply a per-GROUP function to the slots of a scene, group by group in slot order.
+
+    Like :func:`map_obstacles`, but each function gets a whole group of slots
+    of one kind (no vmap; for work that is not the same for every slot, e.g.
+    a loop over some of them): the stacked polynomial curves, the stacked
+    point sets, then each parametric curve as a group of one.
+
+    Args:
+      scenario: one Scenario (not batched).
+      on_curves: ``on_curves(curves, *args) -> pytree`` with leading axis g:
+        ``curves`` a curve stack with leading axis g (the polynomial stack, or
+        a parametric curve with an axis 1 added to its array leaves, so that
+        ``tree_map(lambda x: x[k], curves)`` is one curve either way).
+      on_point_sets: ``on_point_sets(points (g, N, 3), mask (g, N), *args) -> pytree``.
+      slot_args: a tuple of pytrees with a leading axis m, passed to the
+        functions as their group's rows (leading axis g).
+      empty: what to return for a scene without obstacle slots.
+
+    Returns:
+      The functions' results concatenated along the leading axis (m).
+    """
+    m_c = scenario.curves.coeffs.shape[0]
+    m_p = scenario.points.shape[0]
+
+    def rows(a, b):
+        return jax.tree_util.tree_map(lambda x: x[a:b], tuple(slot_args))
+
+    parts = []
+    if m_c:
+        parts.append(on_curves(scenario.curves, *rows(0, m_c)))
+    if m_p:
+        parts.append(on_point_sets(scenario.points, scenario.point_mask, *rows(m_c, m_c + m_p)))
+    for k, pc in enumerate(scenario.parametric):
+        j = m_c + m_p + k
+        parts.append(on_curves(jax.tree_util.tree_map(lambda x: x[None], pc), *rows(j, j + 1)))
     if not parts:
         return empty
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)

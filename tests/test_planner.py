@@ -310,8 +310,109 @@ def test_post_hoc_collision_checks_equal_in_scan_checks():
         assert int(post.iterations) == int(checked.iterations)
         np.testing.assert_allclose(np.asarray(post.q), np.asarray(checked.q), atol=1e-12)
         np.testing.assert_allclose(float(post.min_clearance), float(checked.min_clearance), atol=1e-12)
+        # The same motions searched (the swept proof) and the same between-step clearance.
+        np.testing.assert_array_equal(np.asarray(post.between_searched), np.asarray(checked.between_searched))
+        np.testing.assert_allclose(np.asarray(post.between), np.asarray(checked.between), rtol=0, atol=1e-9)
         if eta == 1e-12:
             assert bool(checked.collided)
+
+
+def _swept_cases():
+    """(label, scenario, gains, options): random scenes (default and paper step, curve and
+    10 points) and random wires across the path with weak repulsion (paper step: some
+    collide). Every rollout is a compilation of this module's other tests (one padded shape)."""
+    scs = sp.random_scenarios(5, 3, obstacles=(1, 5), curve_slots=5, degree=2)
+    cases = []
+    for b in range(3):
+        sc = jax.tree_util.tree_map(lambda x, b=b: x[b], scs)
+        for label, opts in (("curve", make_options("curve")), ("points 10", make_options("points", 10)),
+                            ("curve, paper step", make_options("curve", **sp.PAPER_STEP))):
+            cases.append((f"random {b}, {label}", sc, sp.default_gains(), opts))
+    rng = np.random.default_rng(11)
+    for k in range(4):
+        goal = rng.uniform([0.5, -1.2, 0.6], [1.6, 1.2, 2.2])
+        mid = 0.5 * (goal + np.array([0, 0, 2.0])) + rng.normal(0, 0.15, 3)
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        sc = sp.make_scenario(goal, [sp.line_segment(mid - 1.5 * d, mid + 1.5 * d)], **PAD)
+        weak = sp.default_gains()._replace(eta=jnp.asarray(1e-5 * rng.uniform(0, 1) + 1e-9))
+        cases.append((f"wire {k}, paper step", sc, weak, make_options("curve", **sp.PAPER_STEP)))
+    return cases
+
+
+def test_swept_proof_skips_only_motions_that_cannot_collide():
+    """The checked rollout searches a motion between two steps only where the motion bound
+    does not prove it clear (PlanOptions.swept_proof). Against the post-hoc checks searching
+    EVERY motion (swept_proof=False, the earlier behaviour) on the same trajectory: same
+    status and iterations; the same between-step clearance where the rollout searched; where
+    it skipped, the full search finds no collision, lies above the proof's lower bound
+    (clearance at the start minus the motion bound), and the rollout's record (the smaller
+    end clearance) is at least the search's value. The skipped motions nearest the contact
+    tolerance are checked by brute force too. Not vacuous: most motions are skipped, some
+    are searched, some rollouts collide."""
+    from softplan_jax.metrics import apply_collision_checks, contact_tolerance
+
+    always = make_options("curve", check_collisions=False, swept_proof=False, **sp.PAPER_STEP)
+    post = jax.jit(apply_collision_checks, static_argnums=2)
+    contact = contact_tolerance(always, jnp.float64)
+    skipped = searched = 0
+    collided = []
+    for label, sc, gains, opts in _swept_cases():
+        r = jax.device_get(rollout_jit(sc, gains, opts, 200))
+        ref = jax.device_get(post(r, sc, always))
+        assert int(ref.status) == int(r.status) and int(ref.iterations) == int(r.iterations), label
+        collided.append(int(r.status) == sp.Status.COLLIDED)
+        it = int(r.iterations)
+        mask = np.asarray(sc.curve_mask)
+        c = np.asarray(r.clearance)[: it + 1][:, mask]
+        cb, cb_ref = (np.asarray(x.between)[1 : it + 1][:, mask] for x in (r, ref))
+        did = np.asarray(r.between_searched)[1 : it + 1][:, mask]
+        assert not np.asarray(r.between_searched)[it + 1 :].any() and not np.asarray(r.between_searched)[0].any()
+        assert np.asarray(ref.between_searched)[1 : it + 1][:, mask].all()
+        bound = np.array([float(sp.motion_bound(r.q[k], r.q[k + 1])[-1]) for k in range(it)])
+        lower = c[:-1] - bound[:, None]
+        # Every search result is achieved during the motion: never below the proof's bound.
+        assert np.all(cb_ref >= lower - 1e-9), label
+        np.testing.assert_allclose(cb[did], cb_ref[did], rtol=0, atol=1e-9, err_msg=label)
+        skip = ~did
+        assert np.all(cb_ref[skip] > contact), label  # a skipped motion never hides a collision
+        assert np.all(lower[skip] > contact), label
+        np.testing.assert_array_equal(cb[skip], np.minimum(c[:-1], c[1:])[skip], err_msg=label)
+        assert np.all(cb[skip] >= cb_ref[skip] - 1e-12), label
+        skipped += int(skip.sum())
+        searched += int(did.sum())
+        # Independent brute force over the skipped motions nearest contact (sampling only over-estimates).
+        for flat in np.argsort(np.where(skip, lower, np.inf), axis=None)[:2]:
+            k, j = np.unravel_index(flat, skip.shape)
+            if not skip[k, j]:
+                continue
+            dense = np.asarray(sp.dense_trajectory_clearance(jnp.asarray(r.q[k : k + 2]), sc, substeps=20,
+                                                             arm_samples=100, curve_samples=1000))[0][mask]
+            assert dense[j] >= lower[k, j] - 1e-9 and dense[j] > contact, (label, k, j, dense[j], lower[k, j])
+    assert skipped > 3 * searched and searched > 0, (skipped, searched)
+    assert 0 < sum(collided) < len(collided), collided
+
+
+def test_swept_clear_edge_cases(paper):
+    """swept_clear: a zero motion proves every clear slot clear; NaN, a clearance at the contact
+    tolerance, a motion as long as the clearance or a solve that did not converge never do."""
+    from softplan_jax.metrics import swept_clear
+    from softplan_jax.obstacles import radius_and_mask
+
+    sc = paper["tree"]
+    q = sc.q0
+    truth = jax.jit(sp.true_closest, static_argnums=2)(q, sc, make_options().solver)
+    _, mask = radius_and_mask(sc)
+    c = jnp.where(mask, truth.distance - sc.arm_radius - sc.curves.radius, jnp.inf)
+    contact = 1e-6
+    swept_clear = jax.jit(swept_clear)
+    assert bool(jnp.all(swept_clear(q, q, truth, c, contact)))
+    moved = q.at[0, 2].add(1.0)  # turn the whole arm: the bound (~ the arm's length) exceeds every clearance
+    assert float(sp.motion_bound(q, moved)[-1]) > float(jnp.max(jnp.where(mask, c, 0.0)))
+    assert not bool(jnp.any(swept_clear(q, moved, truth, c, contact) & mask))
+    assert not bool(jnp.any(swept_clear(q, q, truth, jnp.full_like(c, contact), contact)))
+    assert not bool(jnp.any(swept_clear(q, q, truth, c * jnp.nan, contact)))
+    assert not bool(jnp.any(swept_clear(q, q, truth._replace(converged=~truth.converged), c, contact)))
 
 
 def test_tune_gains_lowers_the_loss_and_compiles_once(paper):
