@@ -24,15 +24,32 @@ argument shapes and dtypes. Scenarios with a
 :class:`~softplan_jax.curves.ParametricCurve` (a Python function, not data) are
 not kept. Any failure to read or write an artifact falls back to the ordinary
 compilation.
+
+:func:`rollout_compiler_options` holds the XLA options the rollouts are
+compiled with (issue 9, item 2). They are passed per program
+(``jax.jit(..., compiler_options=...)``), so they apply to this package's
+rollouts only and never to the user's other jax code: no ``XLA_FLAGS``, no
+global jax configuration. ``SOFTPLAN_XLA_OPTIONS=0`` compiles with XLA's
+defaults instead.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import tempfile
 
-__all__ = ["compilation_cache_dir", "enable_compilation_cache", "load_or_export"]
+__all__ = ["compilation_cache_dir", "enable_compilation_cache", "load_or_export", "rollout_compiler_options"]
+
+# XLA CPU options of the rollout programs (issue 9, item 2), measured by
+# benchmarks/xla_options.py (results/xla_options.md), float64, checked rollouts:
+# - xla_cpu_experimental_ynn_fusion_type="": no XNNPACK (YNN) fusions; the planner's
+#   small (..., 3) arrays gain nothing from them and pay layout copies. Median run
+#   time per step -8 % single (tree), -16 % batched (64 random scenes); compile no slower.
+# Tried and not taken: xla_llvm_disable_expensive_passes (no further gain),
+# xla_backend_optimization_level=1 (compile no faster, run +9-17 % against the defaults).
+CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 
 
 def compilation_cache_dir() -> str | None:
@@ -78,6 +95,26 @@ def enable_compilation_cache(directory: str | None = None) -> str | None:
 
 
 _SOURCE_HASH: str | None = None
+
+
+@functools.cache
+def rollout_compiler_options() -> dict | None:
+    """The XLA options that :data:`~softplan_jax.planner.rollout_jit`,
+    :data:`~softplan_jax.planner.rollout_batch` and ``rollout_jit.cached`` compile with:
+    :data:`CPU_COMPILER_OPTIONS` on the CPU backend, if this jaxlib knows them (checked
+    once by compiling a trivial program); None (XLA's defaults) on other backends, on an
+    older jaxlib, or with ``SOFTPLAN_XLA_OPTIONS=0`` in the environment. Decided on the
+    first rollout, not at import (the backend is not initialised by importing)."""
+    import jax
+    import numpy as np
+
+    if os.environ.get("SOFTPLAN_XLA_OPTIONS", "1") == "0" or jax.default_backend() != "cpu":
+        return None
+    try:
+        jax.jit(lambda x: x + 1, compiler_options=CPU_COMPILER_OPTIONS).lower(np.float32(0)).compile()
+    except Exception:  # an option this jaxlib does not know
+        return None
+    return dict(CPU_COMPILER_OPTIONS)
 
 
 def _source_hash() -> str:
@@ -162,6 +199,6 @@ def load_or_export(fn, leaves, key_parts):
             with os.fdopen(fd, "wb") as f:
                 f.write(exported.serialize())
             os.replace(tmp, path)  # atomic: a concurrent run reads the old file or the new one
-        return jax.jit(exported.call).lower(*leaves).compile(), loaded
+        return jax.jit(exported.call, compiler_options=rollout_compiler_options()).lower(*leaves).compile(), loaded
     except Exception:  # jax.export or flatbuffers missing, a read-only disk, ...
         return None, False

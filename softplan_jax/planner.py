@@ -56,7 +56,7 @@ import numpy as np
 
 from .batching import BATCH_AXIS, Progress, batch_mesh, pad_batch, round_chunk, shard_batch
 from .closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
-from .compilation_cache import load_or_export
+from .compilation_cache import load_or_export, rollout_compiler_options
 from .kinematics import motion_bound, points_jacobian, tip_position
 from .metrics import apply_collision_checks as apply_collision_checks  # moved to metrics; old import path
 from .metrics import between_steps, contact_tolerance, swept_clear
@@ -613,12 +613,10 @@ def _key(seed):
     return seed
 
 
-@partial(jax.jit, static_argnames=("options", "max_steps"))
 def _rollout_jit(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, key) -> Rollout:
     return rollout(scenario, gains, options, max_steps, key)
 
 
-@partial(jax.jit, static_argnames=("options", "max_steps", "mesh"))
 def _rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, keys,
                    mesh=None) -> Rollout:
     def vmapped(scenarios, gains, keys):
@@ -656,10 +654,34 @@ class CompiledRollout:
     compiles without running); ``f.cache_size()`` counts the compilations.
     """
 
-    def __init__(self, jitted, batched: bool, doc: str):
-        self._jitted = jitted
+    def __init__(self, fn, static_argnames, batched: bool, doc: str):
+        self._fn = fn
+        self._static_argnames = static_argnames
+        self._jit = self._nested = None
         self._batched = batched
         self.__doc__ = doc
+
+    @property
+    def _jitted(self):
+        """``jax.jit`` of the rollout with this package's XLA options
+        (:func:`~softplan_jax.compilation_cache.rollout_compiler_options`), built on
+        first use: the options depend on the backend, which importing must not start."""
+        if self._jit is None:
+            self._jit = jax.jit(self._fn, static_argnames=self._static_argnames,
+                                compiler_options=rollout_compiler_options())
+        return self._jit
+
+    def _call(self, *args):
+        """The jitted rollout; inside the user's own jit (jax allows compiler options on
+        top-level jits only) a plain jit of it, compiled with the enclosing program's options."""
+        try:
+            return self._jitted(*args)
+        except ValueError as e:
+            if "top-level" not in str(e):
+                raise
+            if self._nested is None:
+                self._nested = jax.jit(self._fn, static_argnames=self._static_argnames)
+            return self._nested(*args)
 
     def _args(self, scenario, gains, options, max_steps, seed):
         dtype = scenario.q0.dtype
@@ -667,7 +689,7 @@ class CompiledRollout:
         return scenario, _strong_gains(gains, dtype), options, max_steps, key
 
     def __call__(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0) -> Rollout:
-        return self._jitted(*self._args(scenario, gains, options, max_steps, seed))
+        return self._call(*self._args(scenario, gains, options, max_steps, seed))
 
     def lower(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0):
         """``jax.jit(...).lower`` of the rollout for these arguments."""
@@ -695,7 +717,7 @@ class CompiledRollout:
 
         def flat(*xs):  # arrays in, arrays out: the artifact needs no pytree registrations
             s, g, k = jax.tree_util.tree_unflatten(treedef, xs)
-            return tuple(jax.tree_util.tree_leaves(self._jitted(s, g, options, max_steps, k)))
+            return tuple(jax.tree_util.tree_leaves(self._fn(s, g, options, max_steps, k)))
 
         compiled, loaded = (None, False)
         if not scenario.parametric and not self._batched:
@@ -716,7 +738,8 @@ class CompiledRollout:
         return run, loaded
 
 
-rollout_jit = CompiledRollout(_rollout_jit, batched=False, doc=""":func:`rollout` under ``jit`` (options and
+rollout_jit = CompiledRollout(_rollout_jit, ("options", "max_steps"), batched=False, doc="""\
+:func:`rollout` under ``jit`` (options and
 max_steps static): ``rollout_jit(scenario, gains, options, max_steps, seed=0)``. One compilation per
 padded scenario shape, dtype, options and max_steps; new goals, obstacles, gain values or seeds reuse
 it. ``seed``: an int or a PRNG key for the escapes. ``rollout_jit.lower(...)`` lowers ahead of time;
@@ -743,7 +766,7 @@ class BatchedRollout(CompiledRollout):
     def __call__(self, scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0,
                  devices=None) -> Rollout:
         args, pad = self._sharded_args(scenarios, gains, options, max_steps, seed, devices)
-        r = self._jitted(*args)
+        r = self._call(*args)
         if pad:
             batch = scenarios.q0.shape[0]
             r = jax.tree_util.tree_map(lambda x: x[:batch], r)
@@ -756,7 +779,8 @@ class BatchedRollout(CompiledRollout):
         return self._jitted.lower(*self._sharded_args(scenarios, gains, options, max_steps, seed, devices)[0])
 
 
-rollout_batch = BatchedRollout(_rollout_batch, batched=True, doc=""":func:`rollout` vmapped over a batch of
+rollout_batch = BatchedRollout(_rollout_batch, ("options", "max_steps", "mesh"), batched=True, doc="""\
+:func:`rollout` vmapped over a batch of
 scenarios of one padded shape (every leaf of ``scenarios`` has a leading batch axis; gains shared),
 jitted: ``rollout_batch(scenarios, gains, options, max_steps, seed=0, devices=None)``. Scenario b's
 escapes use ``jax.random.split(key(seed), B)[b]`` (or ``seed[b]`` when ``seed`` holds B keys).
@@ -937,7 +961,7 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
             (s, k), g_dev = jax.device_put(part), g  # jax arrays, as rollout_batch's: one jit signature
         else:
             (s, k), g_dev = shard_batch(mesh, part, g)
-        return _rollout_batch(s, g_dev, opts, T, k, mesh)
+        return rollout_batch._call(s, g_dev, opts, T, k, mesh)
 
     def collect(a, r):
         nonlocal out, done

@@ -82,3 +82,36 @@ def test_traced_rollout_is_kept_on_disk_and_gives_the_same_result(monkeypatch, t
     monkeypatch.setenv("SOFTPLAN_COMPILATION_CACHE", "0")
     run, loaded = rollout_jit.cached(sc, g, opts, 15)
     assert not loaded and same(run(sc, g, 2)) and not (tmp_path / "off").exists()
+
+
+def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
+    """rollout_jit compiles with compilation_cache.CPU_COMPILER_OPTIONS (no YNN fusions in
+    its program, which XLA's defaults put there), passed per program: a plain jax.jit of
+    the same rollout keeps XLA's defaults, and so does rollout_jit called inside the user's own
+    jit; SOFTPLAN_XLA_OPTIONS=0 turns them off.
+    (The cheapest program of the suite: points method, no checks, 15 steps.)"""
+    import jax
+    import numpy as np
+
+    import softplan_jax as sp
+    from softplan_jax.compilation_cache import CPU_COMPILER_OPTIONS, rollout_compiler_options
+    from softplan_jax.planner import make_options, rollout, rollout_jit
+
+    sc, g, key = sp.paper_scenario("sim1"), sp.default_gains(), jax.random.PRNGKey(0)
+    opts = make_options("points", 10, check_collisions=False)
+    assert rollout_compiler_options() == CPU_COMPILER_OPTIONS  # the suite runs on the CPU
+    ours = rollout_jit.lower(sc, g, opts, 15).compile().as_text()
+    plain = jax.jit(lambda s, g, k: rollout(s, g, opts, 15, k)).lower(sc, g, key).compile().as_text()
+    assert "ynn_fusion" in plain and "ynn_fusion" not in ours
+    # Inside a user's jit (compiler options are for top-level jits only): the enclosing program's options.
+    inner = jax.jit(lambda s: rollout_jit(s, g, opts, 15, 2).q)(sc)
+    outer = rollout_jit(sc, g, opts, 15, 2).q
+    np.testing.assert_allclose(np.asarray(inner), np.asarray(outer), rtol=0, atol=1e-9)
+    try:
+        monkeypatch.setenv("SOFTPLAN_XLA_OPTIONS", "0")
+        rollout_compiler_options.cache_clear()
+        assert rollout_compiler_options() is None
+    finally:
+        monkeypatch.undo()
+        rollout_compiler_options.cache_clear()
+    assert rollout_compiler_options() == CPU_COMPILER_OPTIONS
