@@ -91,8 +91,8 @@ def parse_args(argv=None):
     ap.add_argument("--train-steps", type=int, default=None, help="rollout steps on the training seed (default 100)")
     ap.add_argument("--max-steps", type=int, default=None, help="rollout steps on the held-out seed (default 150)")
     ap.add_argument("--methods", default="curve,1,10,50,100", help="comma list of curve and point counts N")
-    ap.add_argument("--grid-d0", default=None, help="default 0.07,0.1,0.15,0.2,0.25,0.3 (quick 0.07,0.15,0.3)")
-    ap.add_argument("--grid-dt", default=None, help="default 0.1,0.2,0.3,0.4 (quick 0.1,0.2,0.3)")
+    ap.add_argument("--grid-d0", default=None, help="default 0.07,0.1,0.15,0.2,0.3,0.4 (quick 0.07,0.15,0.3)")
+    ap.add_argument("--grid-dt", default=None, help="default 0.1,0.2,0.4,0.6,0.8 (quick 0.1,0.2,0.3)")
     ap.add_argument("--grid-eta", default=None, help="default 0.001,0.004 (quick 0.001)")
     ap.add_argument("--grad-updates", type=int, default=None, help="optax updates per method (default 40)")
     ap.add_argument("--grad-scenes", type=int, default=None, help="training scenes per gradient (default 32)")
@@ -109,8 +109,8 @@ def parse_args(argv=None):
     defaults = dict(n_train=8 if q else 64, n_eval=16 if q else 1024, train_steps=40 if q else 100,
                     max_steps=60 if q else 150, grad_updates=2 if q else 40, grad_scenes=4 if q else 32,
                     chunk=8 if q else 64, timing_chunks=1 if q else 3,
-                    grid_d0="0.07,0.15,0.3" if q else "0.07,0.1,0.15,0.2,0.25,0.3",
-                    grid_dt="0.1,0.2,0.3" if q else "0.1,0.2,0.3,0.4", grid_eta="0.001" if q else "0.001,0.004")
+                    grid_d0="0.07,0.15,0.3" if q else "0.07,0.1,0.15,0.2,0.3,0.4",
+                    grid_dt="0.1,0.2,0.3" if q else "0.1,0.2,0.4,0.6,0.8", grid_eta="0.001" if q else "0.001,0.004")
     for k, v in defaults.items():
         if getattr(args, k) is None:
             setattr(args, k, v)
