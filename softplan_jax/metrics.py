@@ -299,7 +299,6 @@ def apply_collision_checks(r, scenario, options):
         )
     cb = jnp.concatenate([c[:1], jnp.where(mask, cb, jnp.inf)])
     searched = jnp.concatenate([jnp.zeros_like(search[:1]), search])
-    steps = jnp.arange(r.q.shape[0], dtype=r.iterations.dtype)
     nan = jnp.any(jnp.isnan(c), axis=1) | jnp.any(jnp.isnan(cb), axis=1)
     hit = (jnp.any(c <= contact, axis=1) | jnp.any(cb <= contact, axis=1) | nan) & (steps <= r.iterations)
     first = jnp.argmax(hit).astype(r.iterations.dtype)

@@ -69,24 +69,16 @@ def map_obstacles(scenario, on_curve, on_points, slot_args=(), empty=None):
     Returns:
       The functions' results stacked along a leading axis m.
     """
-    m_c = scenario.curves.coeffs.shape[0]
-    m_p = scenario.points.shape[0]
-
-    def rows(a, b):
-        return jax.tree_util.tree_map(lambda x: x[a:b], tuple(slot_args))
-
     parts = []
-    if m_c:
-        parts.append(jax.vmap(on_curve)(scenario.curves, *rows(0, m_c)))
-    if m_p:
-        parts.append(jax.vmap(on_points)(scenario.points, scenario.point_mask, *rows(m_c, m_c + m_p)))
-    for k, pc in enumerate(scenario.parametric):
-        j = m_c + m_p + k
-        out = on_curve(pc, *jax.tree_util.tree_map(lambda x, j=j: x[j], tuple(slot_args)))
-        parts.append(jax.tree_util.tree_map(lambda x: x[None], out))
-    if not parts:
-        return empty
-    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
+    for kind, group, rows in _slot_groups(scenario, slot_args):
+        if kind == "curves":
+            parts.append(jax.vmap(on_curve)(group, *rows))
+        elif kind == "points":
+            parts.append(jax.vmap(on_points)(*group, *rows))
+        else:  # one parametric curve: called directly (a Python function, not vmapped)
+            out = on_curve(group, *jax.tree_util.tree_map(lambda x: x[0], rows))
+            parts.append(jax.tree_util.tree_map(lambda x: x[None], out))
+    return _concatenate(parts, empty)
 
 
 def map_obstacle_groups(scenario, on_curves, on_point_sets, slot_args=(), empty=None):
@@ -111,20 +103,39 @@ def map_obstacle_groups(scenario, on_curves, on_point_sets, slot_args=(), empty=
     Returns:
       The functions' results concatenated along the leading axis (m).
     """
+    parts = []
+    for kind, group, rows in _slot_groups(scenario, slot_args):
+        if kind == "curves":
+            parts.append(on_curves(group, *rows))
+        elif kind == "points":
+            parts.append(on_point_sets(*group, *rows))
+        else:  # a parametric curve as a group of one
+            parts.append(on_curves(jax.tree_util.tree_map(lambda x: x[None], group), *rows))
+    return _concatenate(parts, empty)
+
+
+def _slot_groups(scenario, slot_args):
+    """The obstacle layout, in slot order: ``(kind, group, rows)`` for the stacked
+    polynomial curves (``"curves"``), the stacked point sets (``"points"``, group =
+    (points, mask)) and each parametric curve (``"parametric"``), where ``rows`` are the
+    group's rows (leading axis) of every pytree in ``slot_args``. Empty groups are skipped."""
     m_c = scenario.curves.coeffs.shape[0]
     m_p = scenario.points.shape[0]
 
     def rows(a, b):
         return jax.tree_util.tree_map(lambda x: x[a:b], tuple(slot_args))
 
-    parts = []
     if m_c:
-        parts.append(on_curves(scenario.curves, *rows(0, m_c)))
+        yield "curves", scenario.curves, rows(0, m_c)
     if m_p:
-        parts.append(on_point_sets(scenario.points, scenario.point_mask, *rows(m_c, m_c + m_p)))
+        yield "points", (scenario.points, scenario.point_mask), rows(m_c, m_c + m_p)
     for k, pc in enumerate(scenario.parametric):
         j = m_c + m_p + k
-        parts.append(on_curves(jax.tree_util.tree_map(lambda x: x[None], pc), *rows(j, j + 1)))
+        yield "parametric", pc, rows(j, j + 1)
+
+
+def _concatenate(parts, empty):
+    """The groups' results joined along the slot axis (``empty`` for a scene without slots)."""
     if not parts:
         return empty
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
@@ -246,9 +257,7 @@ def warm_closest(q, scenario, solver: SolverOptions, cells, state, fresh):
         parts.insert(1 if m_c else 0, pts)
     fallbacks = sum((o[2] for o in outs), jnp.zeros((), jnp.int32))
     new_state = tuple(o[1] for o in outs)
-    if not parts:
-        return empty_closest(q.dtype), new_state, fallbacks
-    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts), new_state, fallbacks
+    return _concatenate(parts, empty_closest(q.dtype)), new_state, fallbacks
 
 
 def model_closest(q, scenario, truth: ClosestPoint, method: str, n_points: int,
