@@ -67,8 +67,16 @@ import jax
 import jax.numpy as jnp
 
 from .curves import ParametricCurve, PolynomialCurve
-from .kinematics import arc_derivatives_local, arc_point_local, backbone_points, segment_frames
-from .numerics import atan_over_x, curvature_floor, psd_shift, safe_norm, sin_over_x, solver_tolerance
+from .kinematics import backbone_points, segment_frames
+from .numerics import (
+    atan_over_x,
+    curvature_floor,
+    one_minus_cos_over_x,
+    psd_shift,
+    safe_norm,
+    sin_over_x,
+    solver_tolerance,
+)
 from .validation import check_configuration, check_points
 
 __all__ = [
@@ -146,20 +154,50 @@ DEFAULT_OPTIONS = SolverOptions()
 
 
 class Segment(NamedTuple):
-    """Segment i as the closest-point solvers see it: its row of q and its base
-    frame (R_{i-1}^0, P_{i-1}^0); ``point(s)`` is the paper's F_Ri(s) (§2.3)."""
+    """Segment i as the closest-point solvers see it, with what is fixed during a
+    planner step computed once (:meth:`from_frame`) instead of in every Newton
+    iteration: the base point, the bending plane's two directions in world
+    coordinates, and the trigonometric ratios of theta. ``point(s)`` is the
+    paper's F_Ri(s) (§2.3). Fields may carry a leading segment axis.
 
-    q_i: jax.Array
-    R: jax.Array
+    Attributes:
+      L, theta: () the segment's length and bending angle (its row of q).
+      P: (3,) its base point P_{i-1}^0.
+      bend: (3,) the bending direction ``R_{i-1}^0 (cos phi, sin phi, 0)``.
+      axis: (3,) the base tangent ``R_{i-1}^0 (0, 0, 1)``.
+      sin_ratio: () ``sin(theta) / theta``; cos_ratio: () ``(1 - cos theta) / theta^2``
+        (both finite at theta = 0; :func:`project_to_arc`'s end test).
+    """
+
+    L: jax.Array
+    theta: jax.Array
     P: jax.Array
+    bend: jax.Array
+    axis: jax.Array
+    sin_ratio: jax.Array
+    cos_ratio: jax.Array
+
+    @classmethod
+    def from_frame(cls, q_i, R, P):
+        """From a row of q (..., 3) and the segment's base frame R (..., 3, 3), P (..., 3)
+        (:func:`~softplan_jax.kinematics.segment_frames`); leading axes are kept."""
+        L, theta, phi = q_i[..., 0], q_i[..., 1], q_i[..., 2]
+        bend = R[..., :, 0] * jnp.cos(phi)[..., None] + R[..., :, 1] * jnp.sin(phi)[..., None]
+        half = sin_over_x(0.5 * theta)  # sin_over_x(t/2)^2 / 2 = (1 - cos t)/t^2
+        return cls(L, theta, P, bend, R[..., :, 2], sin_over_x(theta), 0.5 * half * half)
 
     def point(self, s):
-        # F_Ri(s), paper §2.3.
-        return self.P + self.R @ arc_point_local(self.q_i, s)
+        # F_Ri(s), paper §2.3: P + R (r cos phi, r sin phi, a) with the radial and axial
+        # parts r = L s (1 - cos x)/x, a = L s sin(x)/x of paper §2.2 (x = theta s).
+        x = self.theta * s
+        Ls = self.L * s
+        return self.P + (Ls * one_minus_cos_over_x(x)) * self.bend + (Ls * sin_over_x(x)) * self.axis
 
     def derivatives(self, s):
-        d1, d2 = arc_derivatives_local(self.q_i, s)
-        return self.R @ d1, self.R @ d2
+        # dF/ds = L (sin x bend + cos x axis), d2F/ds2 = L theta (cos x bend - sin x axis), x = theta s.
+        x = self.theta * s
+        sx, cx = jnp.sin(x), jnp.cos(x)
+        return self.L * (sx * self.bend + cx * self.axis), (self.L * self.theta) * (cx * self.bend - sx * self.axis)
 
 
 class PairTerms(NamedTuple):
@@ -264,7 +302,7 @@ def project_to_arc(seg: Segment, p):
 
     A PCC segment is a circular arc (a straight line at theta = 0). With x the
     component of p along the bending direction (cos phi, sin phi, 0) and z the
-    axial one, both in the segment's base frame, the squared distance to the
+    axial one, both in the segment's base frame (``seg.bend``, ``seg.axis``), the squared distance to the
     arc point at angle a = theta s is, up to terms free of a,
     ``-(2 L / theta^2) h(a)`` with ``h(a) = (L - x theta) cos a + z theta sin a``,
     maximal over the whole circle at ``a* = atan2(z theta, L - x theta)``. If
@@ -276,10 +314,10 @@ def project_to_arc(seg: Segment, p):
     ``w = z theta / (L - x theta)``, exact and finite down to theta = 0, where
     it is the projection on the straight segment.
     """
-    L, theta, phi = seg.q_i[0], seg.q_i[1], seg.q_i[2]
-    local = seg.R.T @ (p - seg.P)
-    x = local[0] * jnp.cos(phi) + local[1] * jnp.sin(phi)
-    z = local[2]
+    L, theta = seg.L, seg.theta
+    d = p - seg.P
+    x = jnp.dot(d, seg.bend)
+    z = jnp.dot(d, seg.axis)
     X = L - x * theta
     pos = X > 0
     X_safe = jnp.where(pos, X, 1.0)
@@ -296,9 +334,8 @@ def project_to_arc(seg: Segment, p):
     def on_arc(v):
         return (v >= 0.0) & (v <= 1.0)
 
-    # The end with the larger h (sin_over_x(t/2)^2 / 2 = (1 - cos t)/t^2).
-    half = sin_over_x(0.5 * theta)
-    far_end = z * sin_over_x(theta) - X * 0.5 * half * half > 0
+    # The end with the larger h (the segment's ratios, computed once per step).
+    far_end = z * seg.sin_ratio - X * seg.cos_ratio > 0
     s_end = jnp.where(far_end, 1.0, 0.0).astype(L.dtype)
     s_star = jnp.where(
         on_arc(s_a), s_a, jnp.where(big & on_arc(s_b), s_b, jnp.where(big & on_arc(s_c), s_c, s_end))
@@ -388,7 +425,7 @@ def solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOptio
     to the arm). The best sample is a candidate too, so the answer is never
     worse than the grid. Returns (s, u, D^2, converged).
     """
-    dtype = seg.q_i.dtype
+    dtype = seg.L.dtype
     k = options.starts
     s_grid, g_grid = jax.vmap(lambda c: project_to_arc(seg, c))(C_grid)
     # Arm-side profile.
@@ -468,8 +505,7 @@ def curve_closest(q, curve, options: SolverOptions) -> ClosestPoint:
       ClosestPoint (``segment`` int32, ``u`` of q's dtype).
     """
     curve = curve.astype(q.dtype)
-    R_bases, P_bases = segment_frames(q)
-    segs = Segment(q, R_bases, P_bases)
+    segs = Segment.from_frame(q, *segment_frames(q))
     segs_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
     curve_nograd = jax.tree_util.tree_map(jax.lax.stop_gradient, curve)
     solve = options.pair_solver(curve_nograd)  # SolverOptions or closest_grid.GridSolverOptions
@@ -624,8 +660,7 @@ def _point_closest(q, p) -> ClosestPoint:
     boundary problem of paper eqs. (15)-(16) with a fixed obstacle point,
     solved per segment in closed form (:func:`project_to_arc`).
     Returns a ClosestPoint with u = 0."""
-    R_bases, P_bases = segment_frames(q)
-    segs = Segment(q, R_bases, P_bases)
+    segs = Segment.from_frame(q, *segment_frames(q))
     segs_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
     p_ng = jax.lax.stop_gradient(p)
     dtype = q.dtype

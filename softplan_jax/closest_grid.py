@@ -153,7 +153,7 @@ def solve_pair_grid(seg: Segment, curve, options: GridSolverOptions):
 
     Returns (s, u, D^2, converged) of the best candidate.
     """
-    dtype = seg.q_i.dtype
+    dtype = seg.L.dtype
     u_lo, u_hi = curve.u_range[0], curve.u_range[1]
     zero, one = jnp.zeros((), dtype), jnp.ones((), dtype)
     n_s, n_u, ke = options.grid_s, options.grid_u, options.edge_starts

@@ -57,22 +57,6 @@ def arc_point_local(q_i, s):
     return jnp.stack([radial * jnp.cos(phi), radial * jnp.sin(phi), L * s * sin_over_x(x)])
 
 
-def arc_derivatives_local(q_i, s):
-    """First and second derivatives in ``s`` of :func:`arc_point_local` (closed form).
-
-    ``d/ds = L [sin(theta s) cos phi, sin(theta s) sin phi, cos(theta s)]`` (the
-    tangent, length L) and ``d2/ds2 = L theta [cos(theta s) cos phi,
-    cos(theta s) sin phi, -sin(theta s)]``. Neither is singular at theta = 0.
-    """
-    L, theta, phi = q_i[0], q_i[1], q_i[2]
-    x = theta * s
-    sx, cx = jnp.sin(x), jnp.cos(x)
-    cphi, sphi = jnp.cos(phi), jnp.sin(phi)
-    d1 = L * jnp.stack([sx * cphi, sx * sphi, cx])
-    d2 = L * theta * jnp.stack([cx * cphi, cx * sphi, -sx])
-    return d1, d2
-
-
 def _rotation(q_i):
     """The paper's R_i = Rz(phi) Ry(theta) (paper §2.1)."""
     theta, phi = q_i[1], q_i[2]

@@ -282,8 +282,7 @@ def warm_curves(q, curves, data: CurveData, u_prev, fresh, active, solver: Solve
       fallbacks () int32: pairs that took the full solve)``.
     """
     curves = curves.astype(q.dtype)
-    R_bases, P_bases = segment_frames(q)
-    segs = Segment(q, R_bases, P_bases)
+    segs = Segment.from_frame(q, *segment_frames(q))
     segs_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, segs)
     curves_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, curves)
     data = jax.tree_util.tree_map(jax.lax.stop_gradient, data)

@@ -643,7 +643,7 @@ def test_newton_kernel_matches_autodiff(theta):
 
     q = jnp.array([[0.9, 0.4, 0.3], [1.1, theta, -0.7]])
     R, P = sp.segment_frames(q)
-    seg = Segment(q[1], R[1], P[1])
+    seg = Segment.from_frame(q[1], R[1], P[1])
     curve = sp.PolynomialCurve(jnp.array([[0.2, 0.5, -0.3], [0.1, -0.4, 0.6], [1.5, 0.2, 0.1]]), (0.0, 1.0))
 
     def f(x):

@@ -25,7 +25,7 @@ SAMPLES = 2001  # dense samples of u per case
 
 def _segments(q):
     R, P = segment_frames(q)
-    return Segment(q, R, P)
+    return Segment.from_frame(q, R, P)
 
 
 def _random_cases(seed, n_cases, degree):
