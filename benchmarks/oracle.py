@@ -86,6 +86,11 @@ def _arc_coeffs(theta, s):
     so th = 0 needs no special case.  Elementwise on broadcastable real or
     complex arrays.
     """
+    if isinstance(theta, (float, np.floating)) and isinstance(s, (float, int, np.floating, np.integer)):
+        # Real scalars (the frames of every segment): the same formulas on Python
+        # floats, an order of magnitude faster than on 0-d arrays.
+        theta, s = float(theta), float(s)
+        return 0.5 * theta * s * s * _sinc_scalar(0.5 * theta * s) ** 2, s * _sinc_scalar(theta * s)
     theta = np.asarray(theta)
     s = np.asarray(s)
     b = s * _sinc(theta * s)

@@ -25,8 +25,9 @@ beside ours; the tree's are not legible in the paper. Writes
 
 Run ``python benchmarks/paper_tables.py`` (full: ~5-10 min on a 2-core machine,
 mostly compilation) or ``--quick`` (a smoke test: curve and 1 point only,
-the three scenarios padded to one shape, fewer steps and repeats, planner_step
-not timed).
+the three scenarios padded to one shape, 200 steps (the checked curve rollout is
+then the one ``plan`` compiles for these scenes), fewer repeats, planner_step not
+timed).
 """
 
 from __future__ import annotations
@@ -444,7 +445,7 @@ def main(argv=None) -> dict:
         help="curve and 1 point only, one padded shape, 100 steps, 2 repeats, no planner_step "
         "timing (a smoke test)",
     )
-    ap.add_argument("--max-steps", type=int, default=None, help="scan length (default 300; quick 100)")
+    ap.add_argument("--max-steps", type=int, default=None, help="scan length (default 300; quick 200)")
     ap.add_argument("--repeats", type=int, default=None, help="rollout timing repeats (default 5; quick 2)")
     ap.add_argument(
         "--step-repeats",
@@ -474,7 +475,7 @@ def main(argv=None) -> dict:
         args.out = os.path.join(base, "paper_tables")
     if args.figures is None:
         args.figures = os.path.join(base, "figures")
-    max_steps = args.max_steps or (100 if quick else 300)
+    max_steps = args.max_steps or (200 if quick else 300)
     repeats = args.repeats or (2 if quick else 5)
     step_repeats = args.step_repeats if args.step_repeats is not None else (0 if quick else 3)
     if args.methods:

@@ -1,5 +1,6 @@
 """pytest configuration: float64 everywhere, strict dtype promotion,
-and jax's persistent compilation cache (``session.py``).
+jax's persistent compilation cache (``session.py``), and the scheduling of
+test files over the xdist workers (below).
 
 x64 must be switched on before any array is created, i.e. at import time of
 this conftest (pytest imports it before the test modules). Tests marked
@@ -18,6 +19,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import jax  # noqa: E402
+import pytest  # noqa: E402
 
 TESTS = os.path.dirname(os.path.abspath(__file__))
 
@@ -37,3 +39,53 @@ sys.path.insert(0, TESTS)
 import session  # noqa: E402
 
 session.enable()
+
+
+# ----------------------------------------------------------------------------
+# Scheduling over the xdist workers (pyproject.toml: -n 2 --dist loadfile
+# --no-loadscope-reorder). A work unit is one test file, as with loadfile (its
+# module-scoped compiled functions are built once), except that files compiling
+# the same programs form one unit: run one after the other in one worker, the later
+# ones find the earlier ones' programs in the persistent compilation cache (same
+# padded shapes, options and max_steps), where two workers would both compile them.
+# test_planner first: its programs (the paper scenes padded to 5 curve slots, 200
+# steps, default and paper step, 10 points; the loss-and-gradient of tune_gains)
+# are the ones test_safe_step and the notebooks use; test_warm_start's plan_batch is
+# the program of test_cli's batch command.
+SHARED = {
+    "planner": ["test_planner", "test_safe_step", "test_notebooks"],
+    "cli": ["test_warm_start", "test_cli", "test_presets"],
+}
+# Units in this order (largest first, so that the other worker's smaller units fill
+# the time the largest takes); units not listed follow in collection order.
+FIRST = ["planner", "cli", "test_benchmarks", "test_closest", "test_batch", "test_fitting", "test_kinematics"]
+
+
+def _unit(module: str) -> str:
+    return next((unit for unit, modules in SHARED.items() if module in modules), module)
+
+
+def _module(nodeid: str) -> str:
+    return os.path.splitext(os.path.basename(nodeid.split("::", 1)[0]))[0]
+
+
+@pytest.hookimpl(trylast=True)  # after pytest's own reordering by fixtures: files stay contiguous
+def pytest_collection_modifyitems(config, items):
+    def rank(item):
+        unit = _unit(_module(item.nodeid))
+        first = FIRST.index(unit) if unit in FIRST else len(FIRST)
+        return first, SHARED[unit].index(_module(item.nodeid)) if unit in SHARED else 0
+
+    items.sort(key=rank)  # stable: pytest's order within a file
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """loadfile's scheduler with the units above (xdist's own ``xdist_group`` marks are
+    not used: pytest-xdist 3.8 renames nodeids in a way pytest >= 9 ignores)."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class UnitScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid):
+            return _unit(_module(nodeid))
+
+    return UnitScheduling(config, log)

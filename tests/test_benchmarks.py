@@ -1,13 +1,14 @@
 """Smoke tests of the benchmark scripts and tests of ``random_scenarios``.
 
-* ``benchmarks/paper_tables.py --quick`` and ``benchmarks/batch_sweep.py --quick``
-  run in subprocesses (outputs written to a temporary directory): they must
-  finish, and their Markdown, JSON and figures must exist and parse. No timing
-  is asserted (timings belong in the benchmarks).
-* The two subprocesses run at once (each spends most of its time compiling;
-  they share the suite's persistent compilation cache (conftest.py), so a rerun
-  of the suite is much faster). Sharding over 2 host devices is tested on
-  plan_batch itself (tests/test_batch.py), which the sweep calls.
+* ``benchmarks/paper_tables.py --quick`` (default run) and
+  ``benchmarks/batch_sweep.py --quick`` (``slow``, with the other benchmark
+  scripts' quick runs) run in subprocesses (outputs written to a temporary
+  directory): they must finish, and their Markdown, JSON and figures must exist
+  and parse. No timing is asserted (timings belong in the benchmarks). Each
+  spends most of its time compiling; they share the suite's persistent
+  compilation cache (conftest.py), so a rerun of the suite is much faster.
+  Sharding over 2 host devices is tested on plan_batch itself
+  (tests/test_batch.py), which the sweep calls.
 * ``random_scenarios``: seeded and deterministic, the requested shapes, each
   entry equal to ``make_scenario`` of its own obstacles, goals reachable (an
   independent least-squares inverse kinematics finds a configuration within
@@ -23,7 +24,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 
 import jax
 import jax.numpy as jnp
@@ -52,58 +52,20 @@ def _env(devices: int | None):
     return env
 
 
+def _run(cmd, devices=None):
+    """Run a benchmark script in a subprocess; (exit code, stdout, stderr)."""
+    p = subprocess.run(cmd, cwd=ROOT, env=_env(devices), capture_output=True, text=True,
+                       timeout=SUBPROCESS_TIMEOUT)
+    return p.returncode, p.stdout, p.stderr
+
+
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory, request):
-    """Start the quick benchmark runs at once; wait for all; return their outputs."""
-    d = tmp_path_factory.mktemp("bench")
-    py = sys.executable
-    specs = {
-        "paper": (
-            [
-                py,
-                os.path.join(BENCH, "paper_tables.py"),
-                "--quick",
-                "--out",
-                str(d / "paper_tables"),
-                "--figures",
-                str(d / "figures"),
-            ],
-            None,
-        ),
-        "sweep1": (
-            [
-                py,
-                os.path.join(BENCH, "batch_sweep.py"),
-                "--quick",
-                "--out",
-                str(d / "sweep1"),
-                "--figure",
-                str(d / "sweep1.png"),
-            ],
-            1,
-        ),
-    }
-    procs = {}
-    for name, (cmd, devices) in specs.items():
-        procs[name] = subprocess.Popen(
-            cmd,
-            cwd=ROOT,
-            env=_env(devices),
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-    out = {"dir": d}
-    t0 = time.perf_counter()
-    for name, p in procs.items():
-        try:
-            stdout, stderr = p.communicate(timeout=max(1.0, SUBPROCESS_TIMEOUT - (time.perf_counter() - t0)))
-        except subprocess.TimeoutExpired:
-            for q in procs.values():
-                q.kill()
-            raise
-        out[name] = (p.returncode, stdout, stderr)
-    return out
+def paper_run(tmp_path_factory):
+    """``paper_tables.py --quick`` once for the module: (output directory, its run)."""
+    d = tmp_path_factory.mktemp("paper")
+    cmd = [sys.executable, os.path.join(BENCH, "paper_tables.py"), "--quick", "--out", str(d / "paper_tables"),
+           "--figures", str(d / "figures")]
+    return d, _run(cmd)
 
 
 def _ok(run):
@@ -111,9 +73,9 @@ def _ok(run):
     assert rc == 0, f"exit code {rc}\nstdout:\n{stdout[-3000:]}\nstderr:\n{stderr[-5000:]}"
 
 
-def test_paper_tables_quick(runs):
-    _ok(runs["paper"])
-    d = runs["dir"]
+def test_paper_tables_quick(paper_run):
+    d, run = paper_run
+    _ok(run)
     report = json.loads((d / "paper_tables.json").read_text())
     md = (d / "paper_tables.md").read_text()
     assert report["quick"] is True
@@ -154,9 +116,12 @@ def test_paper_tables_quick(runs):
     assert all(os.path.exists(p) for p in report["figures"])
 
 
-def test_batch_sweep_quick(runs):
-    _ok(runs["sweep1"])
-    d = runs["dir"]
+@pytest.mark.slow
+def test_batch_sweep_quick(tmp_path):
+    d = tmp_path
+    cmd = [sys.executable, os.path.join(BENCH, "batch_sweep.py"), "--quick", "--out", str(d / "sweep1"), "--figure",
+           str(d / "sweep1.png")]
+    _ok(_run(cmd, devices=1))
     report = json.loads((d / "sweep1.json").read_text())
     md = (d / "sweep1.md").read_text()
     assert report["quick"] is True and report["devices"] == 1

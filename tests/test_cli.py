@@ -451,6 +451,6 @@ def test_run_warns_about_a_goal_inside_an_obstacle(capsys, tmp_path):
     path = tmp_path / "inside.json"
     path.write_text(json.dumps({"format": "softplan-scenario/1", "goal": [1.0, 0.0, 1.0], "obstacles": [
         {"type": "line_segment", "start": [1.0, -1.0, 1.0], "end": [1.0, 1.0, 1.0], "radius": 0.05}]}))
-    code, out, err = run_main(capsys, "run", str(path), "--max-steps", "5")
+    code, out, err = run_main(capsys, "run", str(path), "--max-steps", STEPS)  # sim1's shapes and steps: its program
     assert code == 0, err
     assert "warning: the goal" in err and "inside obstacle" in err
