@@ -30,7 +30,7 @@ Every figure is a median of repeats of a compiled call with
 ``block_until_ready``; compile time is never in a run time. Writes
 ``benchmarks/results/speed_targets.{md,json}``.
 
-    python benchmarks/speed_targets.py            # ~5 min on 2 CPUs (298 s in the last run)
+    python benchmarks/speed_targets.py            # ~5 min on 2 CPUs (323 s in the last run)
     python benchmarks/speed_targets.py --quick    # ~2.5 min: fewer repeats, smaller batch, no float32
     python benchmarks/speed_targets.py --checked-only   # item 6 alone (float64), into results/speed_checked.*
 """
