@@ -216,6 +216,15 @@ def main(argv=None):
     ap.add_argument("--no-profile", dest="profile", action="store_false")
     ap.add_argument("--out", default=os.path.join(RESULTS_DIR, "kernel.md"))
     args = ap.parse_args(argv)
+    for name in ("steps", "batch", "rounds"):
+        if getattr(args, name) < 1:
+            ap.error(f"--{name} must be >= 1; got {getattr(args, name)}")
+    if not set(args.dtypes.split(",")) <= {"float64", "float32"}:
+        ap.error(f"--dtypes: a comma list of float64 and float32; got {args.dtypes!r}")
+    for spec in args.variant:
+        name, _, path = spec.partition("=")
+        if not name.isidentifier() or not os.path.isfile(os.path.join(path, "__init__.py")):
+            ap.error(f"--variant {spec!r}: need NAME=PATH, PATH a package directory (with __init__.py)")
     variants = [(spec.split("=", 1)[0], load_variant(*spec.split("=", 1))) for spec in args.variant]
     if not variants:
         variants = [("current", softplan_jax)]

@@ -367,3 +367,28 @@ def test_science_quick_run(tmp_path):
     row = rep["summary"][0]
     assert row["intervals"]["reached"] == pytest.approx(science.wilson(row["counts"]["reached"], 16))
     assert (tmp_path / "figures" / "science_rates_vs_n.png").exists()
+
+
+# ----------------------------------------------------------------------------
+# kernel.py
+
+
+def test_kernel_rejects_bad_arguments(capsys):
+    import kernel
+
+    for argv in (["--steps", "0"], ["--dtypes", "float16"], ["--variant", "nope"], ["--variant", "a=/no/such/dir"]):
+        with pytest.raises(SystemExit) as e:
+            kernel.main(argv)
+        assert e.value.code == 2, argv
+    assert "--variant" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_kernel_quick_run_writes_its_report(tmp_path):
+    import kernel
+
+    out = tmp_path / "kernel.md"
+    kernel.main(["--steps", "5", "--batch", "2", "--rounds", "1", "--dtypes", "float64", "--out", str(out)])
+    md = out.read_text()
+    assert "| float64 | current | curve | single |" in md and "| float64 | current | points10 | batch |" in md
+    assert "## Profile, float64" in md and "| warm closest point |" in md
