@@ -38,10 +38,7 @@ import sys
 import time
 
 import jax
-
-jax.config.update("jax_enable_x64", True)
-
-import jax.numpy as jnp  # noqa: E402
+import jax.numpy as jnp
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _common import RESULTS_DIR, finish_machine, fmt_s, log, machine_info, machine_lines  # noqa: E402
@@ -225,6 +222,7 @@ def main(argv=None):
         name, _, path = spec.partition("=")
         if not name.isidentifier() or not os.path.isfile(os.path.join(path, "__init__.py")):
             ap.error(f"--variant {spec!r}: need NAME=PATH, PATH a package directory (with __init__.py)")
+    jax.config.update("jax_enable_x64", True)  # float64 rollouts (here, not at import)
     variants = [(spec.split("=", 1)[0], load_variant(*spec.split("=", 1))) for spec in args.variant]
     if not variants:
         variants = [("current", softplan_jax)]

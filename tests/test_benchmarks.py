@@ -392,3 +392,16 @@ def test_kernel_quick_run_writes_its_report(tmp_path):
     md = out.read_text()
     assert "| float64 | current | curve | single |" in md and "| float64 | current | points10 | batch |" in md
     assert "## Profile, float64" in md and "| warm closest point |" in md
+
+
+def test_importing_a_benchmark_script_changes_no_jax_setting():
+    """Every script in benchmarks/ imports without switching float64 on (each ``main`` does)."""
+    scripts = sorted(f[:-3] for f in os.listdir(BENCH) if f.endswith(".py"))
+    code = (f"import importlib, sys, jax; sys.path.insert(0, {BENCH!r})\n"
+            f"for m in {scripts!r}: importlib.import_module(m)\n"
+            "print(jax.config.jax_enable_x64)")
+    p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_env(None), capture_output=True, text=True,
+                       timeout=SUBPROCESS_TIMEOUT)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert p.stdout.strip().splitlines()[-1] == "False", p.stdout
+    assert "kernel" in scripts and "science" in scripts
