@@ -101,6 +101,21 @@ def median_time(fn, *args, repeats: int = 3):
     return out, statistics.median(times), times
 
 
+def rollout_wrappers(rollout):
+    """``(single, batched)``: a rollout of one scenario and the same rollout vmapped over a
+    batch of scenarios, both with signature ``(scenario(s), gains, options, max_steps)``
+    (``options`` and ``max_steps`` static when jitted). ``rollout``: the planner's
+    ``rollout`` (or another package version's)."""
+
+    def single(sc, g, options, max_steps):
+        return rollout(sc, g, options, max_steps)
+
+    def batched(scs, g, options, max_steps):
+        return jax.vmap(lambda sc: rollout(sc, g, options, max_steps))(scs)
+
+    return single, batched
+
+
 def compile_timed(jitted, *args):
     """(compiled executable, lower + compile seconds) of a jitted function."""
     t0 = time.perf_counter()

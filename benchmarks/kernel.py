@@ -41,7 +41,15 @@ import jax
 import jax.numpy as jnp
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _common import RESULTS_DIR, finish_machine, fmt_s, log, machine_info, machine_lines  # noqa: E402
+from _common import (  # noqa: E402
+    RESULTS_DIR,
+    finish_machine,
+    fmt_s,
+    log,
+    machine_info,
+    machine_lines,
+    rollout_wrappers,
+)
 
 import softplan_jax  # noqa: E402
 
@@ -74,11 +82,7 @@ def compile_rollouts(pkg, dtype, steps, batch_size, methods):
     options = {"curve": planner.make_options("curve", check_collisions=False),
                "points10": planner.make_options("points", 10, check_collisions=False)}
 
-    def single(sc, g, options, max_steps):
-        return planner.rollout(sc, g, options, max_steps)
-
-    def batched(scs, g, options, max_steps):
-        return jax.vmap(lambda sc: planner.rollout(sc, g, options, max_steps))(scs)
+    single, batched = rollout_wrappers(planner.rollout)
 
     out = {}
     for method in methods:

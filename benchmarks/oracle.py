@@ -405,8 +405,7 @@ class _SegmentProblem:
 
     def arm_s(self, s, order=0):
         L, th, cp, sp_ = self._L, self._th, self._cp, self._sp
-        a = 0.5 * th * s * s * _sinc_scalar(0.5 * th * s) ** 2
-        b = s * _sinc_scalar(th * s)
+        a, b = _arc_coeffs(th, s)  # Python floats: its scalar branch
         A = self._rot((L * a * cp, L * a * sp_, L * b), True)
         if order == 0:
             return A

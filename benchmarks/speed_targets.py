@@ -56,6 +56,7 @@ from _common import (  # noqa: E402
     machine_info,
     machine_lines,
     median_time,
+    rollout_wrappers,
     write_results,
 )
 
@@ -134,11 +135,7 @@ def measure_checked(dtype, steps, batch_size, rounds, seed=0):
         "checked_always": make_options("curve", swept_proof=False),
     }
 
-    def single(sc, g, options, max_steps):
-        return rollout(sc, g, options, max_steps)
-
-    def batched(scs, g, options, max_steps):
-        return jax.vmap(lambda sc: rollout(sc, g, options, max_steps))(scs)
+    single, batched = rollout_wrappers(rollout)
 
     calls, out = {}, {}
     for where, fn, sc in (("tree", single, tree), ("batch", batched, batch)):

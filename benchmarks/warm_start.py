@@ -36,7 +36,16 @@ import jax
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _common import RESULTS_DIR, finish_machine, fmt_s, log, machine_info, machine_lines, write_results  # noqa: E402
+from _common import (  # noqa: E402
+    RESULTS_DIR,
+    finish_machine,
+    fmt_s,
+    log,
+    machine_info,
+    machine_lines,
+    rollout_wrappers,
+    write_results,
+)
 
 import softplan_jax as sp  # noqa: E402
 from softplan_jax import obstacles  # noqa: E402
@@ -126,11 +135,7 @@ def speed(batch_size: int, steps: int, rounds: int, seed: int):
     tree = sp.paper_scenario("tree")
     batch = sp.random_scenarios(seed, batch_size)
 
-    def single(sc, g, options, max_steps):
-        return rollout(sc, g, options, max_steps)
-
-    def batched(scs, g, options, max_steps):
-        return jax.vmap(lambda sc: rollout(sc, g, options, max_steps))(scs)
+    single, batched = rollout_wrappers(rollout)
 
     compiled, compile_s = {}, {}
     for where, fn, sc in (("tree", single, tree), ("batch", batched, batch)):

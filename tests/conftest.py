@@ -72,9 +72,10 @@ def _module(nodeid: str) -> str:
 @pytest.hookimpl(trylast=True)  # after pytest's own reordering by fixtures: files stay contiguous
 def pytest_collection_modifyitems(config, items):
     def rank(item):
-        unit = _unit(_module(item.nodeid))
+        module = _module(item.nodeid)
+        unit = _unit(module)
         first = FIRST.index(unit) if unit in FIRST else len(FIRST)
-        return first, SHARED[unit].index(_module(item.nodeid)) if unit in SHARED else 0
+        return first, SHARED[unit].index(module) if unit in SHARED else 0
 
     items.sort(key=rank)  # stable: pytest's order within a file
 
