@@ -167,6 +167,9 @@ class Segment(NamedTuple):
       axis: (3,) the base tangent ``R_{i-1}^0 (0, 0, 1)``.
       sin_ratio: () ``sin(theta) / theta``; cos_ratio: () ``(1 - cos theta) / theta^2``
         (both finite at theta = 0; :func:`project_to_arc`'s end test).
+      normal: (3,) the bending plane's normal ``R_{i-1}^0 (-sin phi, cos phi, 0)``.
+      cos_theta: () ``cos(theta)``; tip: (3,) the segment's end ``F_Ri(1)``
+        (both for :func:`arc_distance2`).
     """
 
     L: jax.Array
@@ -176,15 +179,25 @@ class Segment(NamedTuple):
     axis: jax.Array
     sin_ratio: jax.Array
     cos_ratio: jax.Array
+    normal: jax.Array
+    cos_theta: jax.Array
+    tip: jax.Array
 
     @classmethod
     def from_frame(cls, q_i, R, P):
         """From a row of q (..., 3) and the segment's base frame R (..., 3, 3), P (..., 3)
         (:func:`~softplan_jax.kinematics.segment_frames`); leading axes are kept."""
         L, theta, phi = q_i[..., 0], q_i[..., 1], q_i[..., 2]
-        bend = R[..., :, 0] * jnp.cos(phi)[..., None] + R[..., :, 1] * jnp.sin(phi)[..., None]
+        cp, sp = jnp.cos(phi)[..., None], jnp.sin(phi)[..., None]
+        bend = R[..., :, 0] * cp + R[..., :, 1] * sp
+        normal = R[..., :, 1] * cp - R[..., :, 0] * sp
+        axis = R[..., :, 2]
+        sin_ratio = sin_over_x(theta)
         half = sin_over_x(0.5 * theta)  # sin_over_x(t/2)^2 / 2 = (1 - cos t)/t^2
-        return cls(L, theta, P, bend, R[..., :, 2], sin_over_x(theta), 0.5 * half * half)
+        cos_ratio = 0.5 * half * half
+        # F_Ri(1) = P + L (theta cos_ratio bend + sin_ratio axis) (paper §2.2 at s = 1).
+        tip = P + (L * theta * cos_ratio)[..., None] * bend + (L * sin_ratio)[..., None] * axis
+        return cls(L, theta, P, bend, axis, sin_ratio, cos_ratio, normal, jnp.cos(theta), tip)
 
     def point(self, s):
         # F_Ri(s), paper §2.3: P + R (r cos phi, r sin phi, a) with the radial and axial
@@ -343,6 +356,41 @@ def project_to_arc(seg: Segment, p):
     return s_star, jnp.sum((seg.point(s_star) - p) ** 2)
 
 
+def arc_distance2(seg: Segment, p):
+    """``min_s |F_Ri(s) - p|^2`` over s in [0, 1]: :func:`project_to_arc`'s value
+    without its minimiser, in square roots and divisions only (no trigonometry).
+
+    With x, y, z the components of ``d = p - P`` along the bending direction,
+    the plane's normal and the base tangent, the arc lies on the circle of
+    radius ``r = L / theta`` centred at ``P + r bend`` in the plane y = 0; the
+    distance from p to the whole circle is ``y^2 + (rho - r)^2`` with
+    ``rho - r = (theta (x^2 + z^2) - 2 x L) / (S + L)``, ``S = sqrt((L - x
+    theta)^2 + (z theta)^2)`` (the difference ``rho - r`` multiplied out, free of
+    cancellation and finite at theta = 0, where it is ``-x``: the line). The
+    circle's nearest point, at angle ``a* = atan2(z theta, L - x theta)``, lies on
+    the arc (a in [0, theta], or [theta, 0]) iff ``A = z >= 0`` and ``B = z cos
+    theta <= (L - x theta) sin(theta)/theta`` when |theta| <= pi (sin a* and
+    sin(a* - theta) of the right signs), iff A or B when pi < |theta| < 2 pi (the
+    gap is the complement), and always when |theta| >= 2 pi. Otherwise the
+    minimum is at an end: the smaller of ``|d|^2`` and ``|p - F_Ri(1)|^2``.
+    """
+    L, theta = seg.L, seg.theta
+    d = p - seg.P
+    x, y, z = jnp.dot(d, seg.bend), jnp.dot(d, seg.normal), jnp.dot(d, seg.axis)
+    X = L - x * theta
+    # At the circle's centre (X = z theta = 0) every arc point is equally far: floor
+    # the root's argument so that its derivative stays finite there.
+    den = jnp.sqrt(jnp.maximum(X * X + (z * theta) ** 2, jnp.finfo(X.dtype).tiny)) + L
+    radial = (theta * (x * x + z * z) - 2.0 * x * L) / jnp.where(den > 0, den, 1.0)
+    A = z >= 0.0
+    B = z * seg.cos_theta <= X * seg.sin_ratio
+    abs_theta = jnp.abs(theta)
+    on_arc = jnp.where(abs_theta <= jnp.pi, A & B, A | B) | (abs_theta >= 2.0 * jnp.pi)
+    e = p - seg.tip
+    ends = jnp.minimum(jnp.dot(d, d), jnp.dot(e, e))
+    return jnp.where(on_arc, y * y + radial * radial, ends)
+
+
 def reduced_newton(seg: Segment, curve, u0, s0, f0, iterations: int):
     """Trust-region Newton on g(u) = min_s D_i(s, u)^2 / 2 from u0 (s0 = s*(u0)).
 
@@ -427,7 +475,7 @@ def solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOptio
     """
     dtype = seg.L.dtype
     k = options.starts
-    s_grid, g_grid = jax.vmap(lambda c: project_to_arc(seg, c))(C_grid)
+    g_grid = jax.vmap(lambda c: arc_distance2(seg, c))(C_grid)
     # Arm-side profile.
     s_arm = jnp.linspace(0.0, 1.0, options.grid_s, dtype=dtype)
     A = jax.vmap(seg.point)(s_arm)
@@ -438,17 +486,19 @@ def solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOptio
     )
     u_seed = u_prof[local_minima_1d(f_prof, k)]
     s_seed, g_seed = jax.vmap(lambda u: project_to_arc(seg, curve.point(u)))(u_seed)
+    # The grid's seeds and best sample (their minimisers s* in closed form only here).
     kg = local_minima_1d(g_grid, k)
-    u0 = jnp.concatenate([u_grid[kg], u_seed])
-    s0 = jnp.concatenate([s_grid[kg], s_seed])
-    f0 = jnp.concatenate([g_grid[kg], g_seed])
+    kg = jnp.concatenate([kg, jnp.argmin(g_grid)[None].astype(kg.dtype)])
+    s_kg, f_kg = jax.vmap(lambda c: project_to_arc(seg, c))(C_grid[kg])
+    u0 = jnp.concatenate([u_grid[kg[:k]], u_seed])
+    s0 = jnp.concatenate([s_kg[:k], s_seed])
+    f0 = jnp.concatenate([f_kg[:k], g_seed])
     u_n, s_n, f_n = jax.vmap(lambda a, b, c: reduced_newton(seg, curve, a, b, c, options.iterations))(
         u0, s0, f0
     )
-    j = jnp.argmin(g_grid)
-    u_c = jnp.concatenate([u_n, u_grid[j][None]])
-    s_c = jnp.concatenate([s_n, s_grid[j][None]])
-    f_c = jnp.concatenate([f_n, g_grid[j][None]])
+    u_c = jnp.concatenate([u_n, u_grid[kg[k:]]])
+    s_c = jnp.concatenate([s_n, s_kg[k:]])
+    f_c = jnp.concatenate([f_n, f_kg[k:]])
     best = jnp.argmin(f_c)
     x = jnp.stack([s_c[best], u_c[best]])
     return x[0], x[1], f_c[best], first_order_converged(seg, curve, x)

@@ -43,9 +43,13 @@ piece is a fixed fraction of its distance from u_i. Then near a minimum where
 the distance grows like ``sin(alpha) |u - u_i|`` (alpha: the angle between arm
 and curve) every piece passes once ``tan(alpha)`` exceeds a fixed fraction
 (scale free), where evenly spaced cells fail near the window whenever the
-curve runs nearly parallel to the arm. Cost: ``2 NODES`` closed-form
-projections per pair and step (measured in ``benchmarks/warm_start.py``:
-pair fallbacks 0.4 % with 8 nodes per side against 3 % with 16 even cells).
+curve runs nearly parallel to the arm. Cost: ``2 NODES`` point-to-arc
+distances per pair and step, in square roots and divisions only
+(:func:`~softplan_jax.closest.arc_distance2`: the certificate needs the
+values, not the minimisers; measured in ``benchmarks/kernel.py``: 18.6 ->
+7.5 µs of the tree's step with project_to_arc's trigonometry gone), pair
+fallbacks 0.4 % with 8 nodes per side against 3 % with 16 even cells
+(``benchmarks/warm_start.py``).
 
 The certificate (per obstacle). Each segment i's polished pair gives an
 achievable distance D_i; ``D_w = min_i D_i``. The WINDOW of half-width
@@ -63,11 +67,14 @@ segment gets the full solve (keeping the smaller of the full and the polished
 D^2, both achievable); a segment certified against D_w stays certified when a
 fallback lowers D_w, so one pass is enough.
 
-Fallback cost under ``vmap``. The failed pairs are solved one by one in a
-``lax.while_loop`` (flattened over the curves of a stack): a batch pays (the
-batch's largest number of failures) x (one pair solve) per step, not a select
-over every pair. At the first step of a rollout (no warm state) every pair
-fails and takes the full solve.
+Fallback cost. The failed pairs are solved one by one in a
+``lax.while_loop`` (flattened over the curves of a stack). Under ``vmap`` a
+batching rule (``jax.custom_batching.custom_vmap``) folds the batch axis into
+that loop: it solves the failed pairs of ALL members, ``FALLBACK_CHUNK`` side
+by side per iteration, so a batch pays for its failures only, where plain
+``vmap`` would run the loop as long as the member with the most failures and
+solve a pair for every member in each iteration. At the first step of a
+rollout (no warm state) every pair fails and takes the full solve.
 
 Derivatives. Everything here runs without derivatives (stop_gradient); the
 winning pair goes through :func:`~softplan_jax.closest.closest_from_pairs`,
@@ -77,6 +84,8 @@ w.r.t. q (implicit function theorem, envelope theorem) are the full solver's.
 
 from __future__ import annotations
 
+import functools
+import math
 from typing import NamedTuple
 
 import jax
@@ -85,6 +94,7 @@ import jax.numpy as jnp
 from .closest import (
     Segment,
     SolverOptions,
+    arc_distance2,
     closest_from_pairs,
     first_order_converged,
     project_to_arc,
@@ -109,6 +119,8 @@ TOLERANCE = 64.0
 # ParametricCurve: max |F_o''| from samples over the range, times this factor.
 PARAMETRIC_SAFETY = 2.0
 PARAMETRIC_SAMPLES = 257
+# Failed pairs solved side by side per iteration of the fallback loop under vmap.
+FALLBACK_CHUNK = 8
 
 
 class CurveData(NamedTuple):
@@ -191,7 +203,7 @@ def _piece_bounds(seg: Segment, curve, data: CurveData, u_i, half):
     t = jnp.clip(u_i + sign[:, None] * half * jnp.exp(k[None, :] * jnp.log(ratio)[:, None]), lo, hi)
     t = jnp.where(k == 1.0, end[:, None], t)  # the last piece ends exactly at the range's end
     P = jax.vmap(curve.point)(t.reshape(-1)).reshape(2, NODES, 3)
-    g = jax.vmap(lambda p: project_to_arc(seg, p)[1])(P.reshape(-1, 3)).reshape(2, NODES)
+    g = jax.vmap(lambda p: arc_distance2(seg, p))(P.reshape(-1, 3)).reshape(2, NODES)
     q = _chord_bound(g[:, :-1], g[:, 1:], jnp.sum((P[:, 1:] - P[:, :-1]) ** 2, axis=-1))
     a, b = jnp.minimum(t[:, :-1], t[:, 1:]), jnp.maximum(t[:, :-1], t[:, 1:])
     kappa = data.curvature
@@ -243,23 +255,81 @@ def _polish_and_certify(segs: Segment, curve, data: CurveData, u_prev, solver: S
 
 
 def _fallback(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, solver: SolverOptions) -> _Pairs:
-    """The full solve of every failed pair (fail (m, n)), one pair per iteration of a
-    while loop; each failed pair keeps the smaller of its full and polished D^2."""
-    n = fail.shape[1]
+    """The full solve of every failed pair (fail (m, n)); each failed pair keeps the
+    smaller of its full and polished D^2. Under ``vmap`` the failures of the whole
+    batch are solved together (see :func:`_fallback_fn`)."""
+    return _fallback_fn(solver)(segs, curves, data, pairs, fail)
+
+
+@functools.lru_cache(maxsize=None)
+def _fallback_fn(solver: SolverOptions):
+    """:func:`_solve_failed` for one SolverOptions, with a batching rule.
+
+    Plain ``vmap`` would turn the while loop over failed pairs into one that
+    runs until the batch member with the most failures is done, every
+    iteration solving a pair for EVERY member: a batch of B paid B full pair
+    solves per failure of its worst member (measured: 8 of 44 µs per
+    scenario-step, batch of 64). The rule instead folds the batch axis into
+    the array and solves only the failed pairs of all members, ``FALLBACK_CHUNK``
+    at a time (``benchmarks/kernel.py``, batch of 64: 39 -> 31 µs per
+    scenario-step). Nested ``vmap`` folds one axis per level. custom_vmap has
+    no reverse-mode rule; none is needed, as every input is stop_gradient-ed
+    (the JVP of a rollout sees only symbolic-zero tangents here).
+    """
+
+    @jax.custom_batching.custom_vmap
+    def fallback(segs, curves, data, pairs, fail):
+        return _solve_failed(segs, curves, data, pairs, fail, solver)
+
+    @fallback.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        def lift(x, batched):
+            return x if batched else jnp.broadcast_to(x, (axis_size, *jnp.shape(x)))
+
+        args = [jax.tree_util.tree_map(lift, a, b) for a, b in zip(args, in_batched, strict=True)]
+        out = fallback(*args)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return fallback
+
+
+def _solve_failed(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, solver: SolverOptions) -> _Pairs:
+    """The while loop of :func:`_fallback` over any leading axes ``lead``
+    (``fail``: lead + (m, n); segs: lead + (n,); curves, data: lead + (m,)):
+    each iteration takes up to ``chunk`` failed pairs (1 without leading axes,
+    else ``FALLBACK_CHUNK``), solves them side by side and writes back the
+    better answer."""
+    m, n = fail.shape[-2:]
+    lead = fail.shape[:-2]
+    batch = math.prod(lead)
+    chunk = min(1 if not lead else FALLBACK_CHUNK, batch * m * n)
+    total = batch * m * n
+
+    def flat(tree, k):  # lead axes -> one axis of size batch
+        return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) + k :])), tree)
+
+    segs_f, curves_f, data_f = flat(segs, 0), flat(curves, 0), flat(data, 0)
+    pairs_f = _Pairs(*(x.reshape(total) for x in pairs))
+
+    def solve(idx):
+        b, k, i = idx // (m * n), (idx // n) % m, idx % n
+        curve = jax.tree_util.tree_map(lambda x: x[b, k], curves_f)
+        c = jax.tree_util.tree_map(lambda x: x[b, k], data_f)
+        seg = jax.tree_util.tree_map(lambda x: x[b, i], segs_f)
+        return solve_pair_reduced(seg, curve, c.u_grid, c.C_grid, solver)
 
     def body(state):
         p, todo = state
-        flat = jnp.argmax(todo.reshape(-1))
-        k, i = flat // n, flat % n
-        curve = jax.tree_util.tree_map(lambda x: x[k], curves)
-        c = jax.tree_util.tree_map(lambda x: x[k], data)
-        seg = jax.tree_util.tree_map(lambda x: x[i], segs)
-        new = solve_pair_reduced(seg, curve, c.u_grid, c.C_grid, solver)
-        better = new[2] <= p.d2[k, i]
-        p = _Pairs(*(a.at[k, i].set(jnp.where(better, b, a[k, i])) for a, b in zip(p, new, strict=True)))
-        return p, todo.at[k, i].set(False)
+        (idx,) = jnp.nonzero(todo, size=chunk, fill_value=total)
+        valid = idx < total
+        new = _Pairs(*jax.vmap(solve)(jnp.where(valid, idx, 0)))
+        keep = valid & (new.d2 <= p.d2[jnp.where(valid, idx, 0)])
+        at = jnp.where(keep, idx, total)  # out of range: dropped
+        p = _Pairs(*(a.at[at].set(b, mode="drop") for a, b in zip(p, new, strict=True)))
+        return p, todo.at[jnp.where(valid, idx, total)].set(False, mode="drop")
 
-    return jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (pairs, fail))[0]
+    out = jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (pairs_f, fail.reshape(total)))[0]
+    return _Pairs(*(x.reshape(fail.shape) for x in out))
 
 
 def warm_curves(q, curves, data: CurveData, u_prev, fresh, active, solver: SolverOptions):

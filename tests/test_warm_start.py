@@ -133,3 +133,50 @@ def test_warm_started_rollouts_give_the_full_solvers_distances():
         fallbacks += int(fb[1 : it + 1].sum())
         pair_steps += it * n_pairs
     assert fallbacks < 0.05 * pair_steps, (fallbacks, pair_steps)
+
+
+def test_batched_fallback_equals_one_member_at_a_time():
+    """Under vmap the fallback solves the failed pairs of the whole batch together
+    (warm_start._fallback_fn's batching rule): the same pairs and fallback counts as
+    each member alone, for members with no warm state, with random warm starts, with
+    padding slots, and under a nested vmap."""
+    qs, curves, _ = _random_cases(11, 8, 2)
+    rng = np.random.default_rng(12)
+    m, n = 2, 3
+    stack = jax.tree_util.tree_map(lambda x: x.reshape(4, m, *x.shape[1:]), curves)
+    q = qs[:4]
+    data = jax.vmap(jax.vmap(lambda c: ws.curve_data(c, DEFAULT_OPTIONS)))(stack)
+    u_prev = jnp.asarray(rng.uniform(-1.0, 1.0, (4, m, n)))
+    fresh = jnp.array([True, False, False, False])
+    active = jnp.array([[True, True], [True, True], [True, False], [True, True]])
+
+    def one(q, c, d, u, f, a):
+        cps, u_next, fb = ws.warm_curves(q, c, d, u, f, a, DEFAULT_OPTIONS)
+        return cps.distance, u_next, fb
+
+    args = (q, stack, data, u_prev, fresh, active)
+    batched = jax.jit(jax.vmap(one))(*args)
+    single = jax.jit(one)
+    fbs = []
+    for b in range(4):
+        ref = single(*jax.tree_util.tree_map(lambda x, b=b: x[b], args))
+        for x, y in zip(batched, ref, strict=True):
+            x = np.asarray(x[b])
+            y = np.asarray(y)
+            if b == 2 and x.ndim:  # the padding slot's values are meaningless (but finite)
+                x, y = x[:1], y[:1]
+            np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-13)
+        fbs.append(int(ref[2]))
+    assert fbs[0] == m * n and sum(fbs[1:]) > 0, fbs  # the fallback ran, in more than one member
+    # The member without warm state got every pair's full solve: the full solver's u* and distance.
+    segs = _segments(q[0])
+    for k in range(m):
+        c = jax.tree_util.tree_map(lambda x, k=k: x[0, k], stack)
+        d = jax.tree_util.tree_map(lambda x, k=k: x[0, k], data)
+        s_f, u_f, d2_f, _ = jax.vmap(lambda seg, c=c, d=d: solve_pair_reduced(seg, c, d.u_grid, d.C_grid,
+                                                                               DEFAULT_OPTIONS))(segs)
+        np.testing.assert_allclose(np.asarray(batched[1][0, k]), np.asarray(u_f), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(float(batched[0][0, k]), np.sqrt(float(jnp.min(d2_f))), rtol=0, atol=1e-12)
+    nested = jax.jit(jax.vmap(jax.vmap(one)))(*jax.tree_util.tree_map(lambda x: x.reshape(2, 2, *x.shape[1:]), args))
+    for x, y in zip(nested, batched, strict=True):
+        np.testing.assert_allclose(np.asarray(x).reshape(np.shape(y)), np.asarray(y), rtol=1e-12, atol=1e-13)
