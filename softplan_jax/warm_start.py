@@ -261,7 +261,7 @@ def _fallback(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, solve
     return _fallback_fn(solver)(segs, curves, data, pairs, fail)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _fallback_fn(solver: SolverOptions):
     """:func:`_solve_failed` for one SolverOptions, with a batching rule.
 

@@ -703,7 +703,7 @@ def test_arc_distance_matches_dense_sampling(theta):
             d = np.linalg.norm(oracle.segment_points(q, 0, s_dense) - p, axis=1)
             j = int(np.argmin(d))
             lo, hi = s_dense[max(j - 1, 0)], s_dense[min(j + 1, len(s_dense) - 1)]
-            res = minimize_scalar(lambda s, p=p: np.linalg.norm(oracle.segment_point(q, 0, s) - p),
+            res = minimize_scalar(lambda s, p=p, q=q: np.linalg.norm(oracle.segment_point(q, 0, s) - p),
                                   bounds=(lo, hi), method="bounded", options=dict(xatol=1e-13))
             best = min(d[j], res.fun)
             # Equidistant points (the centre) have many minimisers; the value is what counts.
