@@ -83,7 +83,11 @@ def test_certified_answer_is_the_sampled_global_minimum():
     equals the dense-sampled one (to the sampling error)."""
     qs, curves, _ = _random_cases(7, 48, 2)
     rng = np.random.default_rng(8)
-    noise = rng.normal(0.0, 0.05, (qs.shape[0], 3))
+    # Near starts: u* off by about what one default planner step moves it (0.01 of a range
+    # of 2, i.e. 0.01-0.03 along these curves); the polish then converges in its
+    # POLISH_ITERATIONS. Larger offsets are the random starts (which must not be
+    # certified wrongly) and the planner's fallbacks (benchmarks/warm_start.py).
+    noise = rng.normal(0.0, 0.01, (qs.shape[0], 3))
     noise[::2] = rng.uniform(-2.0, 2.0, noise[::2].shape)  # every other case: a random start
 
     @jax.jit
