@@ -48,7 +48,7 @@ distances per pair and step, in square roots and divisions only
 (:func:`~softplan_jax.closest.arc_distance2`: the certificate needs the
 values, not the minimisers; measured in ``benchmarks/kernel.py``: 18.6 ->
 7.5 µs of the tree's step with project_to_arc's trigonometry gone), pair
-fallbacks 0.4 % with 8 nodes per side against 3 % with 16 even cells
+fallbacks 0.4-0.6 % with 8 nodes per side against 3 % with 16 even cells
 (``benchmarks/warm_start.py``).
 
 The certificate (per obstacle). Each segment i's polished pair gives an
@@ -314,10 +314,10 @@ def _solve_failed(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, s
     chunk = min(1 if not lead else FALLBACK_CHUNK, batch * m * n)
     total = batch * m * n
 
-    def flat(tree, k):  # lead axes -> one axis of size batch
-        return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) + k :])), tree)
+    def flat(tree):  # lead axes -> one axis of size batch
+        return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) :])), tree)
 
-    segs_f, curves_f, data_f = flat(segs, 0), flat(curves, 0), flat(data, 0)
+    segs_f, curves_f, data_f = flat(segs), flat(curves), flat(data)
     pairs_f = _Pairs(*(x.reshape(total) for x in pairs))
 
     def solve(idx):
