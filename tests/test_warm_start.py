@@ -139,28 +139,34 @@ def test_warm_started_rollouts_give_the_full_solvers_distances():
     assert fallbacks < 0.05 * pair_steps, (fallbacks, pair_steps)
 
 
+def _fallback_batch():
+    """4 members (2 curves, 3 segments): no warm state, random warm starts, a padding slot."""
+    qs, curves, _ = _random_cases(11, 8, 2)
+    rng = np.random.default_rng(12)
+    m = 2
+    stack = jax.tree_util.tree_map(lambda x: x.reshape(4, m, *x.shape[1:]), curves)
+    data = jax.vmap(jax.vmap(lambda c: ws.curve_data(c, DEFAULT_OPTIONS)))(stack)
+    u_prev = jnp.asarray(rng.uniform(-1.0, 1.0, (4, m, 3)))
+    fresh = jnp.array([True, False, False, False])
+    active = jnp.array([[True, True], [True, True], [True, False], [True, True]])
+    return qs[:4], stack, data, u_prev, fresh, active
+
+
+def _warm_member(q, c, d, u, f, a):
+    cps, u_next, fb = ws.warm_curves(q, c, d, u, f, a, DEFAULT_OPTIONS)
+    return cps.distance, u_next, fb
+
+
 def test_batched_fallback_equals_one_member_at_a_time():
     """Under vmap the fallback solves the failed pairs of the whole batch together
     (warm_start._fallback_fn's batching rule): the same pairs and fallback counts as
-    each member alone, for members with no warm state, with random warm starts, with
-    padding slots, and under a nested vmap."""
-    qs, curves, _ = _random_cases(11, 8, 2)
-    rng = np.random.default_rng(12)
-    m, n = 2, 3
-    stack = jax.tree_util.tree_map(lambda x: x.reshape(4, m, *x.shape[1:]), curves)
-    q = qs[:4]
-    data = jax.vmap(jax.vmap(lambda c: ws.curve_data(c, DEFAULT_OPTIONS)))(stack)
-    u_prev = jnp.asarray(rng.uniform(-1.0, 1.0, (4, m, n)))
-    fresh = jnp.array([True, False, False, False])
-    active = jnp.array([[True, True], [True, True], [True, False], [True, True]])
-
-    def one(q, c, d, u, f, a):
-        cps, u_next, fb = ws.warm_curves(q, c, d, u, f, a, DEFAULT_OPTIONS)
-        return cps.distance, u_next, fb
-
-    args = (q, stack, data, u_prev, fresh, active)
-    batched = jax.jit(jax.vmap(one))(*args)
-    single = jax.jit(one)
+    each member alone, for members with no warm state, with random warm starts and
+    with padding slots; the member without warm state gets the full solver's answers."""
+    args = _fallback_batch()
+    q, stack, data = args[:3]
+    m, n = stack.u_range.shape[1], q.shape[1]
+    batched = jax.jit(jax.vmap(_warm_member))(*args)
+    single = jax.jit(_warm_member)
     fbs = []
     for b in range(4):
         ref = single(*jax.tree_util.tree_map(lambda x, b=b: x[b], args))
@@ -172,15 +178,26 @@ def test_batched_fallback_equals_one_member_at_a_time():
             np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-13)
         fbs.append(int(ref[2]))
     assert fbs[0] == m * n and sum(fbs[1:]) > 0, fbs  # the fallback ran, in more than one member
-    # The member without warm state got every pair's full solve: the full solver's u* and distance.
-    segs = _segments(q[0])
-    for k in range(m):
-        c = jax.tree_util.tree_map(lambda x, k=k: x[0, k], stack)
-        d = jax.tree_util.tree_map(lambda x, k=k: x[0, k], data)
-        s_f, u_f, d2_f, _ = jax.vmap(lambda seg, c=c, d=d: solve_pair_reduced(seg, c, d.u_grid, d.C_grid,
-                                                                               DEFAULT_OPTIONS))(segs)
-        np.testing.assert_allclose(np.asarray(batched[1][0, k]), np.asarray(u_f), rtol=0, atol=1e-9)
-        np.testing.assert_allclose(float(batched[0][0, k]), np.sqrt(float(jnp.min(d2_f))), rtol=0, atol=1e-12)
-    nested = jax.jit(jax.vmap(jax.vmap(one)))(*jax.tree_util.tree_map(lambda x: x.reshape(2, 2, *x.shape[1:]), args))
+
+    @jax.jit
+    def full(q, c, d):  # every (curve, segment) pair of one member by the full solver: (m, n)
+        segs = _segments(q)
+        return jax.vmap(lambda c, d: jax.vmap(lambda seg: solve_pair_reduced(seg, c, d.u_grid, d.C_grid,
+                                                                             DEFAULT_OPTIONS))(segs))(c, d)
+
+    _, u_f, d2_f, _ = full(q[0], *jax.tree_util.tree_map(lambda x: x[0], (stack, data)))
+    np.testing.assert_allclose(np.asarray(batched[1][0]), np.asarray(u_f), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(batched[0][0]), np.sqrt(np.min(np.asarray(d2_f), axis=1)), rtol=0,
+                               atol=1e-12)
+
+
+@pytest.mark.slow
+def test_batched_fallback_under_nested_vmap():
+    """The batching rule folds one axis per vmap level: a nested vmap (2 x 2) gives
+    the single vmap's answers."""
+    args = _fallback_batch()
+    batched = jax.jit(jax.vmap(_warm_member))(*args)
+    nested = jax.jit(jax.vmap(jax.vmap(_warm_member)))(
+        *jax.tree_util.tree_map(lambda x: x.reshape(2, 2, *x.shape[1:]), args))
     for x, y in zip(nested, batched, strict=True):
         np.testing.assert_allclose(np.asarray(x).reshape(np.shape(y)), np.asarray(y), rtol=1e-12, atol=1e-13)
