@@ -24,8 +24,8 @@ clearance at q_a); where that exceeds the contact tolerance no collision is
 possible and the search could only report an achieved value above it. The
 skipped slots record min(c_a, c_b), also an achieved clearance. The rollout
 and :func:`apply_collision_checks` search the remaining (motion, slot) entries
-in a while loop (:func:`_evaluate_where`), so that under vmap a batch pays its
-largest number of them, not a select over all.
+in a while loop (:func:`~softplan_jax.numerics.evaluate_where`), so that under
+vmap a batch pays its largest number of them, not a select over all.
 
 :func:`apply_collision_checks` adds the true-clearance and between-step
 checks to a planning-only rollout after the fact (vectorised over time).
@@ -43,7 +43,7 @@ import jax.numpy as jnp
 
 from .closest import ClosestPoint, FixedPoint
 from .kinematics import backbone_points, motion_bound, segment_point
-from .numerics import contact_floor, get_epsilon, safe_norm, solve_small
+from .numerics import contact_floor, evaluate_where, get_epsilon, safe_norm, solve_small
 from .obstacles import map_obstacle_groups, map_obstacles, radius_and_mask, true_closest
 from .status import Status
 
@@ -122,35 +122,13 @@ def _slot_motion_distance(q_a, q_b, ta: ClosestPoint, tb: ClosestPoint, curve, i
     return jnp.min(d)
 
 
-def _evaluate_where(todo, fn, chunk: int, dtype):
-    """``out[p] = fn(p)`` where ``todo[p]``, +inf elsewhere; todo (P,) bool.
-
-    ``fn`` runs on ``chunk`` flat indices at a time (vmapped), in a
-    ``lax.while_loop`` over the entries still to do: the cost is
-    ceil(#todo / chunk) iterations, and under ``vmap`` (a batch) the batch's
-    largest number of iterations, not a select over all P entries (what a
-    ``lax.cond`` becomes under vmap). ``fn(p) -> ()`` must accept any index in
-    [0, P) (chunk slots left over run on index P - 1 and are dropped).
-    """
-    P = todo.shape[0]
-
-    def body(state):
-        out, left = state
-        idx = jnp.nonzero(left, size=chunk, fill_value=P)[0]
-        vals = jax.vmap(fn)(jnp.minimum(idx, P - 1))
-        return out.at[idx].set(vals, mode="drop"), left.at[idx].set(False, mode="drop")
-
-    out0 = jnp.full((P,), jnp.inf, dtype)
-    return jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (out0, todo))[0]
-
-
 def _searched_motions(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenario, search,
                       iterations: int, chunk: int):
     """The between-step search of T motions q_a[t] -> q_b[t], run only for the
     (motion, slot) entries where ``search`` (T, m) is True: smallest distance found
     (T, m), +inf where not searched. Per group of slots of one kind
     (:func:`~softplan_jax.obstacles.map_obstacle_groups`), the entries to search
-    go through :func:`_evaluate_where`, ``chunk`` at a time."""
+    go through :func:`~softplan_jax.numerics.evaluate_where`, ``chunk`` at a time."""
     T = q_a.shape[0]
 
     def take(tree, t, j):
@@ -165,7 +143,8 @@ def _searched_motions(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, sc
             curve = None if curves is None else jax.tree_util.tree_map(lambda x: x[j], curves)
             return _slot_motion_distance(q_a[t], q_b[t], take(ta, j, t), take(tb, j, t), curve, iterations)
 
-        return _evaluate_where(todo.reshape(-1), one, chunk, q_a.dtype).reshape(g, T)
+        inf = jnp.full((g * T,), jnp.inf, q_a.dtype)
+        return evaluate_where(todo.reshape(-1), one, chunk, inf).reshape(g, T)
 
     no_grad = jax.lax.stop_gradient
     # Slot args with the slot axis first (map_obstacle_groups splits the leading axis m).

@@ -21,6 +21,7 @@ precision in value and in the first two derivatives:
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -37,6 +38,7 @@ __all__ = [
     "curvature_floor",
     "psd_shift",
     "contact_floor",
+    "evaluate_where",
 ]
 
 
@@ -208,3 +210,28 @@ def psd_shift(a, b, c, dtype):
 def contact_floor(dtype) -> float:
     """Smallest meaningful contact tolerance of ``dtype``: 10 sqrt(eps)."""
     return 10.0 * float(np.sqrt(np.finfo(dtype).eps))
+
+
+def evaluate_where(todo, fn, chunk: int, fill):
+    """``out[p] = fn(p)`` where ``todo[p]``, ``fill[p]`` elsewhere; todo (P,) bool.
+
+    ``fn`` runs on ``chunk`` flat indices at a time (vmapped), in a
+    ``lax.while_loop`` over the entries still to do: the cost is
+    ceil(#todo / chunk) iterations, and under ``vmap`` (a batch) the batch's
+    largest number of iterations, not a select over all P entries (what a
+    ``lax.cond`` becomes under vmap). ``fn(p)`` returns a pytree shaped like one
+    row of ``fill`` (a pytree of arrays with leading axis P) and must accept any
+    index in [0, P) (chunk slots left over run on index P - 1 and are dropped).
+    Used by the between-step search (:mod:`softplan_jax.metrics`) and the warm
+    start's fallback (:mod:`softplan_jax.warm_start`).
+    """
+    P = todo.shape[0]
+
+    def body(state):
+        out, left = state
+        idx = jnp.nonzero(left, size=chunk, fill_value=P)[0]
+        vals = jax.vmap(fn)(jnp.minimum(idx, P - 1))
+        out = jax.tree_util.tree_map(lambda o, v: o.at[idx].set(v, mode="drop"), out, vals)
+        return out, left.at[idx].set(False, mode="drop")
+
+    return jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (fill, todo))[0]

@@ -104,6 +104,7 @@ from .closest import (
 )
 from .curves import PolynomialCurve
 from .kinematics import segment_frames
+from .numerics import evaluate_where
 
 __all__ = ["CurveData", "curve_data", "warm_curves"]
 
@@ -303,42 +304,34 @@ def _fallback_fn(solver: SolverOptions):
 
 
 def _solve_failed(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, solver: SolverOptions) -> _Pairs:
-    """The while loop of :func:`_fallback` over any leading axes ``lead``
-    (``fail``: lead + (m, n); segs: lead + (n,); curves, data: lead + (m,)):
-    each iteration takes up to ``chunk`` failed pairs (1 without leading axes,
-    else ``FALLBACK_CHUNK``), solves them side by side and writes back the
-    better answer."""
+    """The loop of :func:`_fallback` over any leading axes ``lead`` (``fail``:
+    lead + (m, n); segs: lead + (n,); curves, data: lead + (m,)): the failed
+    pairs go through :func:`~softplan_jax.numerics.evaluate_where`, ``chunk``
+    at a time (1 without leading axes, else ``FALLBACK_CHUNK``), and each keeps
+    the better of its full and polished answers."""
     m, n = fail.shape[-2:]
     lead = fail.shape[:-2]
     batch = math.prod(lead)
-    chunk = min(1 if not lead else FALLBACK_CHUNK, batch * m * n)
     total = batch * m * n
+    chunk = min(1 if not lead else FALLBACK_CHUNK, total)
 
     def flat(tree):  # lead axes -> one axis of size batch
         return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) :])), tree)
 
     segs_f, curves_f, data_f = flat(segs), flat(curves), flat(data)
     pairs_f = _Pairs(*(x.reshape(total) for x in pairs))
+    todo = fail.reshape(total)
 
     def solve(idx):
         b, k, i = idx // (m * n), (idx // n) % m, idx % n
         curve = jax.tree_util.tree_map(lambda x: x[b, k], curves_f)
         c = jax.tree_util.tree_map(lambda x: x[b, k], data_f)
         seg = jax.tree_util.tree_map(lambda x: x[b, i], segs_f)
-        return solve_pair_reduced(seg, curve, c.u_grid, c.C_grid, solver)
+        return _Pairs(*solve_pair_reduced(seg, curve, c.u_grid, c.C_grid, solver))
 
-    def body(state):
-        p, todo = state
-        (idx,) = jnp.nonzero(todo, size=chunk, fill_value=total)
-        valid = idx < total
-        new = _Pairs(*jax.vmap(solve)(jnp.where(valid, idx, 0)))
-        keep = valid & (new.d2 <= p.d2[jnp.where(valid, idx, 0)])
-        at = jnp.where(keep, idx, total)  # out of range: dropped
-        p = _Pairs(*(a.at[at].set(b, mode="drop") for a, b in zip(p, new, strict=True)))
-        return p, todo.at[jnp.where(valid, idx, total)].set(False, mode="drop")
-
-    out = jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (pairs_f, fail.reshape(total)))[0]
-    return _Pairs(*(x.reshape(fail.shape) for x in out))
+    new = evaluate_where(todo, solve, chunk, pairs_f)
+    keep = todo & (new.d2 <= pairs_f.d2)
+    return _Pairs(*(jnp.where(keep, a, b).reshape(fail.shape) for a, b in zip(new, pairs_f, strict=True)))
 
 
 def warm_curves(q, curves, data: CurveData, u_prev, fresh, active, solver: SolverOptions):
