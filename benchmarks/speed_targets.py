@@ -26,7 +26,9 @@ On the paper's tree scenario (five curves, three segments), float64 and float32:
    every motion (``swept_proof=False``, the earlier behaviour); compiled
    ahead, interleaved rounds, min and median.
 
-Every figure is a median of repeats of a compiled call with
+Every program is compiled with the XLA options of the public rollouts
+(``compilation_cache.rollout_compiler_options``: what ``sp.plan`` and
+``plan_batch`` run). Every figure is a median of repeats of a compiled call with
 ``block_until_ready``; compile time is never in a run time. Writes
 ``benchmarks/results/speed_targets.{md,json}``.
 
@@ -61,6 +63,7 @@ from _common import (  # noqa: E402
 )
 
 import softplan_jax as sp  # noqa: E402
+from softplan_jax.compilation_cache import rollout_compiler_options  # noqa: E402
 from softplan_jax.obstacles import radius_and_mask  # noqa: E402
 from softplan_jax.planner import make_options, rollout, rollout_jit  # noqa: E402
 from softplan_jax.tuning import rollout_loss  # noqa: E402
@@ -73,8 +76,12 @@ def median_run(fn, *args, repeats):
 
 
 def compiled(fn, *args, **static):
+    """``fn`` traced, lowered and compiled with the XLA options of the public rollouts
+    (``rollout_jit``, ``rollout_batch``: ``compilation_cache.rollout_compiler_options``),
+    and the seconds that took."""
     t0 = time.perf_counter()
-    c = jax.jit(fn, static_argnames=tuple(static)).lower(*args, **static).compile()
+    c = (jax.jit(fn, static_argnames=tuple(static), compiler_options=rollout_compiler_options())
+         .lower(*args, **static).compile())
     return c, time.perf_counter() - t0
 
 

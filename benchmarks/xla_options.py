@@ -41,6 +41,8 @@ VARIANTS = {
                                          "xla_llvm_disable_expensive_passes": True},
     "no YNN, backend optimisation level 1": {"xla_cpu_experimental_ynn_fusion_type": "",
                                              "xla_backend_optimization_level": 1},
+    "no YNN, no fusion emitters": {"xla_cpu_experimental_ynn_fusion_type": "",
+                                   "xla_cpu_use_fusion_emitters": False},
 }
 
 

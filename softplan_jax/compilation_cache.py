@@ -42,14 +42,18 @@ import tempfile
 
 __all__ = ["compilation_cache_dir", "enable_compilation_cache", "load_or_export", "rollout_compiler_options"]
 
-# XLA CPU options of the rollout programs (issue 9, item 2), measured by
+# XLA CPU options of the rollout programs (issue 9, items 2 and 4), measured by
 # benchmarks/xla_options.py (results/xla_options.md), float64, checked rollouts:
 # - xla_cpu_experimental_ynn_fusion_type="": no XNNPACK (YNN) fusions; the planner's
 #   small (..., 3) arrays gain nothing from them and pay layout copies. Median run
-#   time per step -8 % single (tree), -16 % batched (64 random scenes); compile no slower.
+#   time per step -8 % single (tree), -33 % batched (64 random scenes); compile no slower.
+# - xla_cpu_use_fusion_emitters=False: XLA's elemental IR emitter for loop fusions instead
+#   of the MLIR fusion emitters. The rollout is ~550 small kernels, and each one cost the
+#   MLIR pipeline ~6 ms of LLVM time: compile 6.0 -> 4.7 s single, 7.0 -> 5.1 s batched;
+#   run time within 3 % (single -3 %, batched +2 %).
 # Tried and not taken: xla_llvm_disable_expensive_passes (no further gain),
-# xla_backend_optimization_level=1 (compile no faster, run +9-17 % against the defaults).
-CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
+# xla_backend_optimization_level=1 (compile no faster, run +4-17 % against no YNN).
+CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "", "xla_cpu_use_fusion_emitters": False}
 
 
 def compilation_cache_dir() -> str | None:
@@ -101,20 +105,24 @@ _SOURCE_HASH: str | None = None
 def rollout_compiler_options() -> dict | None:
     """The XLA options that :data:`~softplan_jax.planner.rollout_jit`,
     :data:`~softplan_jax.planner.rollout_batch` and ``rollout_jit.cached`` compile with:
-    :data:`CPU_COMPILER_OPTIONS` on the CPU backend, if this jaxlib knows them (checked
-    once by compiling a trivial program); None (XLA's defaults) on other backends, on an
-    older jaxlib, or with ``SOFTPLAN_XLA_OPTIONS=0`` in the environment. Decided on the
-    first rollout, not at import (the backend is not initialised by importing)."""
+    those of :data:`CPU_COMPILER_OPTIONS` that this jaxlib knows (each checked once by
+    compiling a trivial program with it) on the CPU backend; None (XLA's defaults) on
+    other backends, when it knows none of them, or with ``SOFTPLAN_XLA_OPTIONS=0`` in the
+    environment. Decided on the first rollout, not at import (the backend is not
+    initialised by importing)."""
     import jax
     import numpy as np
 
     if os.environ.get("SOFTPLAN_XLA_OPTIONS", "1") == "0" or jax.default_backend() != "cpu":
         return None
-    try:
-        jax.jit(lambda x: x + 1, compiler_options=CPU_COMPILER_OPTIONS).lower(np.float32(0)).compile()
-    except Exception:  # an option this jaxlib does not know
-        return None
-    return dict(CPU_COMPILER_OPTIONS)
+    known = {}
+    for name, value in CPU_COMPILER_OPTIONS.items():
+        try:
+            jax.jit(lambda x: x + 1, compiler_options={name: value}).lower(np.float32(0)).compile()
+        except Exception:  # an option this jaxlib does not know (XLA renames and retires them)
+            continue
+        known[name] = value
+    return known or None
 
 
 def _source_hash() -> str:

@@ -115,3 +115,20 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
         monkeypatch.undo()
         rollout_compiler_options.cache_clear()
     assert rollout_compiler_options() == CPU_COMPILER_OPTIONS
+
+
+def test_xla_options_this_jaxlib_does_not_know_are_left_out(monkeypatch):
+    """An option that XLA has renamed or retired is dropped on its own; the others stay."""
+    from softplan_jax import compilation_cache as cc
+
+    known = dict(cc.CPU_COMPILER_OPTIONS)
+    monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True, **known})
+    try:
+        cc.rollout_compiler_options.cache_clear()
+        assert cc.rollout_compiler_options() == known
+        monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True})
+        cc.rollout_compiler_options.cache_clear()
+        assert cc.rollout_compiler_options() is None
+    finally:
+        monkeypatch.undo()
+        cc.rollout_compiler_options.cache_clear()
