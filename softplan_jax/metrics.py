@@ -83,9 +83,13 @@ def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
     def residual(x):
         return segment_point(q_a + x[0] * dq, i, x[1]) - curve.point(x[2])
 
-    def body(_, x):
+    def residual_and_aux(x):
         r = residual(x)
-        J = jax.jacfwd(residual)(x)  # (3, 3): d r / d(tau, s, u)
+        return r, r
+
+    def body(_, state):
+        x, _ = state
+        J, r = jax.jacfwd(residual_and_aux, has_aux=True)(x)  # (3, 3): d r / d(tau, s, u); r at x
         H = J.T @ J
         # Levenberg-Marquardt damping relative to the dtype (1e-10 vanishes in float32, where a
         # rank-deficient H, e.g. a straight arm's base point, then solved to NaN).
@@ -95,10 +99,15 @@ def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
         cands = jnp.clip(x[None, :] + ts[:, None] * step[None, :], lo, hi)
         f = jax.vmap(lambda c: jnp.sum(residual(c) ** 2))(cands)
         f = jnp.where(jnp.isnan(f), jnp.inf, f)
-        return cands[jnp.argmin(f)]
+        k = jnp.argmin(f)
+        return cands[k], f[k]  # the step length 0 keeps x: |r| never increases
 
-    x = jax.lax.fori_loop(0, iterations, body, jnp.clip(x0, lo, hi))
-    return safe_norm(residual(x))
+    x = jnp.clip(x0, lo, hi)
+    if iterations == 0:
+        return safe_norm(residual(x))
+    # The candidates' squared distances are carried, so the FK chain is traced twice, not four times.
+    _, f = jax.lax.fori_loop(0, iterations, body, (x, jnp.full((), jnp.inf, dtype)))
+    return jnp.sqrt(f)
 
 
 def _slot_motion_distance(q_a, q_b, ta: ClosestPoint, tb: ClosestPoint, curve, iterations: int):
