@@ -72,6 +72,14 @@ def _submodule(pkg, name):
     return importlib.import_module(f"{pkg.__name__}.{name}")
 
 
+def _compiler_options(cc, method):
+    """The variant's XLA options for a rollout of ``method``, as its public rollouts use them."""
+    try:
+        return cc.rollout_compiler_options(method)
+    except TypeError:  # a variant from before the options depended on the method
+        return cc.rollout_compiler_options()
+
+
 def compile_rollouts(pkg, dtype, steps, batch_size, methods):
     """{case: (compiled, args, scenario-steps per call, compile seconds)} for one package."""
     planner = _submodule(pkg, "planner")
@@ -88,7 +96,8 @@ def compile_rollouts(pkg, dtype, steps, batch_size, methods):
     for method in methods:
         for where, fn, sc, n in (("single", single, tree, 1), ("batch", batched, batch, batch_size)):
             t0 = time.perf_counter()
-            c = (jax.jit(fn, static_argnames=("options", "max_steps"), compiler_options=cc.rollout_compiler_options())
+            copts = _compiler_options(cc, options[method].method)
+            c = (jax.jit(fn, static_argnames=("options", "max_steps"), compiler_options=copts)
                  .lower(sc, g, options=options[method], max_steps=steps).compile())
             ct = time.perf_counter() - t0
             jax.block_until_ready(c(sc, g))  # warm-up

@@ -26,9 +26,10 @@ On the paper's tree scenario (five curves, three segments), float64 and float32:
    every motion (``swept_proof=False``, the earlier behaviour); compiled
    ahead, interleaved rounds, min and median.
 
-Every program is compiled with the XLA options of the public rollouts
-(``compilation_cache.rollout_compiler_options``: what ``sp.plan`` and
-``plan_batch`` run). Every figure is a median of repeats of a compiled call with
+Every rollout is compiled with the XLA options of the public rollouts for
+its method (``compilation_cache.rollout_compiler_options``: what ``sp.plan``
+and ``plan_batch`` run); the loss and its gradient with jax's defaults, as a
+user's ``jax.jit`` compiles them. Every figure is a median of repeats of a compiled call with
 ``block_until_ready``; compile time is never in a run time. Writes
 ``benchmarks/results/speed_targets.{md,json}``.
 
@@ -75,12 +76,14 @@ def median_run(fn, *args, repeats):
     return float(median_time(fn, *args, repeats=repeats)[1])
 
 
-def compiled(fn, *args, **static):
-    """``fn`` traced, lowered and compiled with the XLA options of the public rollouts
-    (``rollout_jit``, ``rollout_batch``: ``compilation_cache.rollout_compiler_options``),
-    and the seconds that took."""
+def compiled(fn, *args, public_rollout=True, **static):
+    """``fn`` traced, lowered and compiled, and the seconds that took. A rollout
+    (``public_rollout``) is compiled with the XLA options that the public rollouts
+    (``rollout_jit``, ``rollout_batch``) use for its method
+    (``compilation_cache.rollout_compiler_options``); anything else with jax's defaults."""
     t0 = time.perf_counter()
-    c = (jax.jit(fn, static_argnames=tuple(static), compiler_options=rollout_compiler_options())
+    copts = rollout_compiler_options(static["options"].method) if public_rollout else None
+    c = (jax.jit(fn, static_argnames=tuple(static), compiler_options=copts)
          .lower(*args, **static).compile())
     return c, time.perf_counter() - t0
 
@@ -121,8 +124,9 @@ def measure(dtype, steps, batch_size, repeats):
     # Gradient of a rollout loss vs the rollout itself (same options, same length).
     grad_opts = make_options("curve", goal_tolerance=1e-9, stall_window=10**6)
     loss = lambda g, sc, options, max_steps: rollout_loss(g, sc, options, max_steps)  # noqa: E731
-    c_f, ct_f = compiled(loss, g, sc, options=grad_opts, max_steps=steps)
-    c_g, ct_g = compiled(jax.grad(loss), g, sc, options=grad_opts, max_steps=steps)
+    # As a user's jax.jit of tuning.rollout_loss and its gradient compiles them: XLA's defaults.
+    c_f, ct_f = compiled(loss, g, sc, options=grad_opts, max_steps=steps, public_rollout=False)
+    c_g, ct_g = compiled(jax.grad(loss), g, sc, options=grad_opts, max_steps=steps, public_rollout=False)
     t_f = median_run(c_f, g, sc, repeats=repeats)
     t_g = median_run(c_g, g, sc, repeats=repeats)
     out.update(loss_s=t_f, grad_s=t_g, loss_compile_s=ct_f, grad_compile_s=ct_g)

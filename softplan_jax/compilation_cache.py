@@ -26,7 +26,10 @@ not kept. Any failure to read or write an artifact falls back to the ordinary
 compilation.
 
 :func:`rollout_compiler_options` holds the XLA options the rollouts are
-compiled with (issue 9, item 2). They are passed per program
+compiled with (issue 9, items 2 and 4), per obstacle model: every rollout
+without XLA's YNN fusions, and the curve method's also without its MLIR fusion
+emitters (a quarter less compile time; the N-point model's batched step runs
+slower with it, so it keeps them). They are passed per program
 (``jax.jit(..., compiler_options=...)``), so they apply to this package's
 rollouts only and never to the user's other jax code: no ``XLA_FLAGS``, no
 global jax configuration. ``SOFTPLAN_XLA_OPTIONS=0`` compiles with XLA's
@@ -44,16 +47,19 @@ __all__ = ["compilation_cache_dir", "enable_compilation_cache", "load_or_export"
 
 # XLA CPU options of the rollout programs (issue 9, items 2 and 4), measured by
 # benchmarks/xla_options.py (results/xla_options.md), float64, checked rollouts:
-# - xla_cpu_experimental_ynn_fusion_type="": no XNNPACK (YNN) fusions; the planner's
-#   small (..., 3) arrays gain nothing from them and pay layout copies. Median run
-#   time per step -8 % single (tree), -33 % batched (64 random scenes); compile no slower.
-# - xla_cpu_use_fusion_emitters=False: XLA's elemental IR emitter for loop fusions instead
-#   of the MLIR fusion emitters. The rollout is ~550 small kernels, and each one cost the
-#   MLIR pipeline ~6 ms of LLVM time: compile 6.0 -> 4.7 s single, 7.0 -> 5.1 s batched;
-#   run time within 3 % (single -3 %, batched +2 %).
+# - xla_cpu_experimental_ynn_fusion_type="" (every rollout): no XNNPACK (YNN) fusions; the
+#   planner's small (..., 3) arrays gain nothing from them and pay layout copies. Median
+#   run time per step -8 % single (tree), -33 % batched (64 random scenes); compile no slower.
+# - xla_cpu_use_fusion_emitters=False (curve-method rollouts only): XLA's elemental IR
+#   emitter for loop fusions instead of the MLIR fusion emitters. The curve rollout is ~550
+#   small kernels, and each one cost the MLIR pipeline ~6 ms of LLVM time: compile 6.0 ->
+#   4.7 s single, 7.0 -> 5.1 s batched; run time within 3 %. Not for the N-point method: its
+#   program compiles in ~1 s anyway, and its batched step ran 35-45 % slower with it
+#   (float64 7.5 -> 10.3 us, float32 6.2 -> 9.1 us per scenario-step, tree, batch of 64).
 # Tried and not taken: xla_llvm_disable_expensive_passes (no further gain),
 # xla_backend_optimization_level=1 (compile no faster, run +4-17 % against no YNN).
-CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "", "xla_cpu_use_fusion_emitters": False}
+CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
+CURVE_CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 
 def compilation_cache_dir() -> str | None:
@@ -102,26 +108,36 @@ _SOURCE_HASH: str | None = None
 
 
 @functools.cache
-def rollout_compiler_options() -> dict | None:
-    """The XLA options that :data:`~softplan_jax.planner.rollout_jit`,
-    :data:`~softplan_jax.planner.rollout_batch` and ``rollout_jit.cached`` compile with:
-    those of :data:`CPU_COMPILER_OPTIONS` that this jaxlib knows (each checked once by
-    compiling a trivial program with it) on the CPU backend; None (XLA's defaults) on
-    other backends, when it knows none of them, or with ``SOFTPLAN_XLA_OPTIONS=0`` in the
-    environment. Decided on the first rollout, not at import (the backend is not
-    initialised by importing)."""
+def _known_option(name: str, value) -> bool:
+    """Whether this jaxlib's CPU compiler accepts the option (XLA renames and retires
+    them): a trivial program compiled with it, once per process."""
     import jax
     import numpy as np
 
+    try:
+        jax.jit(lambda x: x + 1, compiler_options={name: value}).lower(np.float32(0)).compile()
+    except Exception:
+        return False
+    return True
+
+
+@functools.cache
+def rollout_compiler_options(method: str = "curve") -> dict | None:
+    """The XLA options that :data:`~softplan_jax.planner.rollout_jit`,
+    :data:`~softplan_jax.planner.rollout_batch` and ``rollout_jit.cached`` compile a
+    rollout of the planner's ``method`` ("curve" or "points") with, on the CPU backend:
+    :data:`CPU_COMPILER_OPTIONS`, and for "curve" also :data:`CURVE_CPU_COMPILER_OPTIONS`,
+    each kept only if this jaxlib knows it. None (XLA's defaults) on other backends, when
+    it knows none of them, or with ``SOFTPLAN_XLA_OPTIONS=0`` in the environment. Decided
+    on the first rollout, not at import (the backend is not initialised by importing)."""
+    import jax
+
+    if method not in ("curve", "points"):
+        raise ValueError(f"method must be 'curve' or 'points'; got {method!r}")
     if os.environ.get("SOFTPLAN_XLA_OPTIONS", "1") == "0" or jax.default_backend() != "cpu":
         return None
-    known = {}
-    for name, value in CPU_COMPILER_OPTIONS.items():
-        try:
-            jax.jit(lambda x: x + 1, compiler_options={name: value}).lower(np.float32(0)).compile()
-        except Exception:  # an option this jaxlib does not know (XLA renames and retires them)
-            continue
-        known[name] = value
+    wanted = {**CPU_COMPILER_OPTIONS, **(CURVE_CPU_COMPILER_OPTIONS if method == "curve" else {})}
+    known = {name: value for name, value in wanted.items() if _known_option(name, value)}
     return known or None
 
 
@@ -166,7 +182,7 @@ def _artifact_key(leaves, key_parts) -> str:
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:32]
 
 
-def load_or_export(fn, leaves, key_parts):
+def load_or_export(fn, leaves, key_parts, compiler_options=None):
     """Compile ``fn`` for ``leaves``, tracing it only when no artifact with this key is on disk.
 
     Args:
@@ -176,6 +192,8 @@ def load_or_export(fn, leaves, key_parts):
       key_parts: strings naming everything else ``fn``'s program depends on
         (static options, the caller's pytree structure); the package source,
         jax/jaxlib versions, backend, device kind, x64 and XLA_FLAGS are added.
+      compiler_options: XLA options to compile the program with (jax's own
+        cache keys on them), e.g. :func:`rollout_compiler_options`.
 
     Returns:
       ``(compiled, loaded)``: the compiled program (call it with arrays of the
@@ -207,6 +225,6 @@ def load_or_export(fn, leaves, key_parts):
             with os.fdopen(fd, "wb") as f:
                 f.write(exported.serialize())
             os.replace(tmp, path)  # atomic: a concurrent run reads the old file or the new one
-        return jax.jit(exported.call, compiler_options=rollout_compiler_options()).lower(*leaves).compile(), loaded
+        return jax.jit(exported.call, compiler_options=compiler_options).lower(*leaves).compile(), loaded
     except Exception:  # jax.export or flatbuffers missing, a read-only disk, ...
         return None, False

@@ -657,25 +657,26 @@ class CompiledRollout:
     def __init__(self, fn, static_argnames, batched: bool, doc: str):
         self._fn = fn
         self._static_argnames = static_argnames
-        self._jit = self._nested = None
+        self._jits = {}
+        self._nested = None
         self._batched = batched
         self.__doc__ = doc
 
-    @property
-    def _jitted(self):
-        """``jax.jit`` of the rollout with this package's XLA options
-        (:func:`~softplan_jax.compilation_cache.rollout_compiler_options`), built on
-        first use: the options depend on the backend, which importing must not start."""
-        if self._jit is None:
-            self._jit = jax.jit(self._fn, static_argnames=self._static_argnames,
-                                compiler_options=rollout_compiler_options())
-        return self._jit
+    def _jitted(self, options: PlanOptions):
+        """``jax.jit`` of the rollout with this package's XLA options for the options'
+        method (:func:`~softplan_jax.compilation_cache.rollout_compiler_options`), built
+        on first use: the options depend on the backend, which importing must not start."""
+        method = options.method
+        if method not in self._jits:
+            self._jits[method] = jax.jit(self._fn, static_argnames=self._static_argnames,
+                                         compiler_options=rollout_compiler_options(method))
+        return self._jits[method]
 
     def _call(self, *args):
         """The jitted rollout; inside the user's own jit (jax allows compiler options on
         top-level jits only) a plain jit of it, compiled with the enclosing program's options."""
         try:
-            return self._jitted(*args)
+            return self._jitted(args[2])(*args)
         except ValueError as e:
             if "top-level" not in str(e):
                 raise
@@ -693,11 +694,11 @@ class CompiledRollout:
 
     def lower(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0):
         """``jax.jit(...).lower`` of the rollout for these arguments."""
-        return self._jitted.lower(*self._args(scenario, gains, options, max_steps, seed))
+        return self._jitted(options).lower(*self._args(scenario, gains, options, max_steps, seed))
 
     def cache_size(self) -> int:
         """Number of compilations so far (one per padded shape, dtype, options, max_steps)."""
-        return self._jitted._cache_size()
+        return sum(j._cache_size() for j in self._jits.values())
 
     def cached(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int):
         """Compile ahead of time, keeping the TRACED program on disk for the next process
@@ -721,9 +722,10 @@ class CompiledRollout:
 
         compiled, loaded = (None, False)
         if not scenario.parametric and not self._batched:
-            compiled, loaded = load_or_export(flat, leaves, (repr(options), str(int(max_steps)), str(treedef)))
+            compiled, loaded = load_or_export(flat, leaves, (repr(options), str(int(max_steps)), str(treedef)),
+                                              rollout_compiler_options(options.method))
         if compiled is None:
-            plain = self._jitted.lower(*self._args(scenario, gains, options, max_steps, 0)).compile()
+            plain = self._jitted(options).lower(*self._args(scenario, gains, options, max_steps, 0)).compile()
 
             def run(scenario, gains, seed=0):
                 s, g, _, _, k = self._args(scenario, gains, options, max_steps, seed)
@@ -776,7 +778,7 @@ class BatchedRollout(CompiledRollout):
               devices=None):
         """``jax.jit(...).lower`` of the batched rollout for these arguments (the batch
         padded to a multiple of the device count)."""
-        return self._jitted.lower(*self._sharded_args(scenarios, gains, options, max_steps, seed, devices)[0])
+        return self._jitted(options).lower(*self._sharded_args(scenarios, gains, options, max_steps, seed, devices)[0])
 
 
 rollout_batch = BatchedRollout(_rollout_batch, ("options", "max_steps", "mesh"), batched=True, doc="""\

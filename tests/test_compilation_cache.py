@@ -4,6 +4,7 @@ import os
 import subprocess
 import sys
 
+import pytest
 from session import REPO, subprocess_env
 
 from softplan_jax.compilation_cache import compilation_cache_dir
@@ -86,20 +87,26 @@ def test_traced_rollout_is_kept_on_disk_and_gives_the_same_result(monkeypatch, t
 
 def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     """rollout_jit compiles with compilation_cache.CPU_COMPILER_OPTIONS (no YNN fusions in
-    its program, which XLA's defaults put there), passed per program: a plain jax.jit of
-    the same rollout keeps XLA's defaults, and so does rollout_jit called inside the user's own
-    jit; SOFTPLAN_XLA_OPTIONS=0 turns them off.
+    its program, which XLA's defaults put there), and a curve-method rollout also with
+    CURVE_CPU_COMPILER_OPTIONS, passed per program: a plain jax.jit of the same rollout
+    keeps XLA's defaults, and so does rollout_jit called inside the user's own jit;
+    SOFTPLAN_XLA_OPTIONS=0 turns them off.
     (The cheapest program of the suite: points method, no checks, 15 steps.)"""
     import jax
     import numpy as np
 
     import softplan_jax as sp
-    from softplan_jax.compilation_cache import CPU_COMPILER_OPTIONS, rollout_compiler_options
+    from softplan_jax.compilation_cache import CPU_COMPILER_OPTIONS, CURVE_CPU_COMPILER_OPTIONS, rollout_compiler_options
     from softplan_jax.planner import make_options, rollout, rollout_jit
 
     sc, g, key = sp.paper_scenario("sim1"), sp.default_gains(), jax.random.PRNGKey(0)
     opts = make_options("points", 10, check_collisions=False)
-    assert rollout_compiler_options() == CPU_COMPILER_OPTIONS  # the suite runs on the CPU
+    # the suite runs on the CPU, with a jaxlib that knows every option
+    assert rollout_compiler_options("points") == CPU_COMPILER_OPTIONS
+    assert rollout_compiler_options("curve") == {**CPU_COMPILER_OPTIONS, **CURVE_CPU_COMPILER_OPTIONS}
+    assert rollout_compiler_options() == rollout_compiler_options("curve")
+    with pytest.raises(ValueError, match="method"):
+        rollout_compiler_options("Curve")
     ours = rollout_jit.lower(sc, g, opts, 15).compile().as_text()
     plain = jax.jit(lambda s, g, k: rollout(s, g, opts, 15, k)).lower(sc, g, key).compile().as_text()
     assert "ynn_fusion" in plain and "ynn_fusion" not in ours
@@ -110,11 +117,11 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     try:
         monkeypatch.setenv("SOFTPLAN_XLA_OPTIONS", "0")
         rollout_compiler_options.cache_clear()
-        assert rollout_compiler_options() is None
+        assert rollout_compiler_options("points") is None and rollout_compiler_options("curve") is None
     finally:
         monkeypatch.undo()
         rollout_compiler_options.cache_clear()
-    assert rollout_compiler_options() == CPU_COMPILER_OPTIONS
+    assert rollout_compiler_options("points") == CPU_COMPILER_OPTIONS
 
 
 def test_xla_options_this_jaxlib_does_not_know_are_left_out(monkeypatch):
@@ -125,10 +132,11 @@ def test_xla_options_this_jaxlib_does_not_know_are_left_out(monkeypatch):
     monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True, **known})
     try:
         cc.rollout_compiler_options.cache_clear()
-        assert cc.rollout_compiler_options() == known
+        assert cc.rollout_compiler_options("points") == known
         monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True})
+        monkeypatch.setattr(cc, "CURVE_CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option_either": False})
         cc.rollout_compiler_options.cache_clear()
-        assert cc.rollout_compiler_options() is None
+        assert cc.rollout_compiler_options("curve") is None
     finally:
         monkeypatch.undo()
         cc.rollout_compiler_options.cache_clear()

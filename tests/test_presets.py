@@ -94,8 +94,9 @@ def test_cli_gains_paper_shows_the_collision(capsys):
 # Sim2's curve count depends on rounding (the plain step with dt = 1 amplifies a 1e-16
 # difference to 1e-1 within 60 steps): 73 with LAPACK's 3x3 solve, 69 with solve_small,
 # 70 with the rollouts' first XLA options (no YNN fusions), 72 with the present ones
-# (also no MLIR fusion emitters), 71 and 75 in two NumPy implementations; the outcome (reached, clearance 0.109) is the same. That entry is
-# checked as "reached within ROUNDING_SENSITIVE's range"; every other entry exactly.
+# (also no MLIR fusion emitters), 71 and 75 in two NumPy implementations; the outcome
+# (reached, clearance 0.109) is the same. That entry is checked as "reached within
+# ROUNDING_SENSITIVE's range"; every other entry exactly.
 PAPER_PRESET_TABLE = {
     "sim1": ["r33", "r23", "r30", "r35", "r32"],
     "sim2": ["r72", "c21", "c21", "c32", "r64"],
