@@ -10,7 +10,8 @@ On the paper's tree scenario (five curves, three segments), float64 and float32:
    rollout (target >= 10,000)
    and batched per scenario-step (target >= 50,000);
 3. batched throughput, curve method: scenario-steps per second (target >= 200,000);
-4. compile time of a rollout (target <= 5 s), reported apart from run time;
+4. compile time of a rollout (target <= 5 s; median and min of COMPILE_REPEATS
+   compiles, the machine is shared), reported apart from run time;
    the number of compilations across scenes of one padded shape (target 0
    after the first; counted with ``rollout_jit.cache_size()``); and the wall
    time of ``softplan run tree`` as a new user runs it, first and second call
@@ -88,6 +89,20 @@ def compiled(fn, *args, public_rollout=True, **static):
     return c, time.perf_counter() - t0
 
 
+COMPILE_REPEATS = 3
+
+
+def compile_min_median(fn, first_s, *args, **static):
+    """Compile time of a target rollout on this shared machine: ``first_s`` (the compile
+    whose program is run) and COMPILE_REPEATS - 1 more, each after ``jax.clear_caches()``
+    (no in-memory hit; the persistent cache is off here); (min, median) seconds."""
+    times = [first_s]
+    for _ in range(COMPILE_REPEATS - 1):
+        jax.clear_caches()
+        times.append(compiled(fn, *args, **static)[1])
+    return min(times), float(np.median(times))
+
+
 def batch_of(scenario, size, seed=0):
     """``size`` copies of the scenario with goals moved by up to 2 cm (one padded shape)."""
     rng = np.random.default_rng(seed)
@@ -105,13 +120,18 @@ def measure(dtype, steps, batch_size, repeats):
         c, ct = compiled(rollout, sc, g, options=o, max_steps=steps)
         t = median_run(c, sc, g, repeats=repeats)
         out[f"{name}_step_s"] = t / (steps + 1)
+        if name == "curve":
+            ct, out[f"{name}_compile_median_s"] = compile_min_median(rollout, ct, sc, g, options=o, max_steps=steps)
         out[f"{name}_compile_s"] = ct
         log(f"  [{jnp.dtype(dtype).name}] {name}: compile {ct:.1f} s, {fmt_s(t / (steps + 1))} per step")
     # The checked rollout (true clearance + between-steps collision checks), as sp.plan runs it.
-    c, ct = compiled(rollout, sc, g, options=make_options("curve"), max_steps=steps)
+    checked = make_options("curve")
+    c, ct = compiled(rollout, sc, g, options=checked, max_steps=steps)
     out["curve_checked_step_s"] = median_run(c, sc, g, repeats=repeats) / (steps + 1)
-    out["curve_checked_compile_s"] = ct
-    log(f"  checked rollout: compile {ct:.1f} s, {fmt_s(out['curve_checked_step_s'])} per step")
+    out["curve_checked_compile_s"], out["curve_checked_compile_median_s"] = compile_min_median(
+        rollout, ct, sc, g, options=checked, max_steps=steps)
+    log(f"  checked rollout: compile {out['curve_checked_compile_s']:.1f} s (min of {COMPILE_REPEATS}), "
+        f"{fmt_s(out['curve_checked_step_s'])} per step")
     # Batched, curve method, planning only.
     batch = batch_of(sc, batch_size)
     vm = lambda b, g, options, max_steps: jax.vmap(lambda s: rollout(s, g, options, max_steps))(b)  # noqa: E731
@@ -308,8 +328,10 @@ def main(argv=None):
              numpy_s / r["batch_scenario_step_s"], "x"),
             (name, "batched throughput, curve method", ">= 200,000", 1.0 / r["batch_scenario_step_s"],
              "scenario-steps/s"),
-            (name, "compile time of a rollout (planning only)", "<= 5 s", r["curve_compile_s"], "s"),
-            (name, "compile time of a rollout (with collision checks)", "<= 5 s", r["curve_checked_compile_s"], "s"),
+            (name, f"compile time of a rollout (planning only; median of {COMPILE_REPEATS}, "
+             f"min {r['curve_compile_s']:.2f} s)", "<= 5 s", r["curve_compile_median_s"], "s"),
+            (name, f"compile time of a rollout (with collision checks; median of {COMPILE_REPEATS}, "
+             f"min {r['curve_checked_compile_s']:.2f} s)", "<= 5 s", r["curve_checked_compile_median_s"], "s"),
             (name, f"gradient of a {args.steps}-step rollout loss / the rollout", "<= 5", r["grad_s"] / r["loss_s"],
              "x"),
             (name, "checked rollout / planning-only rollout, tree single (median)", "<= 1.3",
