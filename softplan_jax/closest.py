@@ -391,6 +391,26 @@ def arc_distance2(seg: Segment, p):
     return jnp.where(on_arc, y * y + radial * radial, ends)
 
 
+def reduced_newton_step(seg: Segment, curve, state):
+    """One iteration of :func:`reduced_newton` for one pair: state (u, s, f, radius)
+    -> the next state."""
+    u, s, f, radius = state
+    dtype = u.dtype
+    lo, hi = curve.u_range[0], curve.u_range[1]
+    width = hi - lo
+    t = pair_terms(seg, curve, s, u)
+    gu, a, b, c = t.gu, t.a, t.b, t.c
+    interior = (s > 0.0) & (s < 1.0) & (a > 0.0)
+    curv = jnp.where(interior, c - b * b / jnp.where(interior, a, 1.0), c)
+    floor = curvature_floor(jnp.abs(c) + jnp.dot(t.C1, t.C1) + jnp.finfo(dtype).tiny, dtype)
+    step = jnp.where(curv > floor, -gu / jnp.where(curv > floor, curv, 1.0), -jnp.sign(gu) * width)
+    u_t, full = trust_region_step_1d(u, step, radius, width, lo, hi)
+    s_t, d2_t = project_to_arc(seg, curve.point(u_t))
+    better = d2_t < f
+    radius = trust_region_radius(better, ~full, radius)
+    return (jnp.where(better, u_t, u), jnp.where(better, s_t, s), jnp.where(better, d2_t, f), radius)
+
+
 def reduced_newton(seg: Segment, curve, u0, s0, f0, iterations: int):
     """Trust-region Newton on g(u) = min_s D_i(s, u)^2 / 2 from u0 (s0 = s*(u0)).
 
@@ -402,28 +422,17 @@ def reduced_newton(seg: Segment, curve, u0, s0, f0, iterations: int):
     accepted only if it lowers g (the radius doubles if the step had been cut
     to it); a rejected step shrinks the radius fourfold. Every iterate lies in
     [u_min, u_max].
+
+    u0, s0, f0 may carry leading axes (several starts on the same pair): they
+    are vmapped INSIDE the loop body, which gives what vmapping this function
+    gives without vmap's second tracing of the loop (tracing time is most of a
+    rollout's compile time).
     """
-    dtype = u0.dtype
-    lo, hi = curve.u_range[0], curve.u_range[1]
-    width = hi - lo
-    tiny = jnp.finfo(dtype).tiny
-
-    def body(_, state):
-        u, s, f, radius = state
-        t = pair_terms(seg, curve, s, u)
-        gu, a, b, c = t.gu, t.a, t.b, t.c
-        interior = (s > 0.0) & (s < 1.0) & (a > 0.0)
-        curv = jnp.where(interior, c - b * b / jnp.where(interior, a, 1.0), c)
-        floor = curvature_floor(jnp.abs(c) + jnp.dot(t.C1, t.C1) + tiny, dtype)
-        step = jnp.where(curv > floor, -gu / jnp.where(curv > floor, curv, 1.0), -jnp.sign(gu) * width)
-        u_t, full = trust_region_step_1d(u, step, radius, width, lo, hi)
-        s_t, d2_t = project_to_arc(seg, curve.point(u_t))
-        better = d2_t < f
-        radius = trust_region_radius(better, ~full, radius)
-        return (jnp.where(better, u_t, u), jnp.where(better, s_t, s), jnp.where(better, d2_t, f), radius)
-
-    init = (u0, s0, f0, jnp.asarray(0.05, dtype))
-    u, s, f, _ = jax.lax.fori_loop(0, iterations, body, init)
+    step = partial(reduced_newton_step, seg, curve)
+    for _ in range(jnp.ndim(u0)):
+        step = jax.vmap(step)
+    radius0 = jnp.full(jnp.shape(u0), 0.05, u0.dtype)
+    u, s, f, _ = jax.lax.fori_loop(0, iterations, lambda _, state: step(state), (u0, s0, f0, radius0))
     return u, s, f
 
 
@@ -493,9 +502,7 @@ def solve_pair_reduced(seg: Segment, curve, u_grid, C_grid, options: SolverOptio
     u0 = jnp.concatenate([u_grid[kg[:k]], u_seed])
     s0 = jnp.concatenate([s_kg[:k], s_seed])
     f0 = jnp.concatenate([f_kg[:k], g_seed])
-    u_n, s_n, f_n = jax.vmap(lambda a, b, c: reduced_newton(seg, curve, a, b, c, options.iterations))(
-        u0, s0, f0
-    )
+    u_n, s_n, f_n = reduced_newton(seg, curve, u0, s0, f0, options.iterations)
     u_c = jnp.concatenate([u_n, u_grid[kg[k:]]])
     s_c = jnp.concatenate([s_n, s_kg[k:]])
     f_c = jnp.concatenate([f_n, f_kg[k:]])

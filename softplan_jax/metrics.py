@@ -66,30 +66,36 @@ POST_HOC_CHUNK = 16
 
 
 def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
-    """Smallest distance found between segment i and a curve over the motion
-    q(tau) = q_a + tau dq, tau in [0, 1]: Gauss-Newton on
-    r(tau, s, u) = P_si(q(tau)) - F_o(u) from x0 = (tau, s, u), box-clipped,
-    never increasing |r| (best of the step lengths 1, 1/2, 1/4, 0).
+    """Smallest distance found between the arm and a curve over the motion
+    q(tau) = q_a + tau dq, tau in [0, 1], from S starts at once: Gauss-Newton on
+    r(tau, s, u) = P_si(q(tau)) - F_o(u) from each start x0[k] = (tau, s, u) on
+    segment i[k] against curve k (a curve pytree with leading axis S),
+    box-clipped, never increasing |r| (best of the step lengths 1, 1/2, 1/4, 0).
+    Returns the smallest distance over the starts.
 
     Every candidate is a real (configuration, arm point, obstacle point)
     triple, so the result is an upper bound on the true minimum over the
-    motion: it can miss a dip, never invent one.
+    motion: it can miss a dip, never invent one. The starts are vmapped inside
+    the loop body, not around the loop (a vmapped loop is traced twice more).
     """
     dtype = q_a.dtype
-    lo = jnp.stack([jnp.zeros((), dtype), jnp.zeros((), dtype), curve.u_range[0]])
-    hi = jnp.stack([jnp.ones((), dtype), jnp.ones((), dtype), curve.u_range[1]])
     ts = jnp.array([1.0, 0.5, 0.25, 0.0], dtype)
 
-    def residual(x):
+    def box(curve):
+        lo = jnp.stack([jnp.zeros((), dtype), jnp.zeros((), dtype), curve.u_range[0]])
+        hi = jnp.stack([jnp.ones((), dtype), jnp.ones((), dtype), curve.u_range[1]])
+        return lo, hi
+
+    def residual(x, i, curve):
         return segment_point(q_a + x[0] * dq, i, x[1]) - curve.point(x[2])
 
-    def residual_and_aux(x):
-        r = residual(x)
+    def residual_and_aux(x, i, curve):
+        r = residual(x, i, curve)
         return r, r
 
-    def body(_, state):
-        x, _ = state
-        J, r = jax.jacfwd(residual_and_aux, has_aux=True)(x)  # (3, 3): d r / d(tau, s, u); r at x
+    def update(x, i, curve):
+        lo, hi = box(curve)
+        J, r = jax.jacfwd(residual_and_aux, has_aux=True)(x, i, curve)  # (3, 3): d r / d(tau, s, u); r at x
         H = J.T @ J
         # Levenberg-Marquardt damping relative to the dtype (1e-10 vanishes in float32, where a
         # rank-deficient H, e.g. a straight arm's base point, then solved to NaN).
@@ -97,17 +103,21 @@ def _motion_pair_distance(q_a, dq, i, x0, curve, iterations: int):
         step = -solve_small(H, J.T @ r)  # no LAPACK call: see solve_small (sharded batches)
         step = jnp.where(jnp.all(jnp.isfinite(step)), step, 0.0)  # never a NaN candidate
         cands = jnp.clip(x[None, :] + ts[:, None] * step[None, :], lo, hi)
-        f = jax.vmap(lambda c: jnp.sum(residual(c) ** 2))(cands)
+        f = jax.vmap(lambda c: jnp.sum(residual(c, i, curve) ** 2))(cands)
         f = jnp.where(jnp.isnan(f), jnp.inf, f)
         k = jnp.argmin(f)
         return cands[k], f[k]  # the step length 0 keeps x: |r| never increases
 
-    x = jnp.clip(x0, lo, hi)
+    x = jax.vmap(lambda x, c: jnp.clip(x, *box(c)))(x0, curve)
     if iterations == 0:
-        return safe_norm(residual(x))
+        return jnp.min(jax.vmap(lambda x, i, c: safe_norm(residual(x, i, c)))(x, i, curve))
+
+    def body(_, state):
+        return jax.vmap(update)(state[0], i, curve)
+
     # The candidates' squared distances are carried, so the FK chain is traced twice, not four times.
-    _, f = jax.lax.fori_loop(0, iterations, body, (x, jnp.full((), jnp.inf, dtype)))
-    return jnp.sqrt(f)
+    _, f = jax.lax.fori_loop(0, iterations, body, (x, jnp.full(i.shape, jnp.inf, dtype)))
+    return jnp.sqrt(jnp.min(f))
 
 
 def _slot_motion_distance(q_a, q_b, ta: ClosestPoint, tb: ClosestPoint, curve, iterations: int):
@@ -127,8 +137,7 @@ def _slot_motion_distance(q_a, q_b, ta: ClosestPoint, tb: ClosestPoint, curve, i
     ends = jnp.array([0.0, 1.0], dtype)
     x0 = jnp.stack([ends, jnp.stack([ta.s, tb.s]), jnp.stack([ta.u, tb.u])], axis=-1)
     curves = jax.tree_util.tree_map(lambda a, b: jnp.stack([a, b]), curve_a, curve_b)
-    d = jax.vmap(lambda i, x, c: _motion_pair_distance(q_a, dq, i, x, c, iterations))(seg, x0, curves)
-    return jnp.min(d)
+    return _motion_pair_distance(q_a, dq, seg, x0, curves, iterations)
 
 
 def _searched_motions(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenario, search,

@@ -39,6 +39,7 @@ __all__ = [
     "psd_shift",
     "contact_floor",
     "evaluate_where",
+    "tie",
 ]
 
 
@@ -212,6 +213,22 @@ def contact_floor(dtype) -> float:
     return 10.0 * float(np.sqrt(np.finfo(dtype).eps))
 
 
+def tie(tree, ref):
+    """``tree`` unchanged, as values that depend on ``ref`` (any array): a loop's
+    initial carry made of constants, tied to a batched input, is batched from the
+    start under ``vmap``. The batching rule of ``lax.scan`` / ``lax.while_loop``
+    batches the loop body once more for every carry leaf that starts unbatched
+    and comes out batched (a fixpoint); tracing is most of a rollout's compile
+    time (``vmap`` of the checked rollout, batch of 64: trace 2.6 -> 1.9 s).
+    The ``select(p, x, x)`` is removed by XLA's algebraic simplifier; no runtime
+    cost. Integer and bool leaves are tied too; NaN-safe (no arithmetic on ref)."""
+    if jnp.size(ref) == 0:
+        return tree
+    first = jnp.ravel(ref)[0]
+    p = jnp.isnan(first) if jnp.issubdtype(first.dtype, jnp.inexact) else first == jnp.zeros((), first.dtype)
+    return jax.tree_util.tree_map(lambda x: jax.lax.select(jnp.broadcast_to(p, jnp.shape(x)), x, x), tree)
+
+
 def evaluate_where(todo, fn, chunk: int, fill):
     """``out[p] = fn(p)`` where ``todo[p]``, ``fill[p]`` elsewhere; todo (P,) bool.
 
@@ -230,8 +247,11 @@ def evaluate_where(todo, fn, chunk: int, fill):
     def body(state):
         out, left = state
         idx = jnp.nonzero(left, size=chunk, fill_value=P)[0]
-        vals = jax.vmap(fn)(jnp.minimum(idx, P - 1))
+        if chunk == 1:  # no vmap of one: its batching of fn's loops costs tracing time
+            vals = jax.tree_util.tree_map(lambda v: v[None], fn(jnp.minimum(idx[0], P - 1)))
+        else:
+            vals = jax.vmap(fn)(jnp.minimum(idx, P - 1))
         out = jax.tree_util.tree_map(lambda o, v: o.at[idx].set(v, mode="drop"), out, vals)
         return out, left.at[idx].set(False, mode="drop")
 
-    return jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (fill, todo))[0]
+    return jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (tie(fill, todo), todo))[0]

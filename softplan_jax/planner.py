@@ -60,7 +60,7 @@ from .compilation_cache import load_or_export, rollout_compiler_options
 from .kinematics import motion_bound, points_jacobian, tip_position
 from .metrics import apply_collision_checks as apply_collision_checks  # moved to metrics; old import path
 from .metrics import between_steps, contact_tolerance, swept_clear
-from .numerics import damped_pinv, safe_norm
+from .numerics import damped_pinv, safe_norm, tie
 from .obstacles import (
     model_closest,
     placeholder_closest,
@@ -571,6 +571,7 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
         walk_velocity=jnp.zeros((3,), dtype),
         warm=warm_state(scenario) if warm else (),
     )
+    carry0 = tie(carry0, q0)  # under vmap (a batch), the carry is batched from the start (see tie)
     final, (qs, tips, cs, cbs, alphas, converged, fallbacks, searched) = jax.lax.scan(
         body, carry0, jnp.arange(max_steps + 1)
     )

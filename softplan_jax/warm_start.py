@@ -98,7 +98,7 @@ from .closest import (
     closest_from_pairs,
     first_order_converged,
     project_to_arc,
-    reduced_newton,
+    reduced_newton_step,
     solve_pair_reduced,
     u_samples,
 )
@@ -232,35 +232,50 @@ class _Pairs(NamedTuple):
     converged: jax.Array
 
 
-def _polish_and_certify(segs: Segment, curve, data: CurveData, u_prev, solver: SolverOptions):
-    """Polish every segment's pair with ONE curve from u_prev and certify it.
+def _per_pair(fn):
+    """``fn(curve, seg, *args)`` over every (curve, segment) pair: curves (m,) outer,
+    segments (n,) inner, args with leading axes (m, n)."""
+    return jax.vmap(jax.vmap(fn, in_axes=(None, 0, 0)), in_axes=(0, None, 0))
+
+
+def _polish_and_certify(segs: Segment, curves, data: CurveData, u_prev, solver: SolverOptions):
+    """Polish every (curve, segment) pair from u_prev and certify it.
 
     Args:
       segs: Segment with a leading axis n (without derivatives).
-      curve: one curve; data: its CurveData; u_prev: (n,) the previous step's u*.
+      curves: a curve stack (leading axis m); data: their CurveData (m,);
+        u_prev: (m, n) the previous step's u*.
       solver: SolverOptions (static): its grid_u sets the window.
 
     Returns:
-      (_Pairs with arrays (n,), certified (n,) bool).
+      (_Pairs with arrays (m, n), certified (m, n) bool).
     """
     dtype = u_prev.dtype
-    lo, hi = curve.u_range[0], curve.u_range[1]
-    u_prev = jnp.clip(u_prev, lo, hi)
+    u_prev = jnp.clip(u_prev, curves.u_range[:, :1], curves.u_range[:, 1:])
 
-    def polish(seg, u0):
-        s0, f0 = project_to_arc(seg, curve.point(u0))
-        u, s, f = reduced_newton(seg, curve, u0, s0, f0, POLISH_ITERATIONS)
-        return s, u, f, first_order_converged(seg, curve, jnp.stack([s, u]))
+    def start(curve, seg, u0):
+        return project_to_arc(seg, curve.point(u0))
 
-    s_w, u_w, d2_w, conv = jax.vmap(polish)(segs, u_prev)
-    floor = jnp.sqrt(jnp.min(d2_w)) - TOLERANCE * jnp.finfo(dtype).eps * data.size
-    half = WINDOW * (hi - lo) / (solver.grid_u - 1)
+    # The Newton iterations of reduced_newton, every pair vmapped inside the loop body.
+    step = _per_pair(lambda curve, seg, state: reduced_newton_step(seg, curve, state))
+    s0, f0 = _per_pair(start)(curves, segs, u_prev)
+    init = (u_prev, s0, f0, jnp.full(u_prev.shape, 0.05, dtype))
+    u_w, s_w, d2_w, _ = jax.lax.fori_loop(0, POLISH_ITERATIONS, lambda _, state: step(curves, segs, state), init)
+    conv = _per_pair(lambda curve, seg, x: first_order_converged(seg, curve, x))(
+        curves, segs, jnp.stack([s_w, u_w], axis=-1)
+    )
 
-    def certify(seg, u_i):
-        bounds, outside, _ = _piece_bounds(seg, curve, data, u_i, half)
-        return jnp.all(~outside[:, None] | (bounds >= floor))
+    def certify(curve, data, d2, u):
+        floor = jnp.sqrt(jnp.min(d2)) - TOLERANCE * jnp.finfo(dtype).eps * data.size
+        half = WINDOW * (curve.u_range[1] - curve.u_range[0]) / (solver.grid_u - 1)
 
-    certified = jax.vmap(certify)(segs, u_w) & conv
+        def one(seg, u_i):
+            bounds, outside, _ = _piece_bounds(seg, curve, data, u_i, half)
+            return jnp.all(~outside[:, None] | (bounds >= floor))
+
+        return jax.vmap(one)(segs, u)
+
+    certified = jax.vmap(certify)(curves, data, d2_w, u_w) & conv
     return _Pairs(s_w, u_w, d2_w, conv), certified
 
 
@@ -359,9 +374,7 @@ def warm_curves(q, curves, data: CurveData, u_prev, fresh, active, solver: Solve
     curves_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, curves)
     data = jax.tree_util.tree_map(jax.lax.stop_gradient, data)
     u_prev = jax.lax.stop_gradient(u_prev)
-    pairs, certified = jax.vmap(lambda c, d, u: _polish_and_certify(segs_ng, c, d, u, solver))(
-        curves_ng, data, u_prev
-    )
+    pairs, certified = _polish_and_certify(segs_ng, curves_ng, data, u_prev, solver)
     fail = (fresh | ~certified) & active[:, None]
     pairs = _fallback(segs_ng, curves_ng, data, pairs, fail, solver)
     cps = jax.vmap(lambda c, s, u, d2, conv: closest_from_pairs(segs, c, s, u, d2, conv))(

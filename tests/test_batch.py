@@ -33,7 +33,7 @@ from session import subprocess_env
 
 import softplan_jax as sp
 from softplan_jax.metrics import apply_collision_checks
-from softplan_jax.numerics import solve_small
+from softplan_jax.numerics import evaluate_where, solve_small, tie
 from softplan_jax.planner import make_options, rollout_jit
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -76,6 +76,53 @@ def test_solve_small_pivots_and_singular():
     # Larger systems fall back to jnp.linalg.solve.
     A = jnp.eye(6) * 2.0
     np.testing.assert_allclose(np.asarray(solve_small(A, jnp.ones(6))), 0.5)
+
+
+# ----------------------------------------------------------------------------
+# tie and evaluate_where (loop carries and skipped work under vmap)
+
+
+@pytest.mark.parametrize("ref", [jnp.array([np.nan, 1.0]), jnp.array([3, 0]), jnp.array([True]), jnp.zeros((0,))])
+def test_tie_changes_no_value(ref):
+    """tie returns every leaf unchanged (NaN, inf, integers, bools, uint32 keys), whatever
+    ref holds (a NaN, a zero, an empty array), eagerly, jitted and under vmap."""
+    tree = (jnp.array([np.nan, -np.inf, 1.5]), jnp.array(7, jnp.int32), jnp.array([True, False]),
+            jax.random.PRNGKey(3))
+    for fn in (tie, jax.jit(tie)):
+        out = fn(tree, ref)
+        for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(tree), strict=True):
+            assert a.dtype == b.dtype and a.shape == b.shape
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    if ref.size:
+        refs = jnp.stack([ref, ref])
+        out = jax.vmap(lambda r: tie(tree, r))(refs)
+        for a, b in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(tree), strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.broadcast_to(np.asarray(b), a.shape))
+
+
+@pytest.mark.parametrize("chunk", [1, 3])
+def test_evaluate_where_matches_a_python_loop(chunk):
+    """evaluate_where fills exactly the flagged entries with fn's values, for chunk 1
+    (no vmap) and larger chunks, and under vmap with different flags per member."""
+    fill = (jnp.full((5,), -1.0), jnp.zeros((5, 2), jnp.int32))
+
+    def fn(p):
+        return (jnp.sin(p.astype(jnp.float64)), jnp.stack([p, 2 * p]).astype(jnp.int32))
+
+    todos = np.array([[True, False, True, True, False], [False] * 5, [True] * 5])
+    for todo in todos:
+        out = evaluate_where(jnp.asarray(todo), fn, chunk, fill)
+        want = tuple(np.array(f) for f in fill)
+        for p in range(5):
+            if todo[p]:
+                want[0][p], want[1][p] = np.sin(p), [p, 2 * p]
+        for a, b in zip(out, want, strict=True):
+            np.testing.assert_array_equal(np.asarray(a), b)
+    batched = jax.vmap(lambda t: evaluate_where(t, fn, chunk, fill))(jnp.asarray(todos))
+    for k, todo in enumerate(todos):
+        single = evaluate_where(jnp.asarray(todo), fn, chunk, fill)
+        for a, b in zip(batched, single, strict=True):
+            np.testing.assert_array_equal(np.asarray(a[k]), np.asarray(b))
 
 
 def test_solve_small_gradient_matches_linalg_solve():

@@ -96,7 +96,8 @@ def test_certified_answer_is_the_sampled_global_minimum():
         data = ws.curve_data(curve, DEFAULT_OPTIONS)
         u_full = jax.vmap(lambda seg: solve_pair_reduced(seg, curve, data.u_grid, data.C_grid, DEFAULT_OPTIONS)[1])(segs)
         u0 = u_full + noise
-        pairs, certified = ws._polish_and_certify(segs, curve, data, u0, DEFAULT_OPTIONS)
+        stack = jax.tree_util.tree_map(lambda x: x[None], (curve, data))  # a stack of one curve
+        pairs, certified = ws._polish_and_certify(segs, *stack, u0[None], DEFAULT_OPTIONS)
         us = jnp.linspace(-1.0, 1.0, 20001, dtype=q.dtype)
         dense = jax.vmap(lambda seg: jax.vmap(lambda u: project_to_arc(seg, curve.point(u))[1])(us))(segs)
         return jnp.sqrt(jnp.min(pairs.d2)), jnp.all(certified), jnp.sqrt(jnp.min(dense))
