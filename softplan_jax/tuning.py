@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .compilation_cache import rollout_compiler_options
 from .planner import Gains, PlanOptions, check_gains, make_options, rollout
 from .scenarios import Scenario
 
@@ -87,8 +88,11 @@ def _to_gains(params, fixed):
 
 # Loss and gradient in the gains: the very program of notebooks/tuning.ipynb and
 # tests/test_planner.py (``jax.jit(jax.value_and_grad(batch_loss))`` with the
-# scenes as an argument), so that they share one compilation through jax's
-# persistent cache. tune_gains applies the chain rule to the log-gains itself.
+# scenes as an argument, compiled with rollout_compiler_options(method)), so that
+# they share one compilation through jax's persistent cache. tune_gains applies
+# the chain rule to the log-gains itself. The package's XLA options roughly halve
+# the gradient's compile time (tree, 200 steps: 15 -> 9 s of XLA; a batch of 4
+# random scenes, 150 steps: 25 -> 14 s) at the same run time (66 vs 68 ms).
 _loss_and_grad = jax.jit(jax.value_and_grad(batch_loss), static_argnames=("options", "max_steps"))
 
 # AOT-compiled _loss_and_grad, keyed by argument structure, shapes, dtypes and statics.
@@ -145,7 +149,8 @@ def tune_gains(scenarios: Scenario, gains: Gains | None = None, *, steps: int = 
     compile_s = 0.0
     if compiled is None:
         t0 = time.perf_counter()
-        compiled = _loss_and_grad.lower(g0, scenarios, opts, int(max_steps), *extra).compile()
+        lowered = _loss_and_grad.lower(g0, scenarios, opts, int(max_steps), *extra)
+        compiled = lowered.compile(compiler_options=rollout_compiler_options(opts.method))
         compile_s = time.perf_counter() - t0
         _COMPILED[key] = compiled
 

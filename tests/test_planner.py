@@ -9,6 +9,7 @@ import oracle
 import pytest
 
 import softplan_jax as sp
+from softplan_jax.compilation_cache import rollout_compiler_options
 from softplan_jax.planner import make_options, rollout_jit
 
 # All paper scenarios padded to one shape: one compilation serves the three.
@@ -253,8 +254,10 @@ def test_gradient_through_rollout_matches_finite_differences(paper):
     # float64 like the default gains (a weakly typed jnp.asarray(0.5) would be another program).
     g = sp.default_gains()._replace(d0=jnp.asarray(0.5, jnp.float64))
     steps = 10  # no rollout ends within 10 steps: the loss is smooth in the gains
-    # One compilation for the loss and its gradient (the finite differences use its value).
-    loss_and_grad = jax.jit(jax.value_and_grad(sp.batch_loss), static_argnames=("options", "max_steps"))
+    # One compilation for the loss and its gradient (the finite differences use its value),
+    # with the package's XLA options as the notebook and tune_gains compile it.
+    loss_and_grad = jax.jit(jax.value_and_grad(sp.batch_loss), static_argnames=("options", "max_steps"),
+                            compiler_options=rollout_compiler_options("curve"))
     _, grad = loss_and_grad(g, batch, opts, steps)
     for k in ("k_att", "v_max", "eta", "d0", "dt"):
         h = 1e-6 * float(getattr(g, k))
