@@ -29,12 +29,12 @@ On the paper's tree scenario (five curves, three segments), float64 and float32:
 
 Every rollout is compiled with the XLA options of the public rollouts for
 its method (``compilation_cache.rollout_compiler_options``: what ``sp.plan``
-and ``plan_batch`` run); the loss and its gradient with jax's defaults, as a
-user's ``jax.jit`` compiles them. Every figure is a median of repeats of a compiled call with
+and ``plan_batch`` run), and so are the loss and its gradient (what
+``tune_gains`` and the tuning notebook compile). Every figure is a median of repeats of a compiled call with
 ``block_until_ready``; compile time is never in a run time. Writes
 ``benchmarks/results/speed_targets.{md,json}``.
 
-    python benchmarks/speed_targets.py            # ~5 min on 2 CPUs (323 s in the last run)
+    python benchmarks/speed_targets.py            # ~4 min on 2 CPUs (219 s in the last run)
     python benchmarks/speed_targets.py --quick    # ~2.5 min: fewer repeats, smaller batch, no float32
     python benchmarks/speed_targets.py --checked-only   # item 6 alone (float64), into results/speed_checked.*
 """
@@ -77,13 +77,12 @@ def median_run(fn, *args, repeats):
     return float(median_time(fn, *args, repeats=repeats)[1])
 
 
-def compiled(fn, *args, public_rollout=True, **static):
-    """``fn`` traced, lowered and compiled, and the seconds that took. A rollout
-    (``public_rollout``) is compiled with the XLA options that the public rollouts
-    (``rollout_jit``, ``rollout_batch``) use for its method
-    (``compilation_cache.rollout_compiler_options``); anything else with jax's defaults."""
+def compiled(fn, *args, **static):
+    """``fn`` traced, lowered and compiled, and the seconds that took, with the XLA
+    options that the public rollouts (``rollout_jit``, ``rollout_batch``) and
+    ``tune_gains`` use for the method (``compilation_cache.rollout_compiler_options``)."""
     t0 = time.perf_counter()
-    copts = rollout_compiler_options(static["options"].method) if public_rollout else None
+    copts = rollout_compiler_options(static["options"].method)
     c = (jax.jit(fn, static_argnames=tuple(static), compiler_options=copts)
          .lower(*args, **static).compile())
     return c, time.perf_counter() - t0
@@ -144,9 +143,9 @@ def measure(dtype, steps, batch_size, repeats):
     # Gradient of a rollout loss vs the rollout itself (same options, same length).
     grad_opts = make_options("curve", goal_tolerance=1e-9, stall_window=10**6)
     loss = lambda g, sc, options, max_steps: rollout_loss(g, sc, options, max_steps)  # noqa: E731
-    # As a user's jax.jit of tuning.rollout_loss and its gradient compiles them: XLA's defaults.
-    c_f, ct_f = compiled(loss, g, sc, options=grad_opts, max_steps=steps, public_rollout=False)
-    c_g, ct_g = compiled(jax.grad(loss), g, sc, options=grad_opts, max_steps=steps, public_rollout=False)
+    # As tune_gains compiles the loss and its gradient: the package's XLA options for the method.
+    c_f, ct_f = compiled(loss, g, sc, options=grad_opts, max_steps=steps)
+    c_g, ct_g = compiled(jax.grad(loss), g, sc, options=grad_opts, max_steps=steps)
     t_f = median_run(c_f, g, sc, repeats=repeats)
     t_g = median_run(c_g, g, sc, repeats=repeats)
     out.update(loss_s=t_f, grad_s=t_g, loss_compile_s=ct_f, grad_compile_s=ct_g)
