@@ -431,6 +431,14 @@ def reduced_newton(seg: Segment, curve, u0, s0, f0, iterations: int):
     step = partial(reduced_newton_step, seg, curve)
     for _ in range(jnp.ndim(u0)):
         step = jax.vmap(step)
+    return reduced_newton_loop(step, u0, s0, f0, iterations)
+
+
+def reduced_newton_loop(step, u0, s0, f0, iterations: int):
+    """The loop of :func:`reduced_newton`: ``iterations`` calls of ``step``, a
+    :func:`reduced_newton_step` vmapped to the shape of u0 (one pair per element;
+    the warm start's polish maps it over every (curve, segment) pair), from the
+    initial trust radius 0.05 in u. Returns (u, s, f)."""
     radius0 = jnp.full(jnp.shape(u0), 0.05, u0.dtype)
     u, s, f, _ = jax.lax.fori_loop(0, iterations, lambda _, state: step(state), (u0, s0, f0, radius0))
     return u, s, f

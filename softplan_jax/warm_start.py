@@ -98,6 +98,7 @@ from .closest import (
     closest_from_pairs,
     first_order_converged,
     project_to_arc,
+    reduced_newton_loop,
     reduced_newton_step,
     solve_pair_reduced,
     u_samples,
@@ -256,11 +257,10 @@ def _polish_and_certify(segs: Segment, curves, data: CurveData, u_prev, solver: 
     def start(curve, seg, u0):
         return project_to_arc(seg, curve.point(u0))
 
-    # The Newton iterations of reduced_newton, every pair vmapped inside the loop body.
+    # reduced_newton's loop, every pair vmapped inside the loop body.
     step = _per_pair(lambda curve, seg, state: reduced_newton_step(seg, curve, state))
     s0, f0 = _per_pair(start)(curves, segs, u_prev)
-    init = (u_prev, s0, f0, jnp.full(u_prev.shape, 0.05, dtype))
-    u_w, s_w, d2_w, _ = jax.lax.fori_loop(0, POLISH_ITERATIONS, lambda _, state: step(curves, segs, state), init)
+    u_w, s_w, d2_w = reduced_newton_loop(lambda state: step(curves, segs, state), u_prev, s0, f0, POLISH_ITERATIONS)
     conv = _per_pair(lambda curve, seg, x: first_order_converged(seg, curve, x))(
         curves, segs, jnp.stack([s_w, u_w], axis=-1)
     )
