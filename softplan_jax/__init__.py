@@ -14,6 +14,7 @@ from .closest_grid import GridSolverOptions
 from .compilation_cache import compilation_cache_dir, enable_compilation_cache
 from .curves import ParametricCurve, PolynomialCurve, curve_points, fit_polynomial_curve, line_segment, stack_curves
 from .fitting import CloudFit, CurveFit, FitWarning, curve_distance, fit_curve, fit_curves, load_cloud, save_fit_scenario
+from .gains_file import gains_from_dict, gains_to_dict, load_gains, save_gains
 from .kinematics import (
     backbone_points,
     motion_bound,
@@ -27,6 +28,7 @@ from .kinematics import (
 from .metrics import apply_collision_checks, dense_trajectory_clearance, true_closest
 from .planner import (
     PAPER_STEP,
+    GainFunction,
     Gains,
     PlanOptions,
     PlanResult,
@@ -56,6 +58,19 @@ from .scenarios import (
     scenario_to_dict,
     scenario_warnings,
     stack_scenarios,
+)
+from .smoothing import (
+    GainSpace,
+    ObjectiveEstimate,
+    ScoreWeights,
+    SmoothingSample,
+    TuneResult,
+    estimate_objective,
+    rollout_score,
+    score_batch,
+    smoothed_objective,
+    smoothing_sample,
+    tune_smoothed,
 )
 from .status import STATUS_NAMES, Status, status_name
 from .tuning import LossWeights, TuningResult, batch_loss, rollout_loss, tune_gains
@@ -111,6 +126,7 @@ __all__ = [
     "scenario_to_dict",
     # planner (paper eq. 9)
     "Gains",
+    "GainFunction",
     "default_gains",
     "attraction",
     "repulsion",
@@ -134,6 +150,11 @@ __all__ = [
     "PRESETS",
     "preset",
     "apply_preset",
+    # gains files (tuned gains as JSON, with the obstacle model they were tuned for)
+    "save_gains",
+    "load_gains",
+    "gains_to_dict",
+    "gains_from_dict",
     # metrics
     "true_closest",
     "dense_trajectory_clearance",
@@ -144,6 +165,18 @@ __all__ = [
     "rollout_loss",
     "batch_loss",
     "tune_gains",
+    # tuning on the smoothed objective (softplan_jax.smoothing)
+    "GainSpace",
+    "ScoreWeights",
+    "rollout_score",
+    "score_batch",
+    "SmoothingSample",
+    "smoothing_sample",
+    "smoothed_objective",
+    "ObjectiveEstimate",
+    "estimate_objective",
+    "TuneResult",
+    "tune_smoothed",
     # compiled programs kept on disk
     "enable_compilation_cache",
     "compilation_cache_dir",

@@ -4,6 +4,7 @@ own scenes from the shell.
 ::
 
     softplan run SCENARIO [--method curve|points] [--n-points N] [--max-steps N]
+                          [--gains paper|default|FILE] [--step safe|plain]
                           [--goal-tolerance TOL] [--repulsion khatib|exponential]
                           [--plot PNG] [--gif GIF] [--out FILE.json|FILE.npz [--force]]
                           [--json] [--float32] [--require-reached]
@@ -16,6 +17,15 @@ own scenes from the shell.
 SCENARIO is a paper scenario name (``sim1``, ``sim2``, ``tree``) or the path of
 a JSON scenario file (a file literally named like a paper scenario: write
 ``./sim1``).
+
+``--gains`` (``run`` and ``batch``) is a gain preset (``default``, ``paper``:
+gains, step options and start pose, :mod:`softplan_jax.presets`) or the path of
+a gains file (format ``softplan-gains/1``, :mod:`softplan_jax.gains_file`,
+written by :func:`softplan_jax.save_gains`): the file's gains with the default
+preset's start pose and step options. A file tuned for another ``--method`` or
+``--n-points`` is bad input. The summary (and ``run --out``) records the gains
+used: ``gains`` (the preset name or the path as given), ``gains_file`` (its
+absolute path, or null for a preset) and ``gain_values``.
 
 ``run --out FILE`` saves the whole trajectory: ``q`` (iterations + 1, n, 3),
 ``tip`` (iterations + 1, 3) and ``clearance`` (iterations + 1, obstacles), the
@@ -109,10 +119,12 @@ def build_parser() -> argparse.ArgumentParser:
                      "modelled by N points (default: curve)")
     run.add_argument("--n-points", type=int, default=None, metavar="N",
                      help="N of the N-point model, >= 1 (method points only; default 10)")
-    run.add_argument("--gains", choices=("paper", "default"), default="default",
+    run.add_argument("--gains", default="default", metavar="PRESET|FILE",
                      help="gain preset (gains, step options and start pose; softplan_jax.presets): paper: "
                      "the calibration that reproduces the paper's findings (plain step, start theta 0.1); "
-                     "default: the library's (default)")
+                     "default: the library's (default); or a gains file (JSON, format softplan-gains/1, "
+                     "from softplan_jax.save_gains): its gains with the default preset's start pose and "
+                     "step options, refused if tuned for another --method/--n-points")
     run.add_argument("--step", choices=("safe", "plain"), default=None,
                      help="safe: the clearance-bounded step, no step can pass through an obstacle the "
                      "planner models exactly (default); plain: the paper's step (default of --gains paper)")
@@ -176,6 +188,9 @@ def _add_batch_parser(sub) -> None:
                        help="N of the N-point model, >= 1 (method points only; default 10)")
     batch.add_argument("--max-steps", type=int, default=600, metavar="N",
                        help="most planner steps, >= 1 (default 600)")
+    batch.add_argument("--gains", default="default", metavar="PRESET|FILE",
+                       help="gain preset (default, paper; as for 'softplan run') or a gains file (JSON, format "
+                       "softplan-gains/1): its gains with the default preset's start pose and step options")
     batch.add_argument("--chunk", type=int, default=512, metavar="C",
                        help="scenarios per call, >= 1, rounded up to a multiple of the device count (default 512)")
     batch.add_argument("--devices", type=int, default=None, metavar="K",
@@ -240,7 +255,8 @@ def _check_output_path(path: str, option: str, inputs=()) -> str:
         raise InputError(f"{option}: {path} is not writable")
     for inp in inputs:
         if inp and os.path.exists(path) and os.path.exists(inp) and os.path.samefile(path, inp):
-            raise InputError(f"{option}: {path} is the input scenario file; refusing to overwrite it")
+            raise InputError(f"{option}: {path} is an input file (scenario, gains or point cloud); "
+                             "refusing to overwrite it")
     return path
 
 
@@ -254,6 +270,56 @@ def _check_plot_format(path: str) -> None:
             f"--plot: cannot tell the image format of {path!r}; use one of the extensions "
             f"{', '.join('.' + e for e in sorted(supported))}"
         )
+
+
+def _check_gains_arg(value: str) -> str | None:
+    """The path of ``--gains`` when it names a gains file; None for a preset name."""
+    from .presets import PRESETS
+
+    if value in PRESETS:
+        return None
+    if not os.path.exists(value):
+        raise InputError(f"--gains: {value!r} is neither a gain preset ({', '.join(sorted(PRESETS))}) "
+                         "nor an existing gains file")
+    if os.path.isdir(value):
+        raise InputError(f"--gains: {value} is a directory, not a gains file")
+    return value
+
+
+def _resolve_gains(args, scenario, method: str, n_points: int):
+    """``(scenario, gains, options, gain_values)`` for ``--gains``: a preset's start pose,
+    gains and step options, or a gains file's gains with the default preset's start pose
+    and options (ValueError for a bad or mismatched file). ``gain_values`` is the JSON
+    form of the gains (:func:`~softplan_jax.gains_file.gains_to_dict`; ``rep_max`` null
+    = no cap)."""
+    from .gains_file import gains_to_dict, load_gains
+    from .planner import check_gains
+    from .presets import apply_preset
+
+    scenario, gains, extra = apply_preset("default" if args.gains_file else args.gains, scenario)
+    if args.gains_file:
+        dtype = scenario.q0.dtype
+        gains = load_gains(args.gains_file, method=method, n_points=n_points, dtype=dtype)
+        gains = check_gains(gains, dtype, scenario.q0.shape[-2])  # seg_weights against the arm's segments
+    return scenario, gains, extra, gains_to_dict(gains, method, n_points)["gains"]
+
+
+def _gains_report(args, gain_values: dict) -> dict:
+    """The summary's record of the gains used."""
+    return {"gains": args.gains,
+            "gains_file": os.path.abspath(args.gains_file) if args.gains_file else None,
+            "gain_values": gain_values}
+
+
+def _fmt_gain_values(values: dict) -> str:
+    def fmt(k, v):
+        if v is None:
+            return f"{k} none (no cap)"
+        if isinstance(v, list):
+            return f"{k} [{', '.join(f'{x:.4g}' for x in v)}]"
+        return f"{k} {v:.4g}"
+
+    return ", ".join(fmt(k, v) for k, v in values.items())
 
 
 def _check_run_args(args, paper_names) -> None:
@@ -279,6 +345,9 @@ def _check_run_args(args, paper_names) -> None:
         if os.path.isdir(args.scenario):
             raise InputError(f"scenario {args.scenario} is a directory, not a JSON file")
     inputs = (args.scenario,) if is_file else ()
+    args.gains_file = _check_gains_arg(args.gains)
+    if args.gains_file is not None:
+        inputs += (args.gains_file,)
     if args.plot is not None and args.gif is not None and os.path.abspath(args.plot) == os.path.abspath(
         args.gif
     ):
@@ -335,8 +404,12 @@ def trajectory_record(result, scenario, summary: dict) -> dict:
       ``status``, ``iterations``, ``reached``, ``collided``, ``min_clearance``,
       ``final_error`` and the summary's metadata (``scenario``, ``method``,
       ``n_points``, ``repulsion``, ``dtype``, ``max_steps``,
-      ``goal_tolerance``, ``compile_time_s``, ``run_time_s``), plus
-      ``softplan_jax_version``.
+      ``goal_tolerance``, ``compile_time_s``, ``run_time_s``, ``gains``: the
+      preset name or the gains file as given, ``gains_file``: its absolute
+      path or None), plus ``softplan_jax_version`` and ``gain_values``: the
+      gains used, a dict of floats (``rep_max`` inf: no cap) and, for a gain
+      function, lists (``rep_profile``, ``seg_weights``). In an NPZ file it is
+      flattened to ``gain_values.k_att``, ... arrays; in JSON inf is null.
     """
     import numpy as np
 
@@ -355,8 +428,9 @@ def trajectory_record(result, scenario, summary: dict) -> dict:
         "final_error": float(result.final_error),
     }
     for key in ("scenario", "method", "n_points", "repulsion", "dtype", "max_steps", "goal_tolerance",
-                "compile_time_s", "run_time_s"):
+                "compile_time_s", "run_time_s", "gains", "gains_file"):
         record[key] = summary[key]
+    record["gain_values"] = {k: (math.inf if v is None else v) for k, v in summary["gain_values"].items()}
     return record
 
 
@@ -366,6 +440,8 @@ def _json_ready(x):
 
     if isinstance(x, np.ndarray):
         return _json_ready(x.tolist())
+    if isinstance(x, dict):
+        return {k: _json_ready(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
         return [_json_ready(v) for v in x]
     if isinstance(x, float) and not math.isfinite(x):
@@ -383,8 +459,15 @@ def write_trajectory(path: str, record: dict) -> None:
             json.dump({k: _json_ready(v) for k, v in record.items()}, fh, allow_nan=False)
             fh.write("\n")
     elif ext == ".npz":
-        # None (n_points of the curve method) has no array form: left out.
-        arrays = {k: np.asarray(v) for k, v in record.items() if v is not None}
+        # None (n_points of the curve method) has no array form: left out; a dict
+        # (gain_values) becomes one array per entry, "name.key" (no pickles).
+        flat = {}
+        for k, v in record.items():
+            if isinstance(v, dict):
+                flat.update({f"{k}.{sub}": w for sub, w in v.items()})
+            else:
+                flat[k] = v
+        arrays = {k: np.asarray(v) for k, v in flat.items() if v is not None}
         with open(path, "wb") as fh:  # np.savez would append .npz to a name without it
             np.savez(fh, **arrays)
     else:
@@ -445,14 +528,13 @@ def _cmd_run(args) -> int:
     import jax.numpy as jnp
 
     from .planner import make_options, result_from_rollout, rollout_jit
-    from .presets import apply_preset
 
     paper_names = _paper_names()
     _check_run_args(args, paper_names)
     dtype = jnp.float32 if args.float32 else jnp.float64
     try:
         scenario, label = _load(args, dtype)
-        scenario, gains, extra = apply_preset(args.gains, scenario)
+        scenario, gains, extra, gain_values = _resolve_gains(args, scenario, args.method, args.n_points)
         extra["repulsion"] = args.repulsion
         if args.step is not None:
             extra["step"] = args.step
@@ -482,7 +564,7 @@ def _cmd_run(args) -> int:
         "method": args.method,
         "n_points": args.n_points if args.method == "points" else None,
         "repulsion": args.repulsion,
-        "gains": args.gains,
+        **_gains_report(args, gain_values),
         "step": options.step,
         "escapes": int(rollout.escapes),
         "dtype": str(jnp.dtype(scenario.q0.dtype)),
@@ -600,19 +682,20 @@ def _cmd_batch(args) -> int:
     import numpy as np
 
     from .batching import pad_batch, round_chunk
-    from .planner import default_gains, make_options, plan_batch, rollout_batch
+    from .planner import make_options, plan_batch, rollout_batch
     from .scenarios import random_scenarios
     from .status import STATUS_NAMES, Status
 
     dtype = jnp.float32 if args.float32 else jnp.float64
+    args.gains_file = _check_gains_arg(args.gains)
     try:
         n_dev = len(jax.local_devices()) if args.devices is None else int(args.devices)
-        options = make_options(args.method, args.n_points or 10)
         t0 = time.perf_counter()
         suite = random_scenarios(args.seed, args.n, obstacles=tuple(args.obstacles), curve_slots=args.slots,
                                  dtype=dtype)
         generation_time = time.perf_counter() - t0
-        gains = default_gains(dtype)
+        suite, gains, extra, gain_values = _resolve_gains(args, suite, args.method, args.n_points or 10)
+        options = make_options(args.method, args.n_points or 10, **extra)
         size = round_chunk(args.chunk, args.n, max(n_dev, 1))
         first = pad_batch(jax.tree_util.tree_map(lambda x: x[:size], suite), size)
         t0 = time.perf_counter()
@@ -633,6 +716,7 @@ def _cmd_batch(args) -> int:
         "method": args.method,
         "n_points": args.n_points if args.method == "points" else None,
         "max_steps": args.max_steps,
+        **_gains_report(args, gain_values),
         "devices": n_dev,
         "chunk": size,
         "dtype": str(jnp.dtype(dtype)),
@@ -665,6 +749,8 @@ def _cmd_batch(args) -> int:
         rows = [
             ("scenarios", f"{s['scenarios']:,} (random_scenarios(seed={s['seed']}), {s['dtype']})"),
             ("method", method),
+            ("gains", s["gains"] + (" (gains file)" if s["gains_file"] else " (preset)")),
+            ("gain values", _fmt_gain_values(s["gain_values"])),
             ("devices", f"{s['devices']}, chunks of {s['chunk']}"),
             ("outcomes", ", ".join(f"{k} {v:,}" for k, v in s["status_counts"].items())),
             ("success / collided", f"{100 * s['success_rate']:.1f} % / {100 * s['collision_rate']:.1f} %"),
@@ -687,7 +773,9 @@ def _text_summary(s: dict) -> str:
         ("scenario", s["scenario"]),
         ("method", method),
         ("repulsion", s["repulsion"]),
-        ("gains", s["gains"] + (" (preset: the paper calibration)" if s["gains"] == "paper" else " (preset)")),
+        ("gains", s["gains"] + (" (gains file)" if s["gains_file"] else
+                                " (preset: the paper calibration)" if s["gains"] == "paper" else " (preset)")),
+        ("gain values", _fmt_gain_values(s["gain_values"])),
         ("step", ("safe (clearance-bounded)" if s["step"] == "safe" else "plain (the paper's)")
          + f", {s['escapes']} escape(s) used"),
         ("dtype", s["dtype"]),

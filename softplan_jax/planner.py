@@ -76,9 +76,11 @@ from .status import Status, status_name
 
 __all__ = [
     "Gains",
+    "GainFunction",
     "default_gains",
     "attraction",
     "repulsion",
+    "repulsion_scale",
     "PlanOptions",
     "PAPER_STEP",
     "planner_step",
@@ -110,6 +112,62 @@ class Gains(NamedTuple):
     dt: jax.Array
 
 
+class GainFunction(NamedTuple):
+    """Gains with the repulsion as a tunable FUNCTION of clearance and of the arm
+    segment (a pytree of arrays; beyond the paper, tuned by :mod:`softplan_jax.smoothing`).
+
+    The first seven fields are those of :class:`Gains`, with the same meaning.
+    The repulsion of paper eq. (9) for an obstacle whose closest arm point lies
+    on segment i at clearance d is :func:`repulsion`'s magnitude times::
+
+        exp(profile(d / d0) + seg_weights[i])
+
+    where ``profile`` interpolates ``rep_profile`` linearly between K knots evenly
+    spaced in ``d / d0`` over [0, 1] (clipped outside). With all zeros it is the
+    field of its :class:`Gains` exactly (:meth:`from_gains` builds that).
+
+    Attributes:
+      rep_profile: (K,) log-multipliers of the repulsion at the knots, K >= 2.
+      seg_weights: (n,) log-multipliers of the repulsion per arm segment
+        (n: the arm's segment count).
+    """
+
+    k_att: jax.Array
+    v_max: jax.Array
+    eta: jax.Array
+    d0: jax.Array
+    rep_max: jax.Array
+    damping: jax.Array
+    dt: jax.Array
+    rep_profile: jax.Array
+    seg_weights: jax.Array
+
+    @classmethod
+    def from_gains(cls, gains: Gains, knots: int, segments: int) -> GainFunction:
+        """The gain function equal to ``gains`` (zero profile and weights)."""
+        if int(knots) < 2 or int(segments) < 1:
+            raise ValueError(f"a GainFunction needs knots >= 2 and segments >= 1, got {knots}, {segments}")
+        dtype = jnp.result_type(gains.k_att)
+        return cls(*gains[:7], jnp.zeros((int(knots),), dtype), jnp.zeros((int(segments),), dtype))
+
+    def scalars(self) -> Gains:
+        """The seven scalar gains (without the profile and weights)."""
+        return Gains(*self[:7])
+
+
+def repulsion_scale(gains, clearance, segment):
+    """The multiplier of the repulsion of a :class:`GainFunction` (1 for :class:`Gains`):
+    ``exp(profile(clearance / d0) + seg_weights[segment])``; shapes broadcast."""
+    if not isinstance(gains, GainFunction):
+        return jnp.ones_like(clearance)
+    K = gains.rep_profile.shape[-1]
+    x = jnp.clip(clearance / gains.d0, 0.0, 1.0) * (K - 1)
+    lo = jnp.clip(jnp.floor(x), 0, K - 2).astype(jnp.int32)
+    t = x - lo.astype(x.dtype)
+    log_scale = (1 - t) * gains.rep_profile[lo] + t * gains.rep_profile[lo + 1] + gains.seg_weights[segment]
+    return jnp.exp(log_scale)
+
+
 def default_gains(dtype=None) -> Gains:
     """The default gains (chosen by measurement on the paper's scenarios; see
     the README's "Gains" section).
@@ -131,7 +189,7 @@ def attraction(V_e, gains: Gains):
     return gains.k_att * V_e / jnp.maximum(1.0, speed / gains.v_max)
 
 
-def repulsion(V_s, clearance, gains: Gains, kind: str = "khatib"):
+def repulsion(V_s, clearance, gains: Gains, kind: str = "khatib", scale=1.0):
     """F_s(V_s): repulsion speed along ``V_s`` (towards the obstacle; eq. 9
     subtracts it), as a function of the surface clearance.
 
@@ -140,17 +198,19 @@ def repulsion(V_s, clearance, gains: Gains, kind: str = "khatib"):
     * ``"exponential"``: ``rep_max * exp(-d / d0)`` — smooth everywhere, never
       exactly zero.
     ``d`` is floored at ``1e-3 d0`` (contact or penetration still repels).
+    ``scale`` multiplies the uncapped magnitude (a :class:`GainFunction`'s
+    :func:`repulsion_scale`).
     """
     d = jnp.maximum(clearance, 1e-3 * gains.d0)
     if kind == "khatib":
         raw = gains.eta * (1.0 / d - 1.0 / gains.d0) / (d * d)
-        raw = jnp.where(d < gains.d0, raw, 0.0)
+        raw = scale * jnp.where(d < gains.d0, raw, 0.0)
         # rep_max = inf: no cap (Khatib's field as printed); double-where keeps inf out of both modes.
         uncapped = jnp.isinf(gains.rep_max)
         cap = jnp.where(uncapped, 1.0, gains.rep_max)
         mag = jnp.where(uncapped, raw, cap * jnp.tanh(raw / cap))
     elif kind == "exponential":
-        mag = gains.rep_max * jnp.exp(-d / gains.d0)
+        mag = scale * gains.rep_max * jnp.exp(-d / gains.d0)
     else:
         raise ValueError(f"unknown repulsion {kind!r}; choose 'khatib' or 'exponential'")
     return mag * V_s / jnp.maximum(safe_norm(V_s), jnp.finfo(V_s.dtype).tiny)
@@ -283,7 +343,8 @@ def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: Pla
     pinvs = jax.vmap(lambda J_k: damped_pinv(J_k, gains.damping))(J)  # (1 + m, 3n, 3)
     V_s = cps.obstacle_point - cps.arm_point
     clearance = cps.distance - scenario.arm_radius - radius
-    F_s = jax.vmap(lambda v, d: repulsion(v, d, gains, options.repulsion))(V_s, clearance)
+    scale = repulsion_scale(gains, clearance, cps.segment)
+    F_s = jax.vmap(lambda v, d, k: repulsion(v, d, gains, options.repulsion, k))(V_s, clearance, scale)
     F_s = jnp.where(mask[:, None], F_s, 0.0)
     F_e = attraction(V_e, gains)
     if walk is not None:
@@ -602,7 +663,7 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
 def _strong_gains(gains: Gains, dtype) -> Gains:
     """Gains as arrays of the scenario's dtype, never weakly typed: a gain given as
     a Python float or ``jnp.asarray(0.1)`` (weak) would otherwise compile anew."""
-    return Gains(*(jnp.asarray(v, dtype) for v in gains))
+    return type(gains)(*(jnp.asarray(v, dtype) for v in gains))
 
 
 def _key(seed):
@@ -831,17 +892,30 @@ def make_options(method="curve", n_points=10, **kwargs) -> PlanOptions:
     return check_options(PlanOptions(method=method, n_points=int(n_points), **kwargs))
 
 
-def check_gains(gains: Gains | None, dtype) -> Gains:
+def check_gains(gains: Gains | GainFunction | None, dtype, n_segments: int | None = None):
+    """Validate gains on the host: a :class:`Gains` or :class:`GainFunction` of finite
+    positive scalars (``damping`` may be 0, ``rep_max`` inf) and, for a GainFunction,
+    finite ``rep_profile`` (K >= 2) and ``seg_weights`` (``n_segments``, when given);
+    returned as arrays of ``dtype``. None gives :func:`default_gains`."""
     if gains is None:
         return default_gains(dtype)
-    if not isinstance(gains, Gains):
-        raise ValueError(f"gains must be a Gains, got {type(gains).__name__}")
+    if not isinstance(gains, (Gains, GainFunction)):
+        raise ValueError(f"gains must be a Gains or a GainFunction, got {type(gains).__name__}")
     vals = {k: np.asarray(v) for k, v in gains._asdict().items()}
-    for k, v in vals.items():
+    for k in Gains._fields:
+        v = vals[k]
         if v.shape != () or not np.isfinite(v) or v <= 0:
             if not ((k == "damping" and v.shape == () and v == 0) or (k == "rep_max" and v.shape == () and v == np.inf)):
                 raise ValueError(f"gain {k} must be a finite positive scalar, got {v!r}")
-    return Gains(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
+    if isinstance(gains, GainFunction):
+        p, w = vals["rep_profile"], vals["seg_weights"]
+        if p.ndim != 1 or p.shape[0] < 2 or not np.all(np.isfinite(p)):
+            raise ValueError(f"rep_profile must be a finite (K,) array with K >= 2, got shape {p.shape}")
+        if w.ndim != 1 or w.shape[0] < 1 or not np.all(np.isfinite(w)):
+            raise ValueError(f"seg_weights must be a finite (n,) array, got shape {w.shape}")
+        if n_segments is not None and w.shape[0] != int(n_segments):
+            raise ValueError(f"seg_weights has {w.shape[0]} entries for an arm of {n_segments} segments")
+    return type(gains)(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
 
 
 def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
@@ -855,7 +929,8 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
       method: "curve" (the paper's exact closest points) or "points" (each curve
         modelled by ``n_points`` points).
       n_points: N of the N-point model (method "points").
-      gains: :class:`Gains`; default :func:`default_gains`.
+      gains: :class:`Gains` or :class:`GainFunction` (e.g. from
+        :func:`~softplan_jax.gains_file.load_gains`); default :func:`default_gains`.
       max_steps: the most planner steps.
       seed: int seed (or PRNG key) of the escapes' random walks.
       **options: further :class:`PlanOptions` fields (step, safe_fraction,
@@ -871,7 +946,7 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
     if int(max_steps) < 1:
         raise ValueError(f"max_steps must be >= 1, got {max_steps}")
     opts = make_options(method, n_points, **options)
-    g = check_gains(gains, scenario.q0.dtype)
+    g = check_gains(gains, scenario.q0.dtype, scenario.q0.shape[0])
     r = rollout_jit(scenario, g, opts, int(max_steps), seed)
     return result_from_rollout(r, scenario)
 
@@ -943,7 +1018,7 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
         raise ValueError(f"progress must be True or False, got {progress!r}")
     opts = make_options(method, n_points, **options)
     dtype = scenarios.q0.dtype
-    g = _strong_gains(check_gains(gains, dtype), dtype)
+    g = _strong_gains(check_gains(gains, dtype, scenarios.q0.shape[-2]), dtype)
     T = int(max_steps)
     mesh = batch_mesh(devices)
     n_dev = 1 if mesh is None else mesh.size

@@ -34,15 +34,20 @@ PUBLIC = [
     "paper_scenario", "random_scenarios", "load_scenario", "save_scenario", "scenario_from_dict",
     "scenario_to_dict",
     # planner (paper eq. 9)
-    "Gains", "default_gains", "attraction", "repulsion", "PlanOptions", "make_options", "PAPER_STEP",
+    "Gains", "GainFunction", "default_gains", "attraction", "repulsion", "PlanOptions", "make_options", "PAPER_STEP",
     "planner_step", "Status", "STATUS_NAMES", "status_name", "Rollout", "rollout", "rollout_jit",
     "rollout_batch", "PlanResult", "result_from_rollout", "plan", "plan_batch",
     # gain presets
     "Preset", "PRESETS", "preset", "apply_preset",
+    # gains files
+    "save_gains", "load_gains", "gains_to_dict", "gains_from_dict",
     # metrics
     "true_closest", "dense_trajectory_clearance", "apply_collision_checks",
     # tuning
     "LossWeights", "TuningResult", "rollout_loss", "batch_loss", "tune_gains",
+    # tuning on the smoothed objective
+    "GainSpace", "ScoreWeights", "rollout_score", "score_batch", "SmoothingSample", "smoothing_sample",
+    "smoothed_objective", "ObjectiveEstimate", "estimate_objective", "TuneResult", "tune_smoothed",
     "enable_compilation_cache", "compilation_cache_dir",
     "__version__",
 ]

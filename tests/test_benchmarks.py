@@ -405,3 +405,38 @@ def test_importing_a_benchmark_script_changes_no_jax_setting():
     assert p.returncode == 0, p.stderr[-3000:]
     assert p.stdout.strip().splitlines()[-1] == "False", p.stdout
     assert "kernel" in scripts and "science" in scripts
+
+
+# ----------------------------------------------------------------------------
+# tuning.py (issue 22)
+
+
+def test_tuning_benchmark_rejects_bad_arguments():
+    import tuning as tuning_bench
+
+    for argv, match in ((["--pairs", "1"], "pairs"), (["--n-train", "0"], "n-train"), (["--sigma", "0"], "sigma"),
+                        (["--fraction", "1000"], "budget")):
+        with pytest.raises(ValueError, match=match):
+            tuning_bench.parse_args(argv)
+
+
+@pytest.mark.slow
+def test_tuning_benchmark_quick_run(tmp_path):
+    """The whole comparison at toy sizes: every tuner, held-out records, paired tests, figures, files."""
+    import json
+
+    import tuning as tuning_bench
+
+    out = tmp_path / "tuning"
+    rep = tuning_bench.main(["--quick", "--out", str(out)])
+    saved = json.loads((tmp_path / "tuning.json").read_text())
+    res = saved["methods"]["curve"]
+    assert set(res["heldout"]) == set(tuning_bench.SETTINGS)
+    for h in res["heldout"].values():
+        assert h["n"] == 16 and len(h["status"]) == 16 and 0 <= h["success"] <= 16
+    # Equal budgets: random, CMA-ES and the gradient within the grid's / fraction.
+    budget = rep["methods"]["curve"]["cost"]["grid"]["rollouts"] // 5
+    for name in ("random", "cma", "gradient"):
+        assert 0 <= res["cost"][name]["rollouts"] <= budget, name
+    assert "Wilson" in (tmp_path / "tuning.md").read_text()
+    assert (tmp_path / "figures" / "tuning_heldout.png").exists()

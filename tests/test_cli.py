@@ -28,7 +28,8 @@ from softplan_jax.planner import PlanResult
 
 STEPS = "80"
 SUMMARY_FIELDS = {
-    "scenario", "method", "n_points", "repulsion", "gains", "step", "escapes", "dtype", "status", "iterations",
+    "scenario", "method", "n_points", "repulsion", "gains", "gains_file", "gain_values", "step", "escapes", "dtype",
+    "status", "iterations",
     "max_steps", "reached", "collided", "min_clearance", "final_error", "goal_tolerance", "compile_time_s", "run_time_s",
     "time_per_scan_step_s", "plot", "gif", "out", "program_from_cache",
 }

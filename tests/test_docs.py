@@ -58,9 +58,14 @@ def test_citation_cites_the_paper_and_the_library():
     assert 'title: "Efficient Path Planning of Soft Robotic Arms in the Presence of Obstacles"' in cff
 
 
-def _readme_scenario(tmp_path):
+def _readme_json(fmt):
+    """The README's JSON blocks of one file format (``softplan-scenario/1``, ``softplan-gains/1``)."""
     text = (ROOT / "README.md").read_text()
-    blocks = re.findall(r"```json\n(.*?)```", text, re.S)
+    return [b for b in re.findall(r"```json\n(.*?)```", text, re.S) if f'"format": "{fmt}"' in b]
+
+
+def _readme_scenario(tmp_path):
+    blocks = _readme_json("softplan-scenario/1")
     assert len(blocks) == 1, "expected one JSON scenario in the README"
     path = tmp_path / "readme_scene.json"
     path.write_text(blocks[0])
@@ -70,6 +75,15 @@ def _readme_scenario(tmp_path):
 def test_readme_scenario_loads(tmp_path):
     scenario = sp.load_scenario(_readme_scenario(tmp_path))
     assert int(scenario.curve_mask.sum()) == 2 and bool(scenario.point_mask.any())  # 2 curves, 1 point set
+
+
+def test_readme_gains_file_loads(tmp_path):
+    blocks = _readme_json("softplan-gains/1")
+    assert len(blocks) == 1, "expected one JSON gains file in the README"
+    path = tmp_path / "readme_gains.json"
+    path.write_text(blocks[0])
+    gains = sp.load_gains(path, method="points", n_points=10)
+    assert isinstance(gains, sp.Gains) and float(gains.d0) == 0.3
 
 
 @pytest.mark.slow  # compiles a rollout for the README scene's own shape (~30 s)

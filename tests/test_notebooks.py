@@ -13,8 +13,7 @@ test executes a copy whose parameter cell is replaced by ``SMALL[name]`` (the
 same names, smaller values). The committed notebooks keep their full-size
 outputs. Nearly all of the time is XLA compilation inside the kernel, which
 shares the suite's persistent compilation cache (``session.py``), so a rerun
-is much faster than the first run (minutes on a 2-core CPU, most of it the two
-compilations of the gradient of a whole rollout in tuning.ipynb).
+is much faster than the first run (minutes on a 2-core CPU, most of it compilation).
 """
 
 import ast
@@ -38,9 +37,10 @@ KERNEL_START_TIMEOUT = 120
 SMALL = {
     # MAX_STEPS = 200 and N = 10 on the padded tree: the rollouts test_planner.py compiles.
     "quickstart.ipynb": "MAX_STEPS = 200\nN_POINTS = (10,)\n",
-    # ROLL_STEPS and PLAN_STEPS as in tests/test_planner.py: the kernel finds those compilations
-    # in the shared persistent cache (tune_gains at 10 steps; plan at 200 on the padded paper scenes).
-    "tuning.ipynb": "ROLL_STEPS = 10\nTUNING_STEPS = 2\nPLAN_STEPS = 200\n",
+    # PAIRS and STEPS as in tests/test_smoothing.py: the kernel finds its compiled batch of
+    # rollout scores in the shared persistent cache.
+    "tuning.ipynb": ("N_TRAIN = 8\nUPDATES = 2\nPAIRS = 4\nSTEPS = 20\nN_EVAL = 16\nEVAL_STEPS = 40\n"
+                     "FN_UPDATES = 2\nFN_PAIRS = 4\nKNOTS = 14\n"),
     "point_clouds.ipynb": "MAX_STEPS = 150\n",
 }
 

@@ -86,8 +86,8 @@ def test_cli_gains_paper_shows_the_collision(capsys):
     s = json.loads(out)
     assert (s["gains"], s["step"], s["status"], s["iterations"], s["collided"]) == ("paper", "plain", "collided",
                                                                                      21, True)
-    assert main(["run", "sim2", "--gains", "fast"]) == 2
-    assert "invalid choice" in capsys.readouterr().err
+    assert main(["run", "sim2", "--gains", "fast"]) == 2  # neither a preset nor a gains file
+    assert "neither a gain preset" in capsys.readouterr().err
 
 
 # The figures of issue 10 (curve / 1 / 10 / 50 / 100 points); "c21" = collided at step 21.

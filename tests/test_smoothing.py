@@ -1,0 +1,210 @@
+"""The smoothed tuning objective (softplan_jax.smoothing, issue 22): its gradient
+against central finite differences of the same objective, against re-run
+differences of the smoothed objective (common random numbers), the GainFunction
+against the Gains it generalises, tune_smoothed's history and budget, bad input.
+
+One compiled program of rollout scores is shared by the float64 tests (4 pairs,
+20 steps, the default GainSpace); the float32 smoke test and the slow re-run
+check compile their own.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import softplan_jax as sp
+from softplan_jax.smoothing import (
+    GainSpace,
+    estimate_objective,
+    smoothed_objective,
+    smoothing_sample,
+    tune_smoothed,
+)
+
+PAIRS, STEPS, SIGMA = 4, 20, 0.2
+SETTINGS = [dict(), dict(d0=0.2, dt=0.4, eta=0.002), dict(d0=0.3, dt=0.6, eta=0.004)]
+
+
+@pytest.fixture(scope="module")
+def suite():
+    return sp.random_scenarios(0, 8)
+
+
+def _base(setting):
+    return sp.default_gains()._replace(**{k: jnp.asarray(v, jnp.float64) for k, v in setting.items()})
+
+
+@pytest.mark.parametrize("setting", SETTINGS, ids=["defaults", "mid", "large"])
+def test_gradient_matches_central_differences_of_the_objective(suite, setting):
+    """jax.grad of smoothed_objective against central differences of smoothed_objective
+    itself (the same sample of rollouts), every component within 10 %, at the default gains
+    and two other settings; and equal to the antithetic score-function formula."""
+    space = GainSpace()
+    base = _base(setting)
+    theta = space.encode(base)
+    sample = smoothing_sample(theta, space, base, suite, jax.random.PRNGKey(3), pairs=PAIRS, sigma=SIGMA,
+                              max_steps=STEPS)
+    grad = np.asarray(jax.grad(smoothed_objective)(theta, sample))
+    assert np.all(np.isfinite(grad))
+    # Scores differ between rollouts (else the gradient would be identically zero).
+    assert np.ptp(np.asarray(sample.scores)) > 1e-3
+    for h in (1e-2, 1e-3):
+        fd = np.array([(float(smoothed_objective(theta.at[j].add(h), sample))
+                        - float(smoothed_objective(theta.at[j].add(-h), sample))) / (2 * h)
+                       for j in range(space.size)])
+        rel = np.abs(fd - grad) / np.abs(fd)
+        assert np.all(rel <= 0.1), (h, grad, fd, rel)
+    # The value at the centre is the mean score; the gradient the antithetic formula.
+    L = np.asarray(sample.scores)
+    eps = (np.asarray(sample.x[:PAIRS]) - np.asarray(theta)) / SIGMA
+    formula = (((L[:PAIRS] - L[PAIRS:]) / (2 * SIGMA))[:, None] * eps).mean(0)
+    np.testing.assert_allclose(grad, formula, rtol=1e-9, atol=1e-12)
+    est = estimate_objective(sample)
+    assert est.value == pytest.approx(L.mean(), rel=1e-12)
+    np.testing.assert_allclose(est.grad, grad, rtol=1e-12)
+    assert est.rollouts == 2 * PAIRS and np.all(est.grad_se > 0)
+
+
+@pytest.mark.slow
+def test_gradient_agrees_with_rerun_differences_of_the_smoothed_objective():
+    """The gradient estimate predicts FINITE steps of the smoothed objective: central
+    differences from fresh rollouts at theta +- h e_j (the same scenes, perturbations
+    and escape keys: common random numbers), every component within 3 combined
+    standard errors, and the two largest components agree in sign."""
+    suite = sp.random_scenarios(0, 128)
+    space = GainSpace()
+    base = _base({})
+    theta = space.encode(base)
+    key = jax.random.PRNGKey(11)
+    n, h = 128, 0.1
+    kw = dict(pairs=n, sigma=SIGMA, max_steps=60)
+    centre = smoothing_sample(theta, space, base, suite, key, **kw)
+    est = estimate_objective(centre)
+    for j in range(space.size):
+        up = smoothing_sample(theta.at[j].add(h), space, base, suite, key, **kw)
+        down = smoothing_sample(theta.at[j].add(-h), space, base, suite, key, **kw)
+        per_pair = ((np.asarray(up.scores).reshape(2, n).mean(0) - np.asarray(down.scores).reshape(2, n).mean(0))
+                    / (2 * h))
+        fd, fd_se = per_pair.mean(), per_pair.std(ddof=1) / math.sqrt(n)
+        z = (est.grad[j] - fd) / math.hypot(est.grad_se[j], fd_se)
+        assert abs(z) <= 3.0, (j, est.grad[j], est.grad_se[j], fd, fd_se)
+        if abs(fd) > 3 * fd_se:  # a clearly nonzero slope: the gradient has its sign
+            assert np.sign(est.grad[j]) == np.sign(fd), (j, est.grad[j], fd)
+
+
+def test_tune_smoothed_history_budget_progress_and_file(suite, tmp_path, capsys):
+    space = GainSpace()
+    res = tune_smoothed(suite, space, updates=3, pairs=PAIRS, sigma=SIGMA, max_steps=STEPS, learning_rate=0.2,
+                        average=1.0)
+    err = capsys.readouterr().err
+    assert err.count("[tune ") == 3 and "rollouts" in err
+    assert res.rollouts == 3 * 2 * PAIRS
+    assert res.history["theta"].shape == (4, space.size)
+    assert res.history["objective"].shape == (3,) and np.all(np.isfinite(res.history["objective"]))
+    np.testing.assert_array_equal(res.history["rollouts"], [8, 16, 24])
+    assert np.any(np.abs(np.diff(res.history["theta"], axis=0)) > 0)
+    # average=1: the mean of the three iterates after the updates (Polyak-Ruppert).
+    np.testing.assert_allclose(res.theta, res.history["theta"][1:].mean(0), rtol=1e-12)
+    for i, k in enumerate(space.names):
+        assert float(getattr(res.gains, k)) == pytest.approx(math.exp(res.theta[i]))
+    assert isinstance(res.gains, sp.Gains)
+    # The first update is plain SGD (no momentum yet): theta_1 = theta_0 - lr * grad_0, with
+    # grad_0 the gradient of the first update's sample (same key: the same draw).
+    first = estimate_objective(smoothing_sample(res.history["theta"][0], space, sp.default_gains(), suite,
+                                                jax.random.fold_in(jax.random.PRNGKey(0), 0), pairs=PAIRS,
+                                                sigma=SIGMA, max_steps=STEPS))
+    np.testing.assert_allclose(res.history["theta"][1], res.history["theta"][0] - 0.2 * first.grad, rtol=1e-10)
+    assert res.history["objective"][0] == pytest.approx(first.value, rel=1e-12)
+    path = tmp_path / "tuned.json"
+    sp.save_gains(res.gains, path, method="curve")
+    back = sp.load_gains(path, method="curve")
+    for k in sp.Gains._fields:
+        assert float(getattr(back, k)) == pytest.approx(float(getattr(res.gains, k)), rel=1e-15)
+
+
+def test_gain_function_generalises_gains(suite):
+    """A GainFunction with zero profile and weights steps exactly as its Gains; a
+    constant log-profile c (or constant segment weights c) steps as eta * exp(c)."""
+    sc = jax.tree_util.tree_map(lambda x: x[0], suite)
+    g = sp.default_gains()._replace(d0=jnp.asarray(3.0, jnp.float64))  # every obstacle within d0: the repulsion acts
+    q = sc.q0.at[:, 1].set(0.3)
+    opts = sp.PlanOptions(step="plain")
+    ref = np.asarray(sp.planner_step(q, sc, g, opts))
+    fn = sp.GainFunction.from_gains(g, 5, 3)
+    np.testing.assert_array_equal(np.asarray(sp.planner_step(q, sc, fn, opts)), ref)
+    c = 0.7
+    scaled = np.asarray(sp.planner_step(q, sc, g._replace(eta=g.eta * math.exp(c)), opts))
+    assert np.abs(scaled - ref).max() > 1e-6  # the repulsion matters here
+    for f in (fn._replace(rep_profile=jnp.full((5,), c)), fn._replace(seg_weights=jnp.full((3,), c))):
+        np.testing.assert_allclose(np.asarray(sp.planner_step(q, sc, f, opts)), scaled, rtol=1e-12, atol=1e-14)
+
+
+def test_gain_space_encode_decode_round_trip():
+    g = sp.default_gains()
+    space = GainSpace(("k_att", "v_max", "eta", "d0", "dt"), knots=14, segments=3)
+    assert space.size == 22
+    base = space.base(g, 3)
+    assert isinstance(base, sp.GainFunction)
+    theta = jnp.arange(22.0) * 0.01
+    back = space.decode(theta, base)
+    np.testing.assert_allclose(np.asarray(space.encode(back)), np.asarray(theta), rtol=1e-12, atol=1e-15)
+    assert float(back.rep_max) == float(g.rep_max) and float(back.damping) == float(g.damping)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(updates=0), "updates"),
+        (dict(updates=-3), "updates"),
+        (dict(pairs=1), "pairs"),
+        (dict(max_steps=0), "max_steps"),
+        (dict(learning_rate=float("nan")), "learning_rate"),
+        (dict(average=1.5), "average"),
+        (dict(sigma=0.0), "sigma"),
+        (dict(sigma=float("inf")), "sigma"),
+        (dict(space=GainSpace(("nope",))), "GainSpace.names"),
+        (dict(space=GainSpace((), knots=1)), "knots"),
+        (dict(space=GainSpace((), segments=2)), "segments"),
+        (dict(space=GainSpace(())), "tunes nothing"),
+        (dict(gains=sp.default_gains()._replace(dt=jnp.asarray(float("nan")))), "gain dt"),
+        (dict(method="bogus"), "unknown method"),
+    ],
+)
+def test_tune_smoothed_rejects_bad_input(suite, kwargs, match):
+    kw = dict(updates=1, pairs=PAIRS, max_steps=STEPS, progress=False)
+    kw.update(kwargs)
+    with pytest.raises(ValueError, match=match):
+        tune_smoothed(suite, **kw)
+
+
+def test_bad_suites_and_theta(suite):
+    empty = jax.tree_util.tree_map(lambda x: x[:0], suite)
+    with pytest.raises(ValueError, match="empty"):
+        tune_smoothed(empty, updates=1, progress=False)
+    with pytest.raises(ValueError, match="Scenario"):
+        tune_smoothed({"goal": [1, 2, 3]}, updates=1, progress=False)
+    space, base = GainSpace(), sp.default_gains()
+    with pytest.raises(ValueError, match="shape"):
+        smoothing_sample(jnp.zeros(2), space, base, suite, jax.random.PRNGKey(0))
+    with pytest.raises(ValueError, match="finite"):
+        smoothing_sample(jnp.array([0.0, jnp.nan, 0.0]), space, base, suite, jax.random.PRNGKey(0))
+
+
+def test_float32_straight_arm_gradient_is_finite():
+    """float32 smoke test: the default start is the straight arm (theta = 0 on every
+    segment); the smoothed objective's value and gradient are finite."""
+    suite = sp.random_scenarios(0, 4, dtype=jnp.float32) if "dtype" in sp.random_scenarios.__code__.co_varnames \
+        else jax.tree_util.tree_map(lambda x: x.astype(jnp.float32) if x.dtype == jnp.float64 else x,
+                                    sp.random_scenarios(0, 4))
+    assert np.all(np.asarray(suite.q0)[:, :, 1] == 0)  # straight
+    space = GainSpace()
+    base = sp.default_gains(jnp.float32)
+    theta = space.encode(base)
+    with jax.numpy_dtype_promotion("standard"):
+        sample = smoothing_sample(theta, space, base, suite, jax.random.PRNGKey(0), pairs=2, max_steps=10)
+        value, grad = jax.value_and_grad(smoothed_objective)(theta, sample)
+    assert sample.scores.dtype == jnp.float32
+    assert np.isfinite(float(value)) and np.all(np.isfinite(np.asarray(grad)))
