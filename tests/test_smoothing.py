@@ -125,11 +125,13 @@ def test_tune_smoothed_history_budget_progress_and_file(suite, tmp_path, capsys)
         assert float(getattr(back, k)) == pytest.approx(float(getattr(res.gains, k)), rel=1e-15)
 
 
-def test_gain_function_generalises_gains(suite):
+def test_gain_function_generalises_gains():
     """A GainFunction with zero profile and weights steps exactly as its Gains; a
-    constant log-profile c (or constant segment weights c) steps as eta * exp(c)."""
-    sc = jax.tree_util.tree_map(lambda x: x[0], suite)
-    g = sp.default_gains()._replace(d0=jnp.asarray(3.0, jnp.float64))  # every obstacle within d0: the repulsion acts
+    constant log-profile c (or constant segment weights c) steps as eta * exp(c).
+    (One curve: small programs.)"""
+    line = sp.PolynomialCurve([[1.0, 0.0], [0.0, 1.0], [0.5, -1.0]], (-2.0, 2.0))
+    sc = sp.make_scenario([1.1, -0.8, 0.9], [line])
+    g = sp.default_gains()._replace(d0=jnp.asarray(3.0, jnp.float64))  # the obstacle within d0: the repulsion acts
     q = sc.q0.at[:, 1].set(0.3)
     opts = sp.PlanOptions(step="plain")
     ref = np.asarray(sp.planner_step(q, sc, g, opts))
