@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .planner import GainFunction, Gains, check_gains
-from .scenarios.json_format import write_json_file
+from .scenarios.json_format import read_json_file, write_json_file
 
 __all__ = ["GAINS_FORMAT", "gains_to_dict", "gains_from_dict", "save_gains", "load_gains"]
 
@@ -263,17 +263,7 @@ def load_gains(path, method: str | None = None, n_points: int | None = None, dty
     """
     path = os.fspath(path)
     _check_model(method, n_points)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
-    except FileNotFoundError:
-        raise ValueError(f"gains file not found: {path}") from None
-    except json.JSONDecodeError as err:
-        raise ValueError(f"gains file {path} is not valid JSON: {err}") from None
-    except UnicodeDecodeError as err:
-        raise ValueError(f"gains file {path} is not UTF-8 text: {err}") from None
-    except OSError as err:
-        raise ValueError(f"cannot read gains file {path}: {err.strerror or err}") from None
+    data = read_json_file(path, "gains")
     try:
         gains, file_method, file_n = _parse(data)
         gains = _validated(gains, dtype or jnp.result_type(float))

@@ -211,20 +211,26 @@ def scenario_to_dict(scenario: Scenario, name: str | None = None) -> dict:
     return out
 
 
+def read_json_file(path: str, kind: str):
+    """The parsed JSON of the ``kind`` file at ``path`` (``kind``: "scenario", "gains", ...
+    for the messages); a missing, unreadable, non-UTF-8 or non-JSON file is a ValueError."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return json.load(fh)
+    except FileNotFoundError:
+        raise ValueError(f"{kind} file not found: {path}") from None
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{kind} file {path} is not valid JSON: {err}") from None
+    except UnicodeDecodeError as err:
+        raise ValueError(f"{kind} file {path} is not UTF-8 text: {err}") from None
+    except OSError as err:
+        raise ValueError(f"cannot read {kind} file {path}: {err.strerror or err}") from None
+
+
 def load_scenario(path, dtype=None) -> Scenario:
     """Read a scenario JSON file (format ``softplan-scenario/1``, see the README)."""
     path = os.fspath(path)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
-    except FileNotFoundError:
-        raise ValueError(f"scenario file not found: {path}") from None
-    except json.JSONDecodeError as err:
-        raise ValueError(f"scenario file {path} is not valid JSON: {err}") from None
-    except UnicodeDecodeError as err:
-        raise ValueError(f"scenario file {path} is not UTF-8 text: {err}") from None
-    except OSError as err:
-        raise ValueError(f"cannot read scenario file {path}: {err.strerror or err}") from None
+    data = read_json_file(path, "scenario")
     try:
         return scenario_from_dict(data, dtype=dtype)
     except ValueError as err:
