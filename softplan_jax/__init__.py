@@ -13,6 +13,7 @@ from .closest import ClosestPoint, SolverOptions, closest_point, closest_point_t
 from .closest_grid import GridSolverOptions
 from .compilation_cache import compilation_cache_dir, enable_compilation_cache
 from .curves import ParametricCurve, PolynomialCurve, curve_points, fit_polynomial_curve, line_segment, stack_curves
+from .fallback import plan_fallback
 from .fitting import CloudFit, CurveFit, FitWarning, curve_distance, fit_curve, fit_curves, load_cloud, save_fit_scenario
 from .gains_file import gains_from_dict, gains_to_dict, load_gains, save_gains
 from .kinematics import (
@@ -46,6 +47,7 @@ from .planner import (
     rollout_jit,
 )
 from .presets import PRESETS, Preset, apply_preset, preset
+from .reach import REACH_REASONS, Reachability, ReachOptions, reachability
 from .scenarios import (
     Scenario,
     default_start,
@@ -145,6 +147,12 @@ __all__ = [
     "result_from_rollout",
     "plan",
     "plan_batch",
+    # reachability and the global fallback (softplan_jax.reach, softplan_jax.global_planner)
+    "ReachOptions",
+    "Reachability",
+    "REACH_REASONS",
+    "reachability",
+    "plan_fallback",
     # gain presets ("paper": the calibration that reproduces the paper; "default")
     "Preset",
     "PRESETS",

@@ -137,6 +137,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="reached when |goal - tip| < TOL (default: the planner's, 0.01)")
     run.add_argument("--repulsion", choices=("khatib", "exponential"), default="khatib",
                      help="repulsion gain function (default: khatib)")
+    run.add_argument("--no-fallback", action="store_true",
+                     help="the local planner only: no reachability test and no global search where it stalls or "
+                          "runs out of steps (default: both; see plan_fallback)")
     run.add_argument("--plot", metavar="PATH", help="write the snapshot figure (PNG, PDF, SVG, ...)")
     run.add_argument("--gif", metavar="PATH", help="write an animated GIF of the motion (needs pillow)")
     run.add_argument("--out", metavar="FILE",
@@ -402,7 +405,10 @@ def trajectory_record(result, scenario, summary: dict) -> dict:
       arrays, T = iterations + 1, m = the scenario's obstacles, the true
       clearance at every step), ``goal`` (3,), and the scalars ``format``,
       ``status``, ``iterations``, ``reached``, ``collided``, ``min_clearance``,
-      ``final_error`` and the summary's metadata (``scenario``, ``method``,
+      ``final_error``, ``planner`` ("local" or "global"), ``reason`` ("" or why the
+      goal was not reached), ``global_start`` (the step where the global search's
+      path leaves the local one, or None), ``best_error`` (the reachability IK's best
+      tip distance, or None) and the summary's metadata (``scenario``, ``method``,
       ``n_points``, ``repulsion``, ``dtype``, ``max_steps``,
       ``goal_tolerance``, ``compile_time_s``, ``run_time_s``, ``gains``: the
       preset name or the gains file as given, ``gains_file``: its absolute
@@ -426,6 +432,10 @@ def trajectory_record(result, scenario, summary: dict) -> dict:
         "collided": bool(result.collided),
         "min_clearance": float(result.min_clearance),
         "final_error": float(result.final_error),
+        "planner": result.planner,
+        "reason": result.reason,
+        "global_start": result.global_start,
+        "best_error": result.best_error,
     }
     for key in ("scenario", "method", "n_points", "repulsion", "dtype", "max_steps", "goal_tolerance",
                 "compile_time_s", "run_time_s", "gains", "gains_file"):
@@ -558,6 +568,15 @@ def _cmd_run(args) -> int:
     rollout = jax.block_until_ready(run(scenario, gains, args.seed))
     run_time = time.perf_counter() - t0
     result = result_from_rollout(rollout, scenario)
+    fallback_time = 0.0
+    if not args.no_fallback and result.status in ("stalled", "max_steps"):
+        from .fallback import rescue
+
+        print(f"softplan: the local planner ended {result.status}; deciding reachability and searching globally "
+              "(the first time compiles for about a minute) ...", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        result = rescue(scenario, [result], options, seed=args.seed)[0]
+        fallback_time = time.perf_counter() - t0
 
     summary = {
         "scenario": label,
@@ -569,6 +588,12 @@ def _cmd_run(args) -> int:
         "escapes": int(rollout.escapes),
         "dtype": str(jnp.dtype(scenario.q0.dtype)),
         "status": result.status,
+        "planner": result.planner,
+        "reason": result.reason,
+        "global_start": result.global_start,
+        "best_error": result.best_error,
+        "fallback": not args.no_fallback,
+        "fallback_time_s": fallback_time,
         "iterations": result.iterations,
         "max_steps": max_steps,
         "reached": result.reached,
@@ -589,7 +614,10 @@ def _cmd_run(args) -> int:
     title = (
         f"{label} — {args.method} method"
         + (f" (N = {args.n_points})" if args.method == "points" else "")
-        + f" — {result.status} after {result.iterations} iterations\n"
+        + f" — {result.status} after {result.iterations} iterations"
+        + (f" (global search from step {result.global_start})" if result.planner == "global" else "")
+        + (f" ({result.reason})" if result.reason else "")
+        + "\n"
         f"min true clearance {result.min_clearance:.3f}, final tip error {result.final_error:.3f}"
     )
     if args.plot is not None or args.gif is not None:
@@ -779,15 +807,21 @@ def _text_summary(s: dict) -> str:
         ("step", ("safe (clearance-bounded)" if s["step"] == "safe" else "plain (the paper's)")
          + f", {s['escapes']} escape(s) used"),
         ("dtype", s["dtype"]),
-        ("status", s["status"]),
-        ("iterations", f"{s['iterations']} (max steps {s['max_steps']})"),
+        ("status", s["status"] + (f" ({s['reason']})" if s["reason"] else "")),
+        ("planner", ("local (potential field, paper eq. 9)" if s["planner"] == "local" else
+                     f"global: the local path to step {s['global_start']}, then the certified global search")
+         + ("" if s["fallback"] else "; fallback off (--no-fallback)")),
+        ("iterations", f"{s['iterations']} (max steps {s['max_steps']} of the local planner)"),
         ("reached", "yes" if s["reached"] else "no"),
         ("collided", "yes" if s["collided"] else "no"),
         ("min true clearance", f"{s['min_clearance']:.4f}"),
-        ("final tip error", f"{s['final_error']:.4f} (goal tolerance {s['goal_tolerance']:g})"),
+        ("final tip error", f"{s['final_error']:.4f} (goal tolerance {s['goal_tolerance']:g})"
+         + (f"; best tip error of a collision-free IK configuration {s['best_error']:.4g}"
+            if s["best_error"] is not None else "")),
         ("compile time", _fmt_seconds(s["compile_time_s"])
          + (" (traced program loaded from the cache)" if s["program_from_cache"] else "")),
-        ("run time", f"{_fmt_seconds(s['run_time_s'])} for {s['max_steps']} scan steps"),
+        ("run time", f"{_fmt_seconds(s['run_time_s'])} for {s['max_steps']} scan steps"
+         + (f"; fallback {_fmt_seconds(s['fallback_time_s'])}" if s["fallback_time_s"] else "")),
         ("time per scan step", f"{_fmt_seconds(s['time_per_scan_step_s'])} "
          "(run time / max steps: the scan runs every step, also after the rollout stops)"),
     ]

@@ -78,7 +78,7 @@ from scipy.spatial import cKDTree
 
 from .curves import PolynomialCurve
 from .scenarios import write_json_file
-from .validation import check_cloud
+from .validation import check_cloud, check_points
 
 __all__ = [
     "CurveFit",
@@ -410,7 +410,8 @@ def curve_distance(curve: PolynomialCurve, points):
     """
     if not isinstance(curve, PolynomialCurve) or curve.coeffs.ndim != 2:
         raise ValueError("curve_distance needs a single PolynomialCurve (coeffs of shape (3, K))")
-    pts = check_cloud(points) if np.size(points) else np.zeros((0, 3))
+    # Any (N, 3) finite points, repeated ones and a single one included (a query, not a cloud to fit).
+    pts = np.asarray(check_points(points), np.float64) if np.size(points) else np.zeros((0, 3))
     lo, hi = (float(x) for x in np.asarray(curve.u_range))
     u, dist = _closest_u(np.asarray(curve.coeffs, np.float64), pts, lo, hi)
     return dist, u

@@ -868,9 +868,20 @@ class PlanResult(NamedTuple):
       min_clearance: float, minimum true clearance over the motion.
       q: (iterations + 1, n, 3) configurations, start first.
       tip: (iterations + 1, 3) tip positions.
-      status: "reached", "collided", "stalled", "max_steps" or "non_finite".
+      status: "reached", "collided", "stalled", "max_steps", "non_finite" or
+        (with the fallback) "unreachable".
       clearance: (iterations + 1, m) true clearance per step and real obstacle.
       final_error: float, |goal - tip| at the end.
+      planner: "local" (the path is the potential-field planner's) or "global"
+        (:func:`~softplan_jax.plan_fallback`: the local path up to step
+        ``global_start``, then the global search's certified path).
+      reason: why the goal was not reached, from the fallback: "beyond_reach",
+        "goal_in_obstacle" (proofs), "no_ik_solution" (status "unreachable"), or
+        "search_exhausted" (reachable, but the search found no path); else "".
+      best_error: the smallest tip distance of a collision-free configuration
+        found by the reachability IK (None where it did not run).
+      global_start: the step where the global search's path leaves the local
+        path (None for a local path).
     """
 
     reached: bool
@@ -882,6 +893,10 @@ class PlanResult(NamedTuple):
     status: str
     clearance: np.ndarray
     final_error: float
+    planner: str = "local"
+    reason: str = ""
+    best_error: float | None = None
+    global_start: int | None = None
 
 
 def make_options(method="curve", n_points=10, **kwargs) -> PlanOptions:

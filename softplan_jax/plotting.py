@@ -34,6 +34,7 @@ _OBSTACLE_COLOR = "#8c5a2b"  # branch brown
 _POINTS_COLOR = "#6b4423"
 _GOAL_COLOR = "#f2b705"
 _PATH_COLOR = "#444444"
+_GLOBAL_COLOR = "#1b9e77"  # the part of the path found by the global search (plan_fallback)
 _BASE_COLOR = "black"
 
 
@@ -87,6 +88,8 @@ def _trajectory(scenario, result) -> dict:
         min_clearance=float(getattr(result, "min_clearance", np.nan)),
         collided=bool(getattr(result, "collided", False)),
         clearance=None if clearance is None else np.asarray(clearance, dtype=float),
+        planner=str(getattr(result, "planner", "local")),
+        global_start=getattr(result, "global_start", None),
     )
 
 
@@ -189,6 +192,14 @@ def _setup_axes(ax, limits, view):
         axis.set_major_locator(MaxNLocator(nbins=5, steps=[1, 2, 2.5, 5, 10]))
 
 
+def _draw_global_part(ax, traj):
+    """Over the tip path: its part planned by the global search (plan_fallback), in its own colour."""
+    if traj["planner"] != "global" or traj["global_start"] is None:
+        return
+    tip = traj["tip"][int(traj["global_start"]):]
+    ax.plot(tip[:, 0], tip[:, 1], tip[:, 2], lw=1.6, color=_GLOBAL_COLOR, label="tip path (global search)")
+
+
 def _draw_scene(ax, scenario, limits, obstacles, tip_path=None):
     """Obstacles, goal and the base; returns the artists of the tip path."""
     curve_labelled = points_labelled = False
@@ -269,7 +280,8 @@ def _resolve_steps(steps, iterations: int) -> list[int]:
 def _default_title(traj) -> str:
     clr = traj["min_clearance"]
     extra = f", min clearance {clr:.3f}" if np.isfinite(clr) else ""
-    return f"{traj['status']} after {traj['iterations']} iterations{extra}"
+    how = f" (global search from step {traj['global_start']})" if traj["planner"] == "global" else ""
+    return f"{traj['status']} after {traj['iterations']} iterations{how}{extra}"
 
 
 def _shadow(ax, pts, limits, **kw):
@@ -331,6 +343,7 @@ def plot_snapshots(scenario, result, steps=None, ax=None, title=None, view=None,
     fig = ax.figure
     _setup_axes(ax, limits, _auto_view(scenario, view))
     _draw_scene(ax, scenario, limits, obstacles, tip_path=traj["tip"])
+    _draw_global_part(ax, traj)
     arm_lw = _radius_linewidth(ax, limits, float(np.asarray(scenario.arm_radius)), floor=3.0)
     for step, color, backbone in zip(steps, _snapshot_colors(len(steps)), backbones, strict=True):
         _shadow(ax, backbone, limits, lw=1.5)

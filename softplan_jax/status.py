@@ -1,6 +1,7 @@
 """Rollout statuses: how a planning run ended (reached the goal, collided,
 stalled in a local minimum of the potential field of paper eq. 9, ran out of
-steps, or met a non-finite number).
+steps, or met a non-finite number; or, with the global fallback, the goal was
+found unreachable).
 """
 
 from __future__ import annotations
@@ -22,10 +23,13 @@ class Status(enum.IntEnum):
     STALLED = 3
     MAX_STEPS = 4
     NONFINITE = 5
+    UNREACHABLE = 6
 
     @property
     def label(self) -> str:
-        """The report name: "running", "reached", "collided", "stalled", "max_steps", "non_finite"."""
+        """The report name: "running", "reached", "collided", "stalled", "max_steps", "non_finite",
+        "unreachable" (set by :func:`~softplan_jax.plan_fallback` only: no collision-free
+        configuration puts the tip on the goal, see :mod:`softplan_jax.reach`)."""
         return "non_finite" if self is Status.NONFINITE else self.name.lower()
 
 

@@ -37,6 +37,8 @@ PUBLIC = [
     "Gains", "GainFunction", "default_gains", "attraction", "repulsion", "PlanOptions", "make_options", "PAPER_STEP",
     "planner_step", "Status", "STATUS_NAMES", "status_name", "Rollout", "rollout", "rollout_jit",
     "rollout_batch", "PlanResult", "result_from_rollout", "plan", "plan_batch",
+    # reachability and the global fallback
+    "ReachOptions", "Reachability", "REACH_REASONS", "reachability", "plan_fallback",
     # gain presets
     "Preset", "PRESETS", "preset", "apply_preset",
     # gains files

@@ -440,3 +440,33 @@ def test_tuning_benchmark_quick_run(tmp_path):
         assert 0 <= res["cost"][name]["rollouts"] <= budget, name
     assert "Wilson" in (tmp_path / "tuning.md").read_text()
     assert (tmp_path / "figures" / "tuning_heldout.png").exists()
+
+
+# ----------------------------------------------------------------------------
+# reach.py (issue 24)
+
+
+def test_reach_benchmark_rejects_bad_arguments():
+    import reach as reach_bench
+
+    for argv, match in ((["--n", "0"], "--n"), (["--chunk", "0"], "--chunk"), (["--max-steps", "0"], "--max-steps")):
+        with pytest.raises(ValueError, match=match):
+            reach_bench.parse_args(argv)
+
+
+@pytest.mark.slow
+def test_reach_benchmark_quick_run(tmp_path):
+    """The whole benchmark at toy sizes (20 local steps, so that the search runs): files, checks, figures."""
+    import json
+
+    import reach as reach_bench
+
+    rep = reach_bench.main(["--quick", "--n", "3", "--max-steps", "20", "--timing-scenes", "2",
+                            "--out", str(tmp_path / "reach")])
+    saved = json.loads((tmp_path / "reach.json").read_text())
+    assert saved["settings"]["n"] == 3 and len(saved["per_scene"]) == 3
+    assert rep["global_paths"] >= 1 and rep["collisions"] == 0 and rep["dense_collisions"] == 0
+    assert rep["swept_proof_failures"] == 0 and not rep["unlabelled"]
+    assert all(v["identical"] for v in rep["paper"].values())
+    assert "95 % interval" in (tmp_path / "reach.md").read_text()
+    assert (tmp_path / "figures" / "reach_time.png").exists()

@@ -14,6 +14,7 @@ hand-made result (no planning).
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -32,6 +33,7 @@ SUMMARY_FIELDS = {
     "status", "iterations",
     "max_steps", "reached", "collided", "min_clearance", "final_error", "goal_tolerance", "compile_time_s", "run_time_s",
     "time_per_scan_step_s", "plot", "gif", "out", "program_from_cache",
+    "planner", "reason", "global_start", "best_error", "fallback", "fallback_time_s",
 }
 
 
@@ -106,13 +108,41 @@ def test_require_reached(sim1_file, tmp_path, capsys):
     data["goal"] = [4.0, 4.0, 4.0]
     far = tmp_path / "far.json"
     far.write_text(json.dumps(data))
-    code, out, err = run_main(capsys, "run", far, "--max-steps", STEPS, "--json")
+    # Without the fallback (with it, unbounded lengths reach this goal: see test_run_fallback_*).
+    code, out, err = run_main(capsys, "run", far, "--max-steps", STEPS, "--json", "--no-fallback")
     assert code == 0, err  # planning finished: success whatever the status
     assert json.loads(out)["reached"] is False
-    code, out, err = run_main(capsys, "run", far, "--max-steps", STEPS, "--json", "--require-reached")
+    code, out, err = run_main(capsys, "run", far, "--max-steps", STEPS, "--json", "--require-reached", "--no-fallback")
     assert code == 3
     code, out, err = run_main(capsys, "run", "sim1", "--max-steps", STEPS, "--json", "--require-reached")
     assert code == (0 if json.loads(out)["reached"] else 3)
+
+
+def test_run_fallback_says_unreachable_and_why(sim1_file, tmp_path, capsys):
+    # sim1's shapes and steps (its compiled rollout); lengths capped at 1.05: the goal is beyond reach.
+    data = json.loads(sim1_file.read_text())
+    data["goal"] = [4.0, 4.0, 4.0]
+    data["arm"]["length_limits"] = [0.001, 1.05]
+    far = tmp_path / "beyond.json"
+    far.write_text(json.dumps(data))
+    out_file = tmp_path / "beyond_run.json"
+    code, out, err = run_main(capsys, "run", far, "--max-steps", STEPS, "--json", "--out", out_file)
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["status"] == "unreachable" and s["reason"] == "beyond_reach" and s["planner"] == "local"
+    assert s["fallback"] is True and not s["reached"] and s["global_start"] is None
+    # Sound (no configuration beats |goal| - sum L_max; the arm leaves its base vertically, so that
+    # bound is not attained) and better than the start pose, whose tip is at (0, 0, 3).
+    assert math.sqrt(48.0) - 3 * 1.05 - 1e-9 <= s["best_error"] < math.sqrt(33.0)
+    saved = json.loads(out_file.read_text())
+    for key in ("status", "reason", "planner", "global_start", "best_error"):
+        assert saved[key] == s[key], key
+    code, out, err = run_main(capsys, "run", far, "--max-steps", STEPS, "--require-reached")
+    assert code == 3 and "unreachable (beyond_reach)" in out
+    code, out, err = run_main(capsys, "run", far, "--max-steps", STEPS, "--json", "--no-fallback")
+    s = json.loads(out)
+    assert s["status"] in ("stalled", "max_steps") and s["reason"] == "" and s["best_error"] is None
+    assert s["fallback"] is False and s["fallback_time_s"] == 0
 
 
 # ----------------------------------------------------------------------------
@@ -455,3 +485,4 @@ def test_run_warns_about_a_goal_inside_an_obstacle(capsys, tmp_path):
     code, out, err = run_main(capsys, "run", str(path), "--max-steps", STEPS)  # sim1's shapes and steps: its program
     assert code == 0, err
     assert "warning: the goal" in err and "inside obstacle" in err
+    assert "unreachable (goal_in_obstacle)" in out  # the fallback's proof

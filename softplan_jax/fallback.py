@@ -1,0 +1,297 @@
+"""Plan with the global fallback: the local planner first, then reachability and a certified search.
+
+:func:`plan_fallback` runs the potential-field planner of paper eq. (9)
+(:func:`~softplan_jax.planner.plan_batch`); for every scene that it leaves
+``stalled`` or at ``max_steps``:
+
+1. :func:`~softplan_jax.reach.reachability` decides whether a collision-free
+   configuration puts the tip on the goal. If none is found the scene's status
+   becomes ``unreachable``, with the reason (``beyond_reach`` and
+   ``goal_in_obstacle`` are proofs; ``no_ik_solution`` means the multi-start
+   IK found none) and the best tip distance.
+2. Otherwise :func:`~softplan_jax.global_planner.global_search` (RRT-Connect
+   with certified motions) searches from configurations along the local
+   planner's path to the certified goal configurations. The returned path is
+   the local path up to the configuration the search left from, then the
+   search's path; every one of its steps is certified by the swept proof
+   (exact clearance at the step's start minus the motion bound above the
+   contact tolerance), and the result records that check. If the search
+   finds nothing the local result stands, with the reason ``search_exhausted``.
+
+Scenes the local planner reached, or that collided (an N-point model can),
+keep their local result. The searches of a batch run in chunks of one shape
+(``chunk`` scenes vmapped, the last chunk padded), so a batch compiles once.
+The default chunk is 1, one scene at a time: a vmapped search runs its
+loops in lockstep until the slowest scene of the chunk is done, and on the
+CPU the first chunk of 8 of random_scenarios(1, 1024)'s rescued scenes took
+114 s (about 30 s of it compilation) where one scene at a time takes about
+1 s; a larger chunk is for accelerators.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .batching import pad_batch
+from .closest import DEFAULT_OPTIONS
+from .global_planner import global_search
+from .kinematics import motion_bound, tip_position
+from .metrics import contact_tolerance
+from .planner import PlanResult, make_options, plan, plan_batch
+from .reach import Reachability, ReachOptions, check_reach_options, clearances, reachability
+from .scenarios import Scenario, stack_scenarios
+from .status import Status, status_name
+
+__all__ = ["plan_fallback", "rescue"]
+
+
+@functools.cache
+def _search_jit(options: ReachOptions, solver, contact: float):
+    def one(scenario, q_starts, n_starts, q_goals, n_goals, key):
+        return global_search(scenario, q_starts, n_starts, q_goals, n_goals, key, options, solver, contact)
+
+    return jax.jit(jax.vmap(one))
+
+
+@functools.cache
+def _path_check_jit(solver, contact: float):
+    """Per step of a path: the exact clearances (m,), and whether the motion to the
+    next step is proven clear by the swept proof (metrics.swept_clear)."""
+    from .metrics import PROOF_TOLERANCE
+
+    def one(scenario, q_a, q_b):
+        c, truth, ok = clearances(q_a, scenario, solver)
+        bound = motion_bound(q_a, q_b)[-1]
+        arm = jnp.sum(jnp.maximum(q_a[:, 0], q_b[:, 0]))
+        # metrics.swept_clear's rounding margin, with the largest real distance (more conservative).
+        far = jnp.max(jnp.where(jnp.isfinite(c), truth.distance, 0.0), initial=0.0)
+        margin = PROOF_TOLERANCE * jnp.finfo(q_a.dtype).eps * (1.0 + arm + far)
+        proven = ok & (jnp.min(c, initial=jnp.inf) - bound > contact + margin)
+        return c, proven
+
+    return jax.jit(jax.vmap(one, in_axes=(None, 0, 0)))
+
+
+_tips_jit = jax.jit(jax.vmap(tip_position))
+
+
+def _scene(scenarios: Scenario, b: int) -> Scenario:
+    return jax.tree_util.tree_map(lambda x: x[b], scenarios)
+
+
+def _start_roots(q_local: np.ndarray, count: int):
+    """Indices of ``count`` configurations evenly spaced along the local path (start and end included)."""
+    last = q_local.shape[0] - 1
+    return np.unique(np.round(np.linspace(0.0, 1.0, count) * last).astype(int))
+
+
+def plan_fallback(scenarios: Scenario, method: str = "curve", n_points: int = 10, gains=None, max_steps: int = 600,
+                  seed=0, *, reach: ReachOptions = ReachOptions(), chunk: int = 1, progress: bool = False,
+                  **options):
+    """Plan with the local planner, and where it stalls or runs out of steps decide
+    reachability and search globally (module docstring).
+
+    Args:
+      scenarios: one Scenario or a batch (leading axis B).
+      method, n_points, gains, max_steps, seed, **options: as :func:`~softplan_jax.plan`
+        (the local planner's settings; ``options`` are :class:`~softplan_jax.PlanOptions` fields).
+      reach: :class:`~softplan_jax.reach.ReachOptions` of the IK and of the search.
+      chunk: scenes per compiled search call (vmapped; the last chunk is padded).
+        Default 1: one scene at a time, the fastest on the CPU (module docstring).
+      progress: one line per finished stage/chunk on stderr.
+
+    Returns:
+      A :class:`~softplan_jax.PlanResult` (one scene) or a list of them (a batch),
+      with ``planner`` ("local": the local planner's path; "global": the local
+      path up to where the search left it, then the search's path), ``reason``
+      and ``best_error`` filled in (see :class:`~softplan_jax.PlanResult`).
+    """
+    if not isinstance(scenarios, Scenario):
+        raise ValueError(f"scenarios must be a Scenario, got {type(scenarios).__name__}")
+    check_reach_options(reach)
+    if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
+        raise ValueError(f"chunk must be an int >= 1, got {chunk!r}")
+    single = scenarios.q0.ndim == 2
+    batch = stack_scenarios([scenarios]) if single else scenarios
+    opts = make_options(method, n_points, **options)
+    t0 = time.perf_counter()
+    B = batch.q0.shape[0]
+    if single:  # exactly plan's rollout (plan_batch's vmapped program rounds differently)
+        results = [plan(scenarios, method, n_points, gains, max_steps, seed, **options)]
+    else:
+        r = jax.device_get(plan_batch(batch, method, n_points, gains, max_steps, seed, **options))
+        results = [_local_result(r, b, batch) for b in range(B)]
+    if progress:
+        _say(f"plan_fallback: local planner on {B} scenes, {time.perf_counter() - t0:.1f} s")
+    results = rescue(batch, results, opts, reach=reach, seed=seed, chunk=chunk, progress=progress)
+    return results[0] if single else results
+
+
+def rescue(scenarios: Scenario, results: list, options, *, reach: ReachOptions = ReachOptions(), seed=0,
+           chunk: int = 1, progress: bool = False) -> list:
+    """The fallback after the local planner: for the results (PlanResult, one per scene of
+    the batch ``scenarios``) that ended "stalled" or "max_steps", reachability and the
+    global search; the others are returned unchanged. ``options``: the local planner's
+    PlanOptions (its contact tolerance, solver and goal tolerance are the search's)."""
+    reach = check_reach_options(reach)
+    seed = _int_seed(seed)
+    batch = stack_scenarios([scenarios]) if scenarios.q0.ndim == 2 else scenarios
+    results = list(results)
+    dtype = batch.q0.dtype
+    contact = contact_tolerance(options, dtype)
+    solver = options.solver if options.method == "curve" else DEFAULT_OPTIONS
+    todo = [b for b in range(len(results)) if results[b].status in ("stalled", "max_steps")]
+    if not todo:
+        return results
+    t1 = time.perf_counter()
+    decided = _reachability_chunks(batch, results, todo, reach, solver, contact, seed, chunk)
+    if progress:
+        n_un = int(np.sum(~decided.reachable))
+        _say(f"plan_fallback: reachability of {len(todo)} scenes, {n_un} unreachable, "
+             f"{time.perf_counter() - t1:.1f} s")
+    search = [i for i in range(len(todo)) if decided.reachable[i]]
+    for i, b in enumerate(todo):
+        results[b] = results[b]._replace(best_error=float(decided.best_error[i]))
+        if not decided.reachable[i]:
+            results[b] = results[b]._replace(status=status_name(Status.UNREACHABLE), reason=decided.reason[i])
+    _search_all(batch, results, [todo[i] for i in search], decided, search, reach, solver, contact,
+                options.goal_tolerance, seed, chunk, progress)
+    return results
+
+
+def _int_seed(seed) -> int:
+    """An int seed for the fallback's keys from plan's seed (an int, or a PRNG key: its last word)."""
+    if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+        return int(seed)
+    key = seed
+    if jnp.issubdtype(jnp.asarray(key).dtype, jax.dtypes.prng_key):
+        key = jax.random.key_data(key)
+    words = np.asarray(key)
+    if words.dtype.kind not in "ui" or words.size == 0:
+        raise ValueError(f"seed must be an int or a JAX PRNG key, got {seed!r}")
+    return int(words.ravel()[-1])
+
+
+def _reachability_chunks(batch, results, todo, reach, solver, contact, seed, chunk):
+    """reachability of the scenes ``todo`` (extra start: where the local planner stopped), in
+    chunks of ``chunk`` scenes padded to one shape (one program whatever the number of scenes)."""
+    host = jax.device_get(batch)
+    size = min(int(chunk), len(todo))
+    parts = []
+    for a in range(0, len(todo), size):
+        part = todo[a : a + size]
+        sub = jax.tree_util.tree_map(lambda x, part=part: np.asarray(x)[part], host)
+        q_end = np.stack([results[b].q[-1] for b in part])
+        sub, q_end = pad_batch((sub, q_end), size)
+        r = reachability(sub, q_end, seed=seed, options=reach, solver=solver, contact_tolerance=contact)
+        parts.append(jax.tree_util.tree_map(lambda x, n=len(part): x[:n], r._replace(reason=None)))
+        parts[-1] = parts[-1]._replace(reason=r.reason[: len(part)])
+    return Reachability(*(np.concatenate([getattr(p, f) for p in parts]) if f != "reason" else
+                          sum((p.reason for p in parts), ()) for f in Reachability._fields))
+
+
+def _say(msg: str):
+    import sys
+
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _local_result(r, b: int, batch: Scenario) -> PlanResult:
+    from .planner import result_from_rollout
+
+    one = jax.tree_util.tree_map(lambda x: x[b], r)
+    return result_from_rollout(one, _scene(batch, b))
+
+
+def _search_all(batch, results, scenes, decided, rows, reach: ReachOptions, solver, contact, tolerance, seed, chunk,
+                progress):
+    """Run the global search for the scenes ``scenes`` (rows ``rows`` of ``decided``) in chunks."""
+    if not scenes:
+        return
+    G, R = int(reach.goal_roots), int(reach.start_roots)
+    host = jax.device_get(batch)
+    fn = _search_jit(reach, solver, float(contact))
+    check = _path_check_jit(solver, float(contact))
+    keys = np.asarray(jax.random.split(jax.random.PRNGKey(int(seed) + 1), len(results)))
+    n = host.q0.shape[-2]
+    t0 = time.perf_counter()
+    size = min(int(chunk), len(scenes))
+    for a in range(0, len(scenes), size):
+        part = scenes[a : a + size]
+        prow = rows[a : a + size]
+        q_starts = np.zeros((len(part), R, n, 3), host.q0.dtype)
+        n_starts = np.zeros(len(part), np.int32)
+        roots = []
+        for k, b in enumerate(part):
+            idx = _start_roots(results[b].q, R)
+            roots.append(idx)
+            q_starts[k, : len(idx)] = results[b].q[idx]
+            n_starts[k] = len(idx)
+        q_goals = decided.q_goal[prow][:, :G]
+        n_goals = np.sum(decided.certified[prow][:, :G], axis=1).astype(np.int32)
+        scenes_part = jax.tree_util.tree_map(lambda x, part=part: x[part], host)
+        args = (scenes_part, q_starts, n_starts, q_goals, n_goals, keys[part])
+        args = pad_batch(args, size)
+        out = jax.device_get(fn(*args))
+        for k, b in enumerate(part):
+            if not out.found[k]:
+                results[b] = results[b]._replace(reason="search_exhausted")
+                continue
+            k_root = int(roots[k][int(out.start[k])])
+            steps = int(out.steps[k])
+            q_global = out.q[k][: steps + 1]
+            q = np.concatenate([results[b].q[: k_root + 1], q_global[1:]])
+            results[b] = _with_path(results[b], q, k_root, _scene(host, b), check, tolerance, out.q.shape[1])
+        if progress:
+            done = min(a + size, len(scenes))
+            _say(f"plan_fallback: global search {done}/{len(scenes)} scenes, {time.perf_counter() - t0:.1f} s")
+
+
+def _with_path(local: PlanResult, q: np.ndarray, k_root: int, scenario: Scenario, check, tolerance,
+               size: int) -> PlanResult:
+    """The result for the path q (the local path to step k_root, then the search's)."""
+    from .obstacles import radius_and_mask
+
+    # The search's part, padded with its last configuration to one shape (a program per
+    # length would compile anew for every path): clearance at every step, swept proof of every motion.
+    part = q[k_root:]
+    padded = np.concatenate([part, np.repeat(part[-1:], size - part.shape[0], axis=0)])
+    c, proven = jax.device_get(check(scenario, jnp.asarray(padded), jnp.asarray(np.roll(padded, -1, axis=0))))
+    c, proven = c[: part.shape[0]], proven[: part.shape[0] - 1]
+    _, mask = radius_and_mask(scenario)
+    mask = np.asarray(mask)
+    # The local part was checked by the rollout itself; every step of the search's part must be proven.
+    if not bool(np.all(proven)):
+        return local._replace(reason="uncertified_step")  # cannot happen by construction; never reported as reached
+    tips = np.concatenate([local.tip[:k_root], np.asarray(_tips_jit(jnp.asarray(padded)))[: part.shape[0]]])
+    err = float(np.linalg.norm(np.asarray(scenario.goal) - tips[-1]))
+    clearance = np.concatenate([local.clearance[:k_root], c[:, mask]])
+    clear = float(np.min(c[:, mask])) if mask.any() else float("inf")
+    if k_root > 0:
+        # The local rollout's minimum also covers its between-step checks up to k_root (and beyond: conservative).
+        clear = min(clear, float(np.min(local.clearance[: k_root + 1])) if mask.any() else clear)
+    reached = err < tolerance
+    return local._replace(
+        reached=reached,
+        iterations=q.shape[0] - 1,
+        q=q,
+        tip=tips,
+        status=status_name(Status.REACHED if reached else Status(int(_status_code(local.status)))),
+        clearance=clearance,
+        final_error=err,
+        min_clearance=clear,
+        planner="global",
+        reason="" if reached else "search_exhausted",
+        global_start=k_root,
+    )
+
+
+def _status_code(name: str) -> int:
+    from .status import STATUS_NAMES
+
+    return {v: k for k, v in STATUS_NAMES.items()}[name]

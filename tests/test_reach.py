@@ -1,0 +1,240 @@
+"""Reachability (multi-start IK with exact clearances) and the certified global fallback (issue 24).
+
+References: the proofs' own geometry (an arm of total length S reaches no
+farther than S from its base), the brute-force sampled clearance of
+:func:`softplan_jax.dense_trajectory_clearance` for every path the search
+returns, and the local planner's arrays for scenes it reaches itself.
+
+Every test shares one ReachOptions and the padded scene shape of
+test_planner (5 curve slots, degree 2), so the reachability, search and
+path-check programs compile once, and the paper scenes' 200-step plans are
+test_planner's programs (from the persistent compilation cache).
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import softplan_jax as sp
+from softplan_jax import global_planner
+from softplan_jax.fallback import _search_jit
+from softplan_jax.reach import _goal_configurations_jit
+
+OPTS = sp.ReachOptions()
+PAD = dict(curve_slots=5, degree=2)  # test_planner's shape
+# The straight start's tip is at (0, 0, 3); a wall of two segments blocks the way to this goal.
+GOAL = (1.6, 0.0, 1.4)
+WALL = [sp.line_segment([0.9, -1.2, 2.0], [0.9, 1.2, 2.0]), sp.line_segment([0.9, -1.2, 1.3], [0.9, 1.2, 2.6])]
+
+
+def scene(goal=GOAL, obstacles=WALL, **kw):
+    return sp.make_scenario(goal, obstacles, **PAD, **kw)
+
+
+@pytest.fixture(scope="module")
+def decided():
+    """One batched reachability call (one compile): reachable, beyond reach, goal on an
+    obstacle, goal at the base."""
+    scenes = [
+        scene(),
+        scene(goal=(4.0, 1.0, 2.0), L_max=1.2),  # |goal| = 4.58 > 3 x 1.2
+        scene(goal=(0.9, 0.3, 2.0), obstacles=[sp.line_segment([0.9, -1.2, 2.0], [0.9, 1.2, 2.0], radius=0.05)]),
+        scene(goal=(0.0, 0.0, 0.0)),
+    ]
+    batch = sp.stack_scenarios(scenes)
+    # One scene at a time with an extra start: plan_fallback's program (compiled once for all).
+    parts = [sp.reachability(s, q_extra=s.q0, options=OPTS) for s in scenes]
+    return batch, sp.Reachability(*(np.stack([getattr(p, f) for p in parts]) if f != "reason" else
+                                    tuple(p.reason for p in parts) for f in sp.Reachability._fields))
+
+
+def test_reachable_goal_has_certified_configuration(decided):
+    batch, r = decided
+    assert r.reachable[0] and r.reason[0] == ""
+    s = jax.tree_util.tree_map(lambda x: x[0], batch)
+    q = jnp.asarray(r.q_goal[0, 0])
+    assert r.certified[0, 0]
+    # Tip on the goal, and the brute-force clearance agrees that the configuration is clear.
+    assert float(jnp.linalg.norm(sp.tip_position(q) - s.goal)) <= OPTS.ik_tolerance
+    dense = np.asarray(sp.dense_trajectory_clearance(jnp.stack([q, q]), s, substeps=1))
+    assert np.min(dense) >= OPTS.ik_clearance - 1e-9
+    assert np.min(dense) == pytest.approx(r.clearance[0, 0], abs=5e-3)  # the sampling error of the brute force
+    # Certified rows first, sorted by clearance.
+    c = r.clearance[0][r.certified[0]]
+    assert np.all(np.diff(c) <= 0)
+
+
+def test_beyond_reach_is_proven_and_best_error_is_sound(decided):
+    _, r = decided
+    assert not r.reachable[1] and r.reason[1] == "beyond_reach"
+    gap = math.sqrt(4.0**2 + 1.0 + 2.0**2) - 3 * 1.2
+    # No configuration gets closer than the gap (soundness). The IK is local: it improves on the
+    # start pose a lot but need not find the straight arm at the goal (the paper-scene test below does).
+    start = math.sqrt(4.0**2 + 1.0 + 1.0)  # the straight start's tip (0, 0, 3)
+    assert gap - 1e-9 <= r.best_error[1] <= 0.5 * start
+
+
+def test_goal_in_obstacle_is_proven(decided):
+    _, r = decided
+    assert not r.reachable[2] and r.reason[2] == "goal_in_obstacle"
+    # The best collision-free tip distance: finite (the start pose counts), not better than the proof allows.
+    assert 0.05 - 1e-9 <= r.best_error[2] <= math.dist((0.9, 0.3, 2.0), (0.0, 0.0, 3.0))
+
+
+def test_goal_at_base_is_decided_without_nan(decided):
+    _, r = decided
+    assert np.all(np.isfinite(r.q_goal[3]))
+    assert np.isfinite(r.best_error[3])
+    assert r.reason[3] in ("", "no_ik_solution")
+    if r.reachable[3]:  # curled into a loop: the certificate must then hold
+        assert r.tip_error[3, 0] <= OPTS.ik_tolerance and r.clearance[3, 0] >= OPTS.ik_clearance
+
+
+@pytest.fixture(scope="module")
+def rescued():
+    """The local planner with 15 steps cannot reach GOAL; the fallback must."""
+    s = scene()
+    return s, sp.plan(s, max_steps=15), sp.plan_fallback(s, max_steps=15)
+
+
+def test_fallback_reaches_what_the_local_planner_does_not(rescued):
+    s, local, r = rescued
+    assert local.status == "max_steps" and local.planner == "local"
+    assert r.status == "reached" and r.reached and r.planner == "global" and r.reason == ""
+    assert r.final_error < 1e-2
+    assert r.best_error is not None and r.best_error <= OPTS.ik_tolerance
+    # The path is the local path up to global_start, then the search's.
+    k = r.global_start
+    assert 0 <= k <= local.iterations
+    np.testing.assert_array_equal(r.q[: k + 1], local.q[: k + 1])
+    assert r.q.shape == (r.iterations + 1, 3, 3) and r.tip.shape == (r.iterations + 1, 3)
+    assert r.clearance.shape == (r.iterations + 1, 2)  # the two real obstacles
+    np.testing.assert_allclose(r.tip[-1], np.asarray(s.goal), atol=1e-2)
+
+
+def test_fallback_path_is_collision_free_by_brute_force(rescued):
+    s, _, r = rescued
+    q = jnp.asarray(r.q[r.global_start:])
+    dense = np.asarray(sp.dense_trajectory_clearance(q, s, substeps=4, arm_samples=60, curve_samples=600))
+    assert np.min(dense) > 0
+    assert not r.collided and r.min_clearance > 0
+    # Every step of the search's part satisfies the swept proof: exact clearance at its start > its motion bound.
+    B = np.asarray(jax.vmap(lambda a, b: sp.motion_bound(a, b)[-1])(q[:-1], q[1:]))
+    assert np.all(r.clearance[r.global_start:-1].min(axis=1) - B > 1e-6)
+    # Steps are short: the path is a sequence of planner-like steps, not jumps.
+    assert np.max(B) <= OPTS.step_motion + 1e-12
+
+
+def test_plot_shows_the_global_part(rescued):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from softplan_jax import plotting
+
+    s, _, r = rescued
+    fig = plotting.plot_snapshots(s, r)
+    try:
+        ax = fig.axes[0]
+        labels = [line.get_label() for line in ax.get_lines()]
+        assert "tip path (global search)" in labels
+        assert f"global search from step {r.global_start}" in fig._suptitle.get_text()
+        green = next(line for line in ax.get_lines() if line.get_label() == "tip path (global search)")
+        np.testing.assert_allclose(np.asarray(green.get_data_3d()).T, r.tip[r.global_start:])
+    finally:
+        plt.close(fig)
+
+
+def test_batch_compiles_the_search_once_and_keeps_local_results(rescued):
+    # rescue() on a batch (plan_fallback's second half), from the local results of plan's
+    # compiled program: the search runs per scene in chunks of one shape, one program.
+    from softplan_jax.fallback import rescue
+
+    s, local, single = rescued
+    near = scene(goal=(0.005, 0.0, 3.0))  # within the goal tolerance of the start's tip
+    local_near = sp.plan(near, max_steps=15)
+    assert local_near.reached
+    fn = _search_jit(OPTS, sp.SolverOptions(), 1e-6)
+    ik = _goal_configurations_jit(OPTS, sp.SolverOptions(), 1e-6, True)
+    before = fn._cache_size(), ik._cache_size()
+    assert before[0] >= 1 and before[1] >= 1  # compiled by the single scene (the fixture)
+    res = rescue(sp.stack_scenarios([s, near, s]), [local, local_near, local], sp.make_options())
+    assert [r.planner for r in res] == ["global", "local", "global"]
+    assert all(r.reached for r in res)
+    assert res[1] is local_near or res[1] == local_near
+    assert res[1].best_error is None and res[1].global_start is None
+    # Reachability and the search run in chunks of one shape: the batch compiles nothing new.
+    assert (fn._cache_size(), ik._cache_size()) == before
+
+
+def test_unreachable_goal_gets_a_status_not_a_path():
+    # test_planner's unreachable scene: the arm cannot stretch to the goal.
+    s = sp.paper_scenario("sim1", L_max=1.05, **PAD)._replace(goal=jnp.array([0.0, 0.0, 10.0]))
+    r = sp.plan_fallback(s, max_steps=200)
+    assert r.status == "unreachable" and r.reason == "beyond_reach" and not r.reached
+    assert r.planner == "local"
+    assert r.best_error == pytest.approx(10.0 - 3 * 1.05, abs=1e-3)
+    assert np.isfinite(r.q).all() and not r.collided
+
+
+def test_paper_scene_keeps_its_local_result():
+    s = sp.paper_scenario("sim1", **PAD)
+    a, f = sp.plan(s, max_steps=200), sp.plan_fallback(s, max_steps=200)
+    assert f.planner == "local" and f.status == a.status == "reached"
+    for field in ("q", "tip", "clearance"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(f, field))
+    assert (a.iterations, a.min_clearance, a.final_error) == (f.iterations, f.min_clearance, f.final_error)
+
+
+def test_wrap_delta_turns_the_short_way():
+    q_a = jnp.array([[1.0, 0.5, 3.0]])
+    q_b = jnp.array([[1.0, 0.5, -3.0]])
+    d = global_planner.wrap_delta(q_a, q_b)
+    assert float(d[0, 2]) == pytest.approx(2 * math.pi - 6.0)
+    assert float(global_planner.wrap_delta(q_b, q_a)[0, 2]) == pytest.approx(6.0 - 2 * math.pi)
+
+
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        (dict(ik_starts=0), "ik_starts"),
+        (dict(tree_size=1), "tree_size"),
+        (dict(extend_distance=-1.0), "extend_distance"),
+        (dict(step_motion=float("nan")), "step_motion"),
+        (dict(safe_fraction=1.5), "safe_fraction"),
+        (dict(length_range=(1.5, 0.5)), "length_range"),
+        (dict(iterations=2.5), "iterations"),
+    ],
+)
+def test_bad_reach_options(bad, match):
+    with pytest.raises(ValueError, match=match):
+        sp.reachability(scene(), options=OPTS._replace(**bad))
+
+
+def test_bad_input():
+    s = scene()
+    with pytest.raises(ValueError, match="Scenario"):
+        sp.reachability("not a scene")
+    with pytest.raises(ValueError, match="q_extra"):
+        sp.reachability(s, q_extra=np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="q_extra"):
+        sp.reachability(s, q_extra=np.full((3, 3), np.nan))
+    with pytest.raises(ValueError, match="chunk"):
+        sp.plan_fallback(s, chunk=0)
+    with pytest.raises(ValueError, match="Scenario"):
+        sp.plan_fallback({"goal": GOAL})
+    with pytest.raises(ValueError, match="goal"):
+        sp.make_scenario((np.nan, 0.0, 1.0), WALL)
+
+
+@pytest.mark.slow
+def test_float32_reachability_smoke():
+    s = sp.make_scenario(GOAL, WALL, q0=sp.default_start(dtype=jnp.float32), **PAD)
+    r = sp.reachability(s, options=OPTS._replace(ik_tolerance=1e-4))
+    assert r.q_goal.dtype == np.float32
+    assert r.reachable and np.all(np.isfinite(r.q_goal))
+    assert r.tip_error[0] <= 1e-4 and r.clearance[0] >= OPTS.ik_clearance
