@@ -40,7 +40,7 @@ import numpy as np
 from .batching import pad_batch
 from .closest import DEFAULT_OPTIONS
 from .global_planner import global_search
-from .kinematics import motion_bound, tip_position
+from .kinematics import tip_position
 from .metrics import contact_tolerance
 from .planner import PlanResult, make_options, plan, plan_batch
 from .reach import Reachability, ReachOptions, check_reach_options, clearances, reachability
@@ -62,16 +62,13 @@ def _search_jit(options: ReachOptions, solver, contact: float):
 def _path_check_jit(solver, contact: float):
     """Per step of a path: the exact clearances (m,), and whether the motion to the
     next step is proven clear by the swept proof (metrics.swept_clear)."""
-    from .metrics import PROOF_TOLERANCE
+    from .metrics import swept_clear
+    from .obstacles import radius_and_mask
 
     def one(scenario, q_a, q_b):
-        c, truth, ok = clearances(q_a, scenario, solver)
-        bound = motion_bound(q_a, q_b)[-1]
-        arm = jnp.sum(jnp.maximum(q_a[:, 0], q_b[:, 0]))
-        # metrics.swept_clear's rounding margin, with the largest real distance (more conservative).
-        far = jnp.max(jnp.where(jnp.isfinite(c), truth.distance, 0.0), initial=0.0)
-        margin = PROOF_TOLERANCE * jnp.finfo(q_a.dtype).eps * (1.0 + arm + far)
-        proven = ok & (jnp.min(c, initial=jnp.inf) - bound > contact + margin)
+        c, truth, _ = clearances(q_a, scenario, solver)
+        _, mask = radius_and_mask(scenario)
+        proven = jnp.all(swept_clear(q_a, q_b, truth, c, contact) | ~mask)  # the metrics' own swept proof
         return c, proven
 
     return jax.jit(jax.vmap(one, in_axes=(None, 0, 0)))
