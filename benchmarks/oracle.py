@@ -714,3 +714,57 @@ def closest_point_to_points(q, points, k=10):
     a, b = np.unravel_index(np.argmin(D), D.shape)
     seg, j = divmod(int(a), k)
     return OClosest(float(D[a, b]), seg, (j + 1) / k, int(b), B[a], points[b], [])
+
+
+# ----------------------------------------------------------------------------
+# Moving curves (issue 23): the rigid motion of softplan_jax.motion, written
+# independently (the rotation as scipy.linalg.expm of the axis' cross-product
+# matrix, the curve sampled in NumPy), and a brute force over space AND time.
+
+
+def rigid_pose(axis, amplitude, omega, phase, shift, velocity, t):
+    """(R (3, 3), offset (3,)) of the motion x -> R (x - pivot) + pivot + offset at time t:
+    R = expm(A sin(omega t + phase) [axis]x), offset = sin(omega t + phase) shift + t velocity."""
+    from scipy.linalg import expm
+
+    a = np.asarray(axis, dtype=np.float64)
+    K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    sigma = math.sin(float(omega) * t + float(phase))
+    R = expm(float(amplitude) * sigma * K)
+    return R, sigma * np.asarray(shift, dtype=np.float64) + t * np.asarray(velocity, dtype=np.float64)
+
+
+def moving_curve_points(coeffs, u_range, motion: dict, t, n: int):
+    """``n`` points of a polynomial curve (coeffs (3, K), lowest degree first), evenly
+    spaced in u over ``u_range``, moved to time t. ``motion``: pivot, axis, amplitude,
+    omega, phase, shift, velocity (one slot)."""
+    u = np.linspace(float(u_range[0]), float(u_range[1]), n)
+    pts = OPoly(coeffs, float(u_range[0]), float(u_range[1])).point(u)
+    R, offset = rigid_pose(motion["axis"], motion["amplitude"], motion["omega"], motion["phase"],
+                           motion["shift"], motion["velocity"], t)
+    p = np.asarray(motion["pivot"], dtype=np.float64)
+    return (pts - p) @ R.T + p + offset
+
+
+def moving_min_clearance(qs, times, coeffs, u_ranges, radii, motions, arm_radius=0.0, substeps=4,
+                         arm_samples=30, curve_samples=300):
+    """Brute-force smallest clearance of a motion among moving curves: each step k -> k+1
+    (q linear, time linear from times[k] to times[k+1]) at ``substeps + 1`` instants, the
+    arm at ``arm_samples`` points per segment (this module's kinematics), each curve at
+    ``curve_samples`` points at that instant. ``motions``: a list of per-curve dicts (see
+    :func:`moving_curve_points`). Returns the smallest sampled distance minus the radii."""
+    qs = np.asarray(qs, dtype=np.float64)
+    s = np.linspace(0.0, 1.0, arm_samples)
+    best = np.inf
+    T = qs.shape[0]
+    steps = [(k, k + 1) for k in range(T - 1)] or [(0, 0)]
+    for a, b in steps:
+        for tau in np.linspace(0.0, 1.0, substeps + 1):
+            q = qs[a] + tau * (qs[b] - qs[a])
+            t = float(times[a]) + tau * (float(times[b]) - float(times[a]))
+            arm = np.concatenate([segment_points(q, i, s) for i in range(q.shape[0])])
+            for c, ur, r, m in zip(coeffs, u_ranges, radii, motions, strict=True):
+                pts = moving_curve_points(c, ur, m, t, curve_samples)
+                d = np.sqrt(((arm[:, None, :] - pts[None]) ** 2).sum(-1)).min()
+                best = min(best, d - float(r) - float(arm_radius))
+    return best

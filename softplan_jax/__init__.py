@@ -27,6 +27,18 @@ from .kinematics import (
     tip_position,
 )
 from .metrics import apply_collision_checks, dense_trajectory_clearance, true_closest
+from .motion import (
+    CurveMotion,
+    GoalPath,
+    MovingScenario,
+    curve_motion,
+    goal_at,
+    goal_path,
+    make_moving_scenario,
+    scenario_at,
+    speed_bounds,
+    stack_moving_scenarios,
+)
 from .planner import (
     PAPER_STEP,
     GainFunction,
@@ -61,6 +73,7 @@ from .scenarios import (
     scenario_warnings,
     stack_scenarios,
 )
+from .scenarios.moving import MOVING_SCENARIOS, moving_scenario, random_moving_scenarios
 from .smoothing import (
     GainSpace,
     ObjectiveEstimate,
@@ -75,6 +88,7 @@ from .smoothing import (
     tune_smoothed,
 )
 from .status import STATUS_NAMES, Status, status_name
+from .tracking import Track, TrackOptions, TrackResult, track, track_batch
 from .tuning import LossWeights, TuningResult, batch_loss, rollout_loss, tune_gains
 
 try:
@@ -153,6 +167,25 @@ __all__ = [
     "REACH_REASONS",
     "reachability",
     "plan_fallback",
+    # moving obstacles and moving goals (softplan_jax.motion, softplan_jax.tracking)
+    "CurveMotion",
+    "GoalPath",
+    "MovingScenario",
+    "curve_motion",
+    "goal_path",
+    "make_moving_scenario",
+    "stack_moving_scenarios",
+    "scenario_at",
+    "goal_at",
+    "speed_bounds",
+    "MOVING_SCENARIOS",
+    "moving_scenario",
+    "random_moving_scenarios",
+    "TrackOptions",
+    "Track",
+    "TrackResult",
+    "track",
+    "track_batch",
     # gain presets ("paper": the calibration that reproduces the paper; "default")
     "Preset",
     "PRESETS",

@@ -113,7 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
         "exit 3 when the goal was not reached); 2 bad input.",
     )
     run.add_argument("scenario", metavar="SCENARIO",
-                     help="paper scenario (sim1, sim2, tree) or path to a JSON scenario file")
+                     help="paper scenario (sim1, sim2, tree), moving scene (tree_sway, tree_fruit, wire_sweep: "
+                     "tracked among moving obstacles, see softplan_jax.track) or path to a JSON scenario file "
+                     "(with 'motion'/'goal_path' fields: a moving scene)")
     run.add_argument("--method", choices=("curve", "points"), default="curve",
                      help="curve: exact closest points (the paper's method); points: each curve "
                      "modelled by N points (default: curve)")
@@ -140,6 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-fallback", action="store_true",
                      help="the local planner only: no reachability test and no global search where it stalls or "
                           "runs out of steps (default: both; see plan_fallback)")
+    run.add_argument("--anticipation", type=float, default=None, metavar="S",
+                     help="moving scenes: seconds of look-ahead of the repulsion, >= 0 (the field sees each "
+                     "moving obstacle inflated by its speed bound times S; default: the preset's, else 0)")
+    run.add_argument("--hold-tolerance", type=float, default=None, metavar="TOL",
+                     help="moving scenes: the goal counts as held while |goal - tip| <= TOL (default 0.02)")
     run.add_argument("--plot", metavar="PATH", help="write the snapshot figure (PNG, PDF, SVG, ...)")
     run.add_argument("--gif", metavar="PATH", help="write an animated GIF of the motion (needs pillow)")
     run.add_argument("--out", metavar="FILE",
@@ -338,12 +345,16 @@ def _check_run_args(args, paper_names) -> None:
     tol = args.goal_tolerance
     if tol is not None and not (math.isfinite(tol) and tol > 0):
         raise InputError(f"--goal-tolerance must be a finite number > 0, got {args.goal_tolerance}")
+    if args.anticipation is not None and not (math.isfinite(args.anticipation) and args.anticipation >= 0):
+        raise InputError(f"--anticipation must be a finite number >= 0, got {args.anticipation}")
+    if args.hold_tolerance is not None and not (math.isfinite(args.hold_tolerance) and args.hold_tolerance > 0):
+        raise InputError(f"--hold-tolerance must be a finite number > 0, got {args.hold_tolerance}")
     is_file = args.scenario not in paper_names
     if is_file:
         if not os.path.exists(args.scenario):
             raise InputError(
-                f"unknown scenario {args.scenario!r}: not a paper scenario ({', '.join(paper_names)}) "
-                "and no such file"
+                f"unknown scenario {args.scenario!r}: not a paper scenario or moving scene "
+                f"({', '.join(paper_names)}) and no such file"
             )
         if os.path.isdir(args.scenario):
             raise InputError(f"scenario {args.scenario} is a directory, not a JSON file")
@@ -518,6 +529,22 @@ def _paper_names():
     return sorted(PAPER_SCENARIOS)
 
 
+def _moving_names():
+    from .scenarios.moving import MOVING_SCENARIOS
+
+    return sorted(MOVING_SCENARIOS)
+
+
+def _is_moving_file(path: str) -> bool:
+    """The scenario file has motion fields (read once more by _load_moving for the errors)."""
+    from .scenarios.json_format import is_moving_dict, read_json_file
+
+    try:
+        return is_moving_dict(read_json_file(path, "scenario"))
+    except ValueError:
+        return False  # the static loader reports the error
+
+
 def _fmt_seconds(t: float) -> str:
     if t >= 1.0:
         return f"{t:.2f} s"
@@ -540,8 +567,13 @@ def _cmd_run(args) -> int:
     from .planner import make_options, result_from_rollout, rollout_jit
 
     paper_names = _paper_names()
-    _check_run_args(args, paper_names)
+    _check_run_args(args, paper_names + _moving_names())
     dtype = jnp.float32 if args.float32 else jnp.float64
+    if args.scenario in _moving_names() or (args.scenario not in paper_names and _is_moving_file(args.scenario)):
+        return _cmd_track(args, dtype)
+    for flag, value in (("--anticipation", args.anticipation), ("--hold-tolerance", args.hold_tolerance)):
+        if value is not None:
+            _warn(f"{flag} applies to moving scenes only; {args.scenario} does not move, it is ignored")
     try:
         scenario, label = _load(args, dtype)
         scenario, gains, extra, gain_values = _resolve_gains(args, scenario, args.method, args.n_points)
@@ -661,6 +693,152 @@ def _cmd_run(args) -> int:
         print(json.dumps(clean, indent=2))
     else:
         print(_text_summary(summary))
+    if args.require_reached and not result.reached:
+        return EXIT_NOT_REACHED
+    return EXIT_OK
+
+
+def _cmd_track(args, dtype) -> int:
+    """``softplan run`` on a moving scene: track its goal among its moving obstacles (softplan_jax.track)."""
+    import jax
+
+    from .scenarios.json_format import load_moving_scenario
+    from .scenarios.moving import MOVING_OPTIONS, moving_scenario
+    from .tracking import make_track_options, result_from_track, track_program
+
+    label = args.scenario
+    try:
+        if args.scenario in _moving_names():
+            moving = moving_scenario(args.scenario, dtype=dtype)
+            preset = dict(MOVING_OPTIONS[args.scenario])
+        else:
+            moving = load_moving_scenario(args.scenario, dtype=dtype)
+            preset = {}
+        scenario, gains, extra, gain_values = _resolve_gains(args, moving.scene, args.method, args.n_points)
+        moving = moving._replace(scene=scenario)
+        extra["repulsion"] = args.repulsion
+        for key in ("step", "escapes", "goal_tolerance"):
+            if getattr(args, key) is not None:
+                extra[key] = getattr(args, key)
+        if args.anticipation is not None:
+            preset["anticipation"] = args.anticipation
+        if args.hold_tolerance is not None:
+            preset["hold_tolerance"] = args.hold_tolerance
+        options = make_track_options(args.method, args.n_points, **preset, **extra)
+    except OSError as err:
+        raise InputError(f"cannot read scenario file {args.scenario}: {err.strerror or err}") from None
+    except ValueError as err:
+        raise InputError(str(err)) from None
+    max_steps = int(args.max_steps)
+    from .planner import strong_gains
+
+    gains = strong_gains(gains, dtype)
+    print("softplan: a moving scene: tracking its goal for "
+          f"{max_steps} steps ({max_steps * float(gains.dt):g} s; compiling once) ...", file=sys.stderr, flush=True)
+    fn = track_program(options, max_steps, False)
+    key = jax.random.PRNGKey(int(args.seed))
+    # Twice: the first call compiles (or finds the program in jit's cache), the second is timed alone.
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(moving, gains, key))
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    track = jax.block_until_ready(fn(moving, gains, key))
+    run_time = time.perf_counter() - t0
+    compile_time = max(first - run_time, 0.0)
+    result = result_from_track(track, moving, float(gains.dt))
+    summary = {
+        "scenario": label,
+        "moving": True,
+        "method": args.method,
+        "n_points": args.n_points if args.method == "points" else None,
+        "repulsion": args.repulsion,
+        **_gains_report(args, gain_values),
+        "step": options.plan.step,
+        "anticipation_s": options.anticipation,
+        "hold_tolerance": options.hold_tolerance,
+        "dtype": str(jax.numpy.dtype(dtype)),
+        "status": result.status,
+        "iterations": result.iterations,
+        "max_steps": max_steps,
+        "horizon_s": max_steps * float(gains.dt),
+        "reached": result.reached,
+        "reached_at_s": None if result.reached_step is None else float(result.time[result.reached_step]),
+        "held_s": result.held_time,
+        "held_to_end": result.held_to_end,
+        "collided": result.collided,
+        "min_clearance": result.min_clearance,
+        "final_error": result.final_error,
+        "goal_tolerance": options.plan.goal_tolerance,
+        "compile_time_s": compile_time,
+        "run_time_s": run_time,
+        "time_per_scan_step_s": run_time / max_steps,
+        "plot": None,
+        "gif": None,
+        "out": None,
+    }
+    title = (f"{label} (moving) — {args.method} method"
+             + (f" (N = {args.n_points})" if args.method == "points" else "") + f" — {result.status}")
+    if args.plot is not None or args.gif is not None:
+        if "matplotlib.pyplot" not in sys.modules:
+            import matplotlib
+
+            matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from . import plotting
+
+        try:
+            if args.plot is not None:
+                fig = plotting.plot_tracking(result, title=title)
+                try:
+                    fig.savefig(args.plot, dpi=120, bbox_inches="tight", pad_inches=0.2)
+                finally:
+                    plt.close(fig)
+                summary["plot"] = os.path.abspath(args.plot)
+            if args.gif is not None:
+                plotting.animate_tracking(result, args.gif, title=title)
+                summary["gif"] = os.path.abspath(args.gif)
+        except OSError as err:
+            raise InputError(f"cannot write output: {err}") from None
+    if args.out is not None:
+        import numpy as np
+
+        replaced = os.path.exists(args.out)
+        record = {"format": TRAJECTORY_FORMAT, "softplan_jax_version": _version(),
+                  **{k: np.asarray(getattr(result, k)) for k in ("q", "tip", "clearance", "goal", "time", "error")},
+                  **{k: v for k, v in summary.items() if k not in ("plot", "gif", "out", "gain_values")},
+                  "gain_values": {k: (math.inf if v is None else v) for k, v in summary["gain_values"].items()}}
+        try:
+            write_trajectory(args.out, record)
+        except OSError as err:
+            raise InputError(f"cannot write output: {err}") from None
+        summary["out"] = os.path.abspath(args.out)
+        if replaced:
+            print(f"softplan: overwrote {args.out} (--force)", file=sys.stderr)
+    if args.json:
+        clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()}
+        print(json.dumps(clean, indent=2))
+    else:
+        rows = [
+            ("scenario", f"{label} (moving obstacles; tracked)"),
+            ("method", args.method + (f" (N = {args.n_points})" if args.method == "points" else "")),
+            ("gains", summary["gains"]),
+            ("step", f"{summary['step']}, look-ahead {summary['anticipation_s']:g} s"),
+            ("dtype", summary["dtype"]),
+            ("status", result.status),
+            ("steps", f"{result.iterations} of {max_steps} ({summary['horizon_s']:g} s horizon)"),
+            ("reached", "no" if not result.reached else
+             f"at t = {summary['reached_at_s']:.2f} s; held {result.held_time:.2f} s"
+             + (" (to the end)" if result.held_to_end else f" (hold tolerance {options.hold_tolerance:g})")),
+            ("collided", "yes" if result.collided else "no"),
+            ("min true clearance", f"{result.min_clearance:.4f}"),
+            ("final tip error", f"{result.final_error:.4f} (goal tolerance {options.plan.goal_tolerance:g})"),
+            ("compile time", _fmt_seconds(compile_time)),
+            ("run time", f"{_fmt_seconds(run_time)} for {max_steps} scan steps"),
+        ]
+        rows += [(k, summary[k]) for k in ("plot", "gif", "out") if summary[k]]
+        width = max(len(k) for k, _ in rows)
+        print("\n".join(f"{k:<{width}}  {v}" for k, v in rows))
     if args.require_reached and not result.reached:
         return EXIT_NOT_REACHED
     return EXIT_OK

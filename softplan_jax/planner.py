@@ -318,7 +318,7 @@ def check_options(options: PlanOptions) -> PlanOptions:
     return options
 
 
-def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None):
+def field_velocity(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None):
     """Paper eq. (9): qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj).
 
     ``walk = (walking () bool, velocity (3,))``, if given: while walking, the
@@ -354,7 +354,7 @@ def _qdot(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: Pla
     return qdot.reshape(n, 3), jnp.where(mask, clearance, jnp.inf)
 
 
-def _apply_step(q, qdot, scenario: Scenario, gains: Gains):
+def apply_step(q, qdot, scenario: Scenario, gains: Gains):
     q_next = q + gains.dt * qdot
     return q_next.at[:, 0].set(jnp.clip(q_next[:, 0], scenario.L_min, scenario.L_max))
 
@@ -383,8 +383,8 @@ def _step_scale(q, q_next, clearance, options: PlanOptions):
 
 def _next_q(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None):
     """One planner step from q: ``(q_next, alpha)`` (alpha = 1 for the plain step)."""
-    qdot, clearance = _qdot(q, scenario, gains, truth, options, walk)
-    q_next = _apply_step(q, qdot, scenario, gains)
+    qdot, clearance = field_velocity(q, scenario, gains, truth, options, walk)
+    q_next = apply_step(q, qdot, scenario, gains)
     if options.step == "plain":
         return q_next, jnp.ones((), q.dtype)
     alpha = _step_scale(q, q_next, clearance, options)
@@ -660,13 +660,13 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
 # Entry points.
 
 
-def _strong_gains(gains: Gains, dtype) -> Gains:
+def strong_gains(gains: Gains, dtype) -> Gains:
     """Gains as arrays of the scenario's dtype, never weakly typed: a gain given as
     a Python float or ``jnp.asarray(0.1)`` (weak) would otherwise compile anew."""
     return type(gains)(*(jnp.asarray(v, dtype) for v in gains))
 
 
-def _key(seed):
+def prng_key(seed):
     """A PRNG key from an int seed (or a key, returned as it is)."""
     if seed is None:
         seed = 0
@@ -694,10 +694,10 @@ def _rollout_batch(scenarios: Scenario, gains: Gains, options: PlanOptions, max_
                          check_vma=False)(scenarios, gains, keys)
 
 
-def _batch_keys(seed, batch: int):
+def batch_keys(seed, batch: int):
     """One key per scenario: ``jax.random.split(key(seed), batch)``, or ``seed`` itself when it
     already holds one key per scenario (shape (batch, 2) raw keys, or (batch,) typed keys)."""
-    key = _key(seed)
+    key = prng_key(seed)
     typed = jax.dtypes.issubdtype(key.dtype, jax.dtypes.prng_key)
     if key.ndim == (1 if typed else 2):
         if key.shape[0] != batch:
@@ -748,8 +748,8 @@ class CompiledRollout:
 
     def _args(self, scenario, gains, options, max_steps, seed):
         dtype = scenario.q0.dtype
-        key = _batch_keys(seed, scenario.q0.shape[0]) if self._batched else _key(seed)
-        return scenario, _strong_gains(gains, dtype), options, max_steps, key
+        key = batch_keys(seed, scenario.q0.shape[0]) if self._batched else prng_key(seed)
+        return scenario, strong_gains(gains, dtype), options, max_steps, key
 
     def __call__(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0) -> Rollout:
         return self._call(*self._args(scenario, gains, options, max_steps, seed))
@@ -1033,7 +1033,7 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
         raise ValueError(f"progress must be True or False, got {progress!r}")
     opts = make_options(method, n_points, **options)
     dtype = scenarios.q0.dtype
-    g = _strong_gains(check_gains(gains, dtype, scenarios.q0.shape[-2]), dtype)
+    g = strong_gains(check_gains(gains, dtype, scenarios.q0.shape[-2]), dtype)
     T = int(max_steps)
     mesh = batch_mesh(devices)
     n_dev = 1 if mesh is None else mesh.size
@@ -1044,7 +1044,7 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
     if n_chunks == 1 and bar is None:
         return rollout_batch(scenarios, g, opts, T, seed, devices=devices)
 
-    keys = _batch_keys(seed, batch)
+    keys = batch_keys(seed, batch)
     host = jax.tree_util.tree_map(np.asarray, scenarios)
     out, done = None, 0
 

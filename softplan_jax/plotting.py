@@ -7,6 +7,9 @@
 * :func:`animate` — an animated GIF of the whole motion (needs pillow).
 * :func:`plot_clearance` — true clearance to every obstacle per iteration.
 * :func:`plot_cloud_fit` — a point cloud with the curves fitted to it.
+* :func:`plot_tracking`, :func:`animate_tracking` — a tracking run among
+  moving obstacles (:func:`softplan_jax.track`): snapshots with the obstacles
+  where they were, error and clearance over time; a GIF with everything moving.
 
 Every function takes a :class:`~softplan_jax.planner.PlanResult` (what
 :func:`softplan_jax.plan` returns) or a single, unbatched
@@ -759,3 +762,175 @@ def plot_snapshots_with_clearance(scenario, result, steps=None, title=None, view
     fig.suptitle(_default_title(traj) if title is None else title, fontsize=12)
     fig.tight_layout()
     return fig
+
+
+# ----------------------------------------------------------------------------
+# Moving scenes (softplan_jax.tracking).
+
+
+def _tracking_data(result):
+    for field in ("moving", "time", "goal", "error", "q", "tip"):
+        if not hasattr(result, field):
+            raise ValueError(f"result must be a TrackResult (from softplan_jax.track); "
+                             f"{type(result).__name__} has no {field!r}")
+    return result.moving
+
+
+def _obstacles_at(moving, t) -> list[dict]:
+    from .motion import scenario_at
+
+    return _obstacles(scenario_at(moving, float(t)))
+
+
+def _tracking_title(result) -> str:
+    held = f", held {result.held_time:.1f} s" if result.reached else ""
+    return (f"{result.status} — {result.iterations} steps ({result.time[-1]:.1f} s){held}, "
+            f"min clearance {result.min_clearance:.3f}")
+
+
+def plot_tracking(result, snapshots: int = 3, title=None, view=None, figsize=(14, 5.5)):
+    """A tracking run among moving obstacles (:func:`softplan_jax.track`): left,
+    the arm and the obstacles at ``snapshots`` times in one 3D view (earlier
+    times fainter), the goal's path and the tip path; right, the tip's distance
+    to the goal and the smallest clearance over time.
+
+    Returns:
+      The matplotlib Figure.
+    """
+    moving = _tracking_data(result)
+    if int(snapshots) < 1:
+        raise ValueError(f"snapshots must be >= 1, got {snapshots}")
+    T = int(result.iterations)
+    steps = np.unique(np.round(np.linspace(0, T, int(snapshots))).astype(int))
+    n = result.q.shape[1]
+    backbones = _backbones(result.q[steps])
+    core = np.concatenate([backbones.reshape(-1, 3), result.tip, result.goal])
+    limits, _ = _view_box(core, _obstacles_at(moving, result.time[0]))
+    plt = _pyplot()
+    fig = plt.figure(figsize=figsize)
+    ax = fig.add_axes((0.0, 0.08, 0.5, 0.8), projection="3d")
+    scene = moving.scene._replace(goal=np.asarray(result.goal[-1]))
+    _setup_axes(ax, limits, _auto_view(scene, view))
+    colors = _snapshot_colors(len(steps))
+    arm_lw = _radius_linewidth(ax, limits, float(np.asarray(moving.scene.arm_radius)), floor=3.0)
+    for k, (step, backbone, color) in enumerate(zip(steps, backbones, colors, strict=True)):
+        alpha = 0.35 + 0.65 * (k + 1) / len(steps)
+        t = result.time[step]
+        for ob in _view_box(core, _obstacles_at(moving, t))[1]:
+            pts = ob["pts"]
+            if ob["kind"] == "curve":
+                ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=_OBSTACLE_COLOR, alpha=alpha,
+                        lw=_radius_linewidth(ax, limits, ob["radius"], floor=2.0), solid_capstyle="round")
+            elif len(pts):
+                ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=9, color=_POINTS_COLOR, alpha=alpha, depthshade=False)
+        _draw_arm(ax, backbone, n, color, arm_lw, f"t = {t:.1f} s (step {step})")
+        ax.scatter(*result.goal[step], marker="*", s=200, color=_GOAL_COLOR, edgecolors=color, linewidths=1.2,
+                   depthshade=False, zorder=10)
+    ax.plot(result.goal[:, 0], result.goal[:, 1], result.goal[:, 2], color=_GOAL_COLOR, lw=1.5, label="goal path")
+    ax.plot(result.tip[:, 0], result.tip[:, 1], result.tip[:, 2], ls="--", lw=1.0, color=_PATH_COLOR,
+            label="tip path")
+    ax.scatter(0, 0, 0, marker="s", s=40, color=_BASE_COLOR, depthshade=False, label="base")
+    ax.plot([], [], color=_OBSTACLE_COLOR, lw=2.5, label="obstacles (fainter: earlier)")
+    _legend(ax, loc="upper left", bbox_to_anchor=(0.0, 1.0), fontsize=8, framealpha=0.85)
+    ax2 = fig.add_axes((0.58, 0.14, 0.38, 0.7))
+    ax2.plot(result.time, result.error, color="C0", label="|goal - tip|")
+    ax2.set_yscale("log")
+    ax2.set_xlabel("time [s]")
+    ax2.set_ylabel("distance to goal [m]", color="C0")
+    clearance = np.min(result.clearance, axis=1) if result.clearance.shape[1] else np.full(len(result.time), np.nan)
+    ax3 = ax2.twinx()
+    ax3.plot(result.time, clearance, color=_OBSTACLE_COLOR, label="smallest clearance")
+    ax3.set_ylabel("smallest clearance [m]", color=_OBSTACLE_COLOR)
+    ax3.set_ylim(bottom=0.0)
+    if result.reached_step is not None:
+        ax2.axvline(result.time[result.reached_step], color="0.5", ls=":", lw=1.0)
+    lines = ax2.get_lines()[:1] + ax3.get_lines()[:1]
+    ax2.legend(lines, [ln.get_label() for ln in lines], loc="upper right", fontsize=8)
+    fig.suptitle(_tracking_title(result) if title is None else title, fontsize=12)
+    return fig
+
+
+def animate_tracking(result, path, fps=15, max_frames=200, hold=1.0, title=None, view=None, figsize=(8, 6),
+                     dpi=80):
+    """An animated GIF of a tracking run: the arm, the moving obstacles and the
+    moving goal at every shown step (arguments as :func:`animate`).
+
+    Returns:
+      ``path``.
+    """
+    try:
+        import PIL  # noqa: F401
+    except ImportError:
+        raise ValueError("animate_tracking needs pillow to write GIFs: pip install pillow") from None
+    moving = _tracking_data(result)
+    path = os.fspath(path)
+    if not path.lower().endswith(".gif"):
+        raise ValueError(f"animate_tracking writes GIF files; the path must end in .gif, got {path!r}")
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be > 0, got {fps!r}")
+    if int(max_frames) < 2:
+        raise ValueError(f"max_frames must be >= 2, got {max_frames!r}")
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    T = int(result.iterations)
+    steps = np.unique(np.round(np.linspace(0, T, min(T + 1, int(max_frames)))).astype(int))
+    n = result.q.shape[1]
+    backbones = _backbones(result.q[steps])
+    core = np.concatenate([backbones.reshape(-1, 3), result.tip, result.goal])
+    limits, first = _view_box(core, _obstacles_at(moving, result.time[0]))
+    shapes = [_view_box(core, _obstacles_at(moving, result.time[s]))[1] for s in steps]
+    plt = _pyplot()
+    fig = plt.figure(figsize=figsize)
+    try:
+        ax = fig.add_axes((0.0, 0.04, 0.76, 0.86), projection="3d")
+        _setup_axes(ax, limits, _auto_view(moving.scene._replace(goal=np.asarray(result.goal[0])), view))
+        lines = []
+        for k, ob in enumerate(first):
+            if ob["kind"] == "curve":
+                (ln,) = ax.plot([], [], [], color=_OBSTACLE_COLOR, lw=_radius_linewidth(ax, limits, ob["radius"], 2.5),
+                                solid_capstyle="round", label="obstacle" if k == 0 else None)
+            else:
+                (ln,) = ax.plot([], [], [], ls="none", marker="o", ms=3, color=_POINTS_COLOR)
+            lines.append(ln)
+        color = _snapshot_colors(1)[0]
+        arm_lw = _radius_linewidth(ax, limits, float(np.asarray(moving.scene.arm_radius)), floor=3.0)
+        (arm,) = ax.plot([], [], [], color=color, lw=arm_lw, solid_capstyle="round", label="arm")
+        (joints,) = ax.plot([], [], [], ls="none", marker="o", ms=5, color=color, markeredgecolor="white",
+                            markeredgewidth=0.8)
+        (goal,) = ax.plot([], [], [], ls="none", marker="*", ms=16, color=_GOAL_COLOR, markeredgecolor="black",
+                          label="goal")
+        (tip_path,) = ax.plot([], [], [], ls="--", lw=1.0, color=_PATH_COLOR, label="tip path")
+        ax.scatter(0, 0, 0, marker="s", s=40, color=_BASE_COLOR, depthshade=False, label="base")
+        _legend(ax, loc="upper left", bbox_to_anchor=(0.97, 0.9), fontsize=8, framealpha=0.9)
+        prefix = "" if title is None else f"{title}\n"
+        text = fig.suptitle("", fontsize=11, y=0.97)
+        frames = list(range(len(steps))) + [len(steps) - 1] * int(round(hold * fps))
+        fig.set_dpi(dpi)
+        _fit_axis_labels_inside(fig, ax, limits)
+
+        def update(k):
+            s = steps[k]
+            for ln, ob in zip(lines, shapes[k], strict=True):
+                pts = ob["pts"]
+                ln.set_data_3d(pts[:, 0], pts[:, 1], pts[:, 2])
+            b = backbones[k]
+            arm.set_data_3d(b[:, 0], b[:, 1], b[:, 2])
+            j = b[_joint_indices(n)]
+            joints.set_data_3d(j[:, 0], j[:, 1], j[:, 2])
+            g = result.goal[s]
+            goal.set_data_3d([g[0]], [g[1]], [g[2]])
+            tip = result.tip[: s + 1]
+            tip_path.set_data_3d(tip[:, 0], tip[:, 1], tip[:, 2])
+            status = f" — {result.status}" if s == T else ""
+            text.set_text(f"{prefix}t = {result.time[s]:.1f} s, step {s} / {T}, "
+                          f"|goal - tip| = {result.error[s]:.3f}{status}")
+            return (*lines, arm, joints, goal, tip_path, text)
+
+        anim = FuncAnimation(fig, update, frames=frames, blit=False)
+        anim.save(path, writer=PillowWriter(fps=fps), dpi=dpi)
+    finally:
+        plt.close(fig)
+    return path
+
+
+__all__ += ["plot_tracking", "animate_tracking"]

@@ -1,7 +1,8 @@
 """Rollout statuses: how a planning run ended (reached the goal, collided,
 stalled in a local minimum of the potential field of paper eq. 9, ran out of
 steps, or met a non-finite number; or, with the global fallback, the goal was
-found unreachable).
+found unreachable; or, tracking a moving goal, an obstacle moved too fast to
+stay provably clear of, or the goal was reached and then lost).
 """
 
 from __future__ import annotations
@@ -24,12 +25,17 @@ class Status(enum.IntEnum):
     MAX_STEPS = 4
     NONFINITE = 5
     UNREACHABLE = 6
+    TOO_FAST = 7
+    LOST = 8
 
     @property
     def label(self) -> str:
         """The report name: "running", "reached", "collided", "stalled", "max_steps", "non_finite",
         "unreachable" (set by :func:`~softplan_jax.plan_fallback` only: no collision-free
-        configuration puts the tip on the goal, see :mod:`softplan_jax.reach`)."""
+        configuration puts the tip on the goal, see :mod:`softplan_jax.reach`); with moving
+        obstacles (:func:`~softplan_jax.track`) also "too_fast" (an obstacle could reach the arm
+        within one step whatever the arm did: stopped at the last configuration proven clear) and
+        "lost" (the moving goal was reached, then not held)."""
         return "non_finite" if self is Status.NONFINITE else self.name.lower()
 
 

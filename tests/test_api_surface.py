@@ -39,6 +39,10 @@ PUBLIC = [
     "rollout_batch", "PlanResult", "result_from_rollout", "plan", "plan_batch",
     # reachability and the global fallback
     "ReachOptions", "Reachability", "REACH_REASONS", "reachability", "plan_fallback",
+    # moving obstacles and moving goals
+    "CurveMotion", "GoalPath", "MovingScenario", "curve_motion", "goal_path", "make_moving_scenario",
+    "stack_moving_scenarios", "scenario_at", "goal_at", "speed_bounds", "MOVING_SCENARIOS", "moving_scenario",
+    "random_moving_scenarios", "TrackOptions", "Track", "TrackResult", "track", "track_batch",
     # gain presets
     "Preset", "PRESETS", "preset", "apply_preset",
     # gains files

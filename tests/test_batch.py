@@ -255,15 +255,15 @@ def test_two_host_devices_match_one():
 
 
 def test_batch_keys_per_scenario():
-    from softplan_jax.planner import _batch_keys
+    from softplan_jax.planner import batch_keys
 
     keys = jax.random.split(jax.random.PRNGKey(4), 5)
-    np.testing.assert_array_equal(np.asarray(_batch_keys(4, 5)), np.asarray(keys))
+    np.testing.assert_array_equal(np.asarray(batch_keys(4, 5)), np.asarray(keys))
     # A share of a suite keeps the suite's keys.
-    np.testing.assert_array_equal(np.asarray(_batch_keys(keys[2:4], 2)), np.asarray(keys[2:4]))
+    np.testing.assert_array_equal(np.asarray(batch_keys(keys[2:4], 2)), np.asarray(keys[2:4]))
     typed = jax.random.split(jax.random.key(4), 3)
-    assert _batch_keys(typed, 3) is typed
-    assert _batch_keys(jax.random.key(4), 3).shape == (3,)
+    assert batch_keys(typed, 3) is typed
+    assert batch_keys(jax.random.key(4), 3).shape == (3,)
     batch = sp.stack_scenarios([sp.paper_scenario("sim1", **PAD)] * 2)
     with pytest.raises(ValueError, match="3 keys for a batch of 2"):
         sp.plan_batch(batch, max_steps=5, seed=jax.random.split(jax.random.PRNGKey(0), 3))

@@ -470,3 +470,35 @@ def test_reach_benchmark_quick_run(tmp_path):
     assert all(v["identical"] for v in rep["paper"].values())
     assert "95 % interval" in (tmp_path / "reach.md").read_text()
     assert (tmp_path / "figures" / "reach_time.png").exists()
+
+
+# ----------------------------------------------------------------------------
+# moving.py (issue 23)
+
+
+def test_moving_benchmark_rejects_bad_arguments():
+    import moving as moving_bench
+
+    for argv, match in ((["--n", "0"], "--n"), (["--chunk", "0"], "--chunk"), (["--brute", "-1"], "--brute"),
+                        (["--seed", "-1"], "--seed"), (["--max-steps", "0"], "--max-steps")):
+        with pytest.raises(ValueError, match=match):
+            moving_bench.parse_args(argv)
+
+
+@pytest.mark.slow
+def test_moving_benchmark_quick_run(tmp_path):
+    """The whole benchmark at toy sizes: the table, the independent checks, the timing, the figures."""
+    import json
+
+    import moving as moving_bench
+
+    rep = moving_bench.main(["--quick", "--n", "4", "--max-steps", "60", "--brute", "2", "--exact", "2",
+                             "--oracle", "2", "--rounds", "1", "--batch", "2", "--out", str(tmp_path / "moving")])
+    saved = json.loads((tmp_path / "moving.json").read_text())
+    assert saved["n"] == 4 and set(saved["table"]) == {"curve", "10 points", "50 points"}
+    assert sum(saved["table"]["curve"]["counts"].values()) == 4
+    assert rep["table"]["curve"]["counts"]["collided"] == 0 and rep["brute_force"]["contacts"] == 0
+    assert rep["warm_start_exactness"]["misses_gt_1e-9"] == 0 and rep["oracle"]["misses_gt_1e-9"] == 0
+    assert rep["ratio_single_min"] > 0 and rep["ratio_batch_min"] > 0
+    assert "| model | reached and held |" in (tmp_path / "moving.md").read_text()
+    assert (tmp_path / "figures" / "moving_outcomes.png").exists()

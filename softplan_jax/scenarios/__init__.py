@@ -8,7 +8,17 @@
 * :mod:`.random_suite` -- seeded random scenario suites for the benchmarks.
 """
 
-from .json_format import load_scenario, save_scenario, scenario_from_dict, scenario_to_dict, write_json_file
+from .json_format import (
+    load_moving_scenario,
+    load_scenario,
+    moving_from_dict,
+    moving_to_dict,
+    save_moving_scenario,
+    save_scenario,
+    scenario_from_dict,
+    scenario_to_dict,
+    write_json_file,
+)
 from .paper import PAPER_RESULTS, PAPER_SCENARIOS, paper_scenario
 from .random_suite import random_scenarios
 from .scenario import Scenario, default_start, make_scenario, obstacle_count, scenario_warnings, stack_scenarios
@@ -29,4 +39,8 @@ __all__ = [
     "save_scenario",
     "write_json_file",
     "random_scenarios",
+    "moving_from_dict",
+    "moving_to_dict",
+    "load_moving_scenario",
+    "save_moving_scenario",
 ]

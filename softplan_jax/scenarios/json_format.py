@@ -1,6 +1,14 @@
 """Scenario files: the JSON format ``softplan-scenario/1`` documented in the
 README (arm, goal, obstacles as polynomial curves, line segments or point sets),
 read with every malformed field named in a ValueError, and written atomically.
+
+Moving scenes (issue 23) add an optional ``"motion"`` object to a polynomial
+or line-segment obstacle (the fields of :func:`~softplan_jax.motion.curve_motion`:
+pivot, axis, amplitude, omega, phase, shift, velocity) and an optional
+top-level ``"goal_path"`` (``times``, ``points``, and ``attach``: the index in
+``obstacles`` of the curve that carries the goal). :func:`load_moving_scenario`
+reads them; :func:`load_scenario` refuses a file that has them (it would drop
+the motion).
 """
 
 from __future__ import annotations
@@ -16,11 +24,25 @@ import numpy as np
 from ..curves import PolynomialCurve, line_segment
 from .scenario import Scenario, default_start, make_scenario
 
-__all__ = ["scenario_from_dict", "scenario_to_dict", "load_scenario", "save_scenario", "write_json_file"]
+__all__ = [
+    "scenario_from_dict",
+    "scenario_to_dict",
+    "load_scenario",
+    "save_scenario",
+    "write_json_file",
+    "moving_from_dict",
+    "moving_to_dict",
+    "load_moving_scenario",
+    "save_moving_scenario",
+    "is_moving_dict",
+]
 
 
 # "metadata": any JSON object (e.g. fit residuals from `softplan fit`); kept out of the Scenario.
-_TOP_KEYS = {"format", "arm", "goal", "obstacles", "name", "description", "metadata"}
+_TOP_KEYS = {"format", "arm", "goal", "obstacles", "name", "description", "metadata", "goal_path"}
+_MOTION_KEYS = {"pivot": (3,), "axis": (3,), "amplitude": (), "omega": (), "phase": (), "shift": (3,),
+                "velocity": (3,)}
+_GOAL_PATH_KEYS = {"times", "points", "attach"}
 _ARM_KEYS = {"segments", "start", "radius", "length_limits"}
 _FORMAT = "softplan-scenario/1"
 
@@ -54,9 +76,88 @@ def _num_array(value, path: str, shape=None):
     return arr
 
 
+def is_moving_dict(data) -> bool:
+    """The JSON structure has a ``goal_path`` or an obstacle ``motion`` (a moving scene)."""
+    if not isinstance(data, dict):
+        return False
+    obs = data.get("obstacles", [])
+    return "goal_path" in data or (isinstance(obs, list) and any(isinstance(o, dict) and "motion" in o for o in obs))
+
+
 def scenario_from_dict(data: dict, dtype=None) -> Scenario:
     """Build a Scenario from the JSON structure (see the README); every
-    malformed field raises a ValueError naming the field."""
+    malformed field raises a ValueError naming the field. A moving scene
+    (``motion``/``goal_path`` fields) is refused: use :func:`moving_from_dict`."""
+    if is_moving_dict(data):
+        raise _err("goal_path" if "goal_path" in data else "obstacles[].motion",
+                   "this scene moves; read it with load_moving_scenario / moving_from_dict "
+                   "(`softplan run` plays it)")
+    return _parse(data, dtype)[0]
+
+
+def moving_from_dict(data: dict, dtype=None):
+    """Build a :class:`~softplan_jax.motion.MovingScenario` from the JSON structure
+    (a file without motion gives one where nothing moves); every malformed field
+    raises a ValueError naming the field."""
+    from ..motion import curve_motion, goal_path, make_moving_scenario
+
+    scen, motions, path = _parse(data, dtype)
+    dtype = scen.q0.dtype
+    built = {}
+    for k, (where, fields) in motions.items():
+        try:
+            built[k] = curve_motion(**fields, dtype=dtype)
+        except ValueError as err:
+            raise _err(where, str(err)) from None
+    goal = None
+    if path is not None:
+        try:
+            goal = goal_path(path["times"], path["points"], path["attach"], dtype=dtype)
+        except ValueError as err:
+            raise _err("goal_path", str(err)) from None
+    return make_moving_scenario(scen, built, goal)
+
+
+def _parse_motion(value, path: str) -> dict:
+    if not isinstance(value, dict):
+        raise _err(path, f"must be an object, got {value!r}")
+    extra = set(value) - set(_MOTION_KEYS)
+    if extra:
+        raise _err(f"{path}.{sorted(extra)[0]}", f"unknown key (allowed: {sorted(_MOTION_KEYS)})")
+    fields = {key: _num_array(value[key], f"{path}.{key}", shape) for key, shape in _MOTION_KEYS.items()
+              if key in value}
+    if "omega" in fields and fields["omega"] < 0:
+        raise _err(f"{path}.omega", f"must be >= 0, got {float(fields['omega'])}")
+    return fields
+
+
+def _parse_goal_path(value, curve_index: dict) -> dict:
+    if not isinstance(value, dict):
+        raise _err("goal_path", f"must be an object, got {value!r}")
+    extra = set(value) - _GOAL_PATH_KEYS
+    if extra:
+        raise _err(f"goal_path.{sorted(extra)[0]}", f"unknown key (allowed: {sorted(_GOAL_PATH_KEYS)})")
+    for key in ("times", "points"):
+        if key not in value:
+            raise _err(f"goal_path.{key}", "is missing")
+    times = _num_array(value["times"], "goal_path.times", (None,))
+    if times.shape[0] < 1:
+        raise _err("goal_path.times", "is empty")
+    if np.any(np.diff(times) <= 0):
+        raise _err("goal_path.times", f"must be strictly increasing, got {times.tolist()}")
+    points = _num_array(value["points"], "goal_path.points", (times.shape[0], 3))
+    attach = value.get("attach", None)
+    if attach is not None:
+        if not isinstance(attach, int) or isinstance(attach, bool):
+            raise _err("goal_path.attach", f"must be an obstacle index (an integer) or null, got {attach!r}")
+        if attach not in curve_index:
+            raise _err("goal_path.attach", f"obstacle {attach} is not a polynomial curve or line segment of this "
+                       f"scene (those are {sorted(curve_index)})")
+    return {"times": times, "points": points, "attach": -1 if attach is None else curve_index[attach]}
+
+
+def _parse(data: dict, dtype=None):
+    """(Scenario, {curve index: (field path, motion fields)}, goal path fields or None)."""
     if not isinstance(data, dict):
         raise _err("(top)", f"must be a JSON object, got {type(data).__name__}")
     for key in ("name", "description"):
@@ -105,14 +206,15 @@ def scenario_from_dict(data: dict, dtype=None) -> Scenario:
     if not isinstance(obstacles_json, list):
         raise _err("obstacles", "must be a list")
     obstacles = []
+    motions, curve_index = {}, {}
     for k, ob in enumerate(obstacles_json):
         path = f"obstacles[{k}]"
         if not isinstance(ob, dict) or "type" not in ob:
             raise _err(path, "must be an object with a 'type'")
         kind = ob["type"]
         allowed = {
-            "polynomial": {"type", "coeffs", "u_range", "radius", "name", "metadata"},
-            "line_segment": {"type", "start", "end", "radius", "name", "metadata"},
+            "polynomial": {"type", "coeffs", "u_range", "radius", "name", "metadata", "motion"},
+            "line_segment": {"type", "start", "end", "radius", "name", "metadata", "motion"},
             "points": {"type", "points", "radius", "name", "metadata"},
         }
         if kind not in allowed:
@@ -125,6 +227,10 @@ def scenario_from_dict(data: dict, dtype=None) -> Scenario:
         r = _num_array(ob.get("radius", 0.0), f"{path}.radius", ())
         if r < 0:
             raise _err(f"{path}.radius", f"must be >= 0, got {float(r)}")
+        if kind != "points":
+            curve_index[k] = len(curve_index)  # polynomial curves keep their order in the scene
+            if "motion" in ob:
+                motions[curve_index[k]] = (f"{path}.motion", _parse_motion(ob["motion"], f"{path}.motion"))
         if kind == "polynomial":
             for key in ("coeffs", "u_range"):
                 if key not in ob:
@@ -159,7 +265,8 @@ def scenario_from_dict(data: dict, dtype=None) -> Scenario:
         pr = np.zeros(scen.point_radius.shape)
         pr[: len(radii)] = radii
         scen = scen._replace(point_radius=jnp.asarray(pr, q0.dtype))
-    return scen
+    path = _parse_goal_path(data["goal_path"], curve_index) if "goal_path" in data else None
+    return scen, motions, path
 
 
 def scenario_to_dict(scenario: Scenario, name: str | None = None) -> dict:
@@ -209,6 +316,43 @@ def scenario_to_dict(scenario: Scenario, name: str | None = None) -> dict:
     if name:
         out = {"name": name, **out}
     return out
+
+
+def moving_to_dict(moving, name: str | None = None) -> dict:
+    """The JSON structure of a MovingScenario: :func:`scenario_to_dict` of its scene
+    with each moving curve's ``motion`` and the ``goal_path``."""
+    scene = moving.scene
+    if scene.q0.ndim != 2:
+        raise ValueError("save one scenario at a time (this one is batched)")
+    out = scenario_to_dict(scene, name)
+    real = np.nonzero(np.asarray(scene.curve_mask))[0]
+    motion = {k: np.asarray(v) for k, v in moving.motion._asdict().items()}
+    for k, slot in enumerate(real):  # scenario_to_dict writes the curves first, in slot order
+        row = {key: motion[key][slot].tolist() for key in _MOTION_KEYS}
+        if any(np.any(np.asarray(v) != 0) for v in row.values()):
+            out["obstacles"][k]["motion"] = row
+    path = moving.goal_path
+    attach = int(path.attach)
+    out["goal"] = np.asarray(path.points[0]).tolist()
+    out["goal_path"] = {"times": np.asarray(path.times).tolist(), "points": np.asarray(path.points).tolist(),
+                        "attach": None if attach < 0 else int(np.flatnonzero(real == attach)[0])}
+    return out
+
+
+def load_moving_scenario(path, dtype=None):
+    """Read a scenario JSON file as a :class:`~softplan_jax.motion.MovingScenario`
+    (with its ``motion`` and ``goal_path`` fields; a static file: nothing moves)."""
+    path = os.fspath(path)
+    data = read_json_file(path, "scenario")
+    try:
+        return moving_from_dict(data, dtype=dtype)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
+
+
+def save_moving_scenario(moving, path, name: str | None = None, overwrite: bool = False) -> None:
+    """Write a MovingScenario as JSON (as :func:`save_scenario`)."""
+    write_json_file(path, moving_to_dict(moving, name), overwrite)
 
 
 def read_json_file(path: str, kind: str):

@@ -23,7 +23,7 @@ __all__ = ["random_scenarios"]
 
 
 
-def _seed_sequence(key_or_seed) -> np.random.SeedSequence:
+def seed_sequence(key_or_seed) -> np.random.SeedSequence:
     """A NumPy SeedSequence from an int seed or a JAX PRNG key (raw or typed)."""
     if isinstance(key_or_seed, (int, np.integer)) and not isinstance(key_or_seed, bool):
         if int(key_or_seed) < 0:
@@ -215,7 +215,7 @@ def random_scenarios(
     q0 = check_configuration(default_start() if q0 is None else q0)
     q0_np = np.asarray(q0, np.float64)
     n_seg = q0_np.shape[0]
-    rng = np.random.default_rng(_seed_sequence(key_or_seed))
+    rng = np.random.default_rng(seed_sequence(key_or_seed))
     tips = _batched_tips()
     q0_j = jnp.asarray(q0_np, q0.dtype)
     p0 = np.asarray(tips(q0_j[None]), np.float64)[0]
