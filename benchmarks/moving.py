@@ -172,7 +172,7 @@ def main(argv=None):
         m = jax.tree_util.tree_map(lambda x, b=b: x[b], suite)
         it = int(rc.iterations[b])
         real = np.asarray(m.scene.curve_mask)
-        d = np.asarray(full(jnp.asarray(rc.q[b, : it + 1]), m, jnp.arange(it + 1) * dt))[:, real]
+        d = np.asarray(full(jnp.asarray(rc.q[b, : it + 1]), m, jnp.asarray(np.arange(it + 1) * dt)))[:, real]
         c = np.asarray(rc.clearance[b, : it + 1])[:, real]
         diff = np.abs(d - c)  # radii are 0 in the suite: clearance = distance
         worst_exact = max(worst_exact, float(diff.max()))
