@@ -553,6 +553,34 @@ def _fmt_seconds(t: float) -> str:
     return f"{t * 1e6:.1f} us"
 
 
+def _write_figures(args, summary: dict, make_plot, write_gif) -> None:
+    """``run --plot`` / ``--gif``: the figure from ``make_plot(plotting)`` saved to args.plot,
+    ``write_gif(plotting)`` for args.gif; their absolute paths into the summary."""
+    if args.plot is None and args.gif is None:
+        return
+    if "matplotlib.pyplot" not in sys.modules:
+        import matplotlib
+
+        matplotlib.use("Agg")  # the command never opens a window
+    import matplotlib.pyplot as plt
+
+    from . import plotting
+
+    try:
+        if args.plot is not None:
+            fig = make_plot(plotting)
+            try:
+                fig.savefig(args.plot, dpi=120, bbox_inches="tight", pad_inches=0.2)
+            finally:
+                plt.close(fig)
+            summary["plot"] = os.path.abspath(args.plot)
+        if args.gif is not None:
+            write_gif(plotting)
+            summary["gif"] = os.path.abspath(args.gif)
+    except OSError as err:
+        raise InputError(f"cannot write output: {err}") from None
+
+
 def _cmd_run(args) -> int:
     import jax
 
@@ -652,28 +680,8 @@ def _cmd_run(args) -> int:
         + "\n"
         f"min true clearance {result.min_clearance:.3f}, final tip error {result.final_error:.3f}"
     )
-    if args.plot is not None or args.gif is not None:
-        if "matplotlib.pyplot" not in sys.modules:
-            import matplotlib
-
-            matplotlib.use("Agg")  # the command never opens a window
-        import matplotlib.pyplot as plt
-
-        from . import plotting
-
-        try:
-            if args.plot is not None:
-                fig = plotting.plot_snapshots(scenario, result, title=title)
-                try:
-                    fig.savefig(args.plot, dpi=120, bbox_inches="tight", pad_inches=0.2)
-                finally:
-                    plt.close(fig)
-                summary["plot"] = os.path.abspath(args.plot)
-            if args.gif is not None:
-                plotting.animate(scenario, result, args.gif, title=title.split("\n")[0])
-                summary["gif"] = os.path.abspath(args.gif)
-        except OSError as err:
-            raise InputError(f"cannot write output: {err}") from None
+    _write_figures(args, summary, lambda plotting: plotting.plot_snapshots(scenario, result, title=title),
+                   lambda plotting: plotting.animate(scenario, result, args.gif, title=title.split("\n")[0]))
 
     if args.out is not None:
         replaced = os.path.exists(args.out)
@@ -778,28 +786,8 @@ def _cmd_track(args, dtype) -> int:
     }
     title = (f"{label} (moving) — {args.method} method"
              + (f" (N = {args.n_points})" if args.method == "points" else "") + f" — {result.status}")
-    if args.plot is not None or args.gif is not None:
-        if "matplotlib.pyplot" not in sys.modules:
-            import matplotlib
-
-            matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        from . import plotting
-
-        try:
-            if args.plot is not None:
-                fig = plotting.plot_tracking(result, title=title)
-                try:
-                    fig.savefig(args.plot, dpi=120, bbox_inches="tight", pad_inches=0.2)
-                finally:
-                    plt.close(fig)
-                summary["plot"] = os.path.abspath(args.plot)
-            if args.gif is not None:
-                plotting.animate_tracking(result, args.gif, title=title)
-                summary["gif"] = os.path.abspath(args.gif)
-        except OSError as err:
-            raise InputError(f"cannot write output: {err}") from None
+    _write_figures(args, summary, lambda plotting: plotting.plot_tracking(result, title=title),
+                   lambda plotting: plotting.animate_tracking(result, args.gif, title=title))
     if args.out is not None:
         import numpy as np
 

@@ -418,6 +418,23 @@ def _fit_axis_labels_inside(fig, ax, limits, margin=4.0, tries=12):
     return zoom
 
 
+def _check_gif_args(name: str, path, fps, max_frames) -> str:
+    """The checks :func:`animate` and :func:`animate_tracking` share: pillow installed, a
+    ``.gif`` path, fps > 0, max_frames >= 2 (ValueError naming ``name``); returns the path."""
+    try:
+        import PIL  # noqa: F401
+    except ImportError:
+        raise ValueError(f"{name} needs pillow to write GIFs: pip install pillow") from None
+    path = os.fspath(path)
+    if not path.lower().endswith(".gif"):
+        raise ValueError(f"{name} writes GIF files; the path must end in .gif, got {path!r}")
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be > 0, got {fps!r}")
+    if int(max_frames) < 2:
+        raise ValueError(f"max_frames must be >= 2, got {max_frames!r}")
+    return path
+
+
 def animate(scenario, result, path, fps=15, max_frames=200, hold=1.0, title=None, view=None,
             figsize=(8, 6), dpi=80):
     """Write an animated GIF of the motion (matplotlib's PillowWriter).
@@ -440,17 +457,7 @@ def animate(scenario, result, path, fps=15, max_frames=200, hold=1.0, title=None
     Raises:
       ValueError: bad arguments, or pillow is not installed.
     """
-    try:
-        import PIL  # noqa: F401
-    except ImportError:
-        raise ValueError("animate needs pillow to write GIFs: pip install pillow") from None
-    path = os.fspath(path)
-    if not path.lower().endswith(".gif"):
-        raise ValueError(f"animate writes GIF files; the path must end in .gif, got {path!r}")
-    if not (np.isfinite(fps) and fps > 0):
-        raise ValueError(f"fps must be > 0, got {fps!r}")
-    if int(max_frames) < 2:
-        raise ValueError(f"max_frames must be >= 2, got {max_frames!r}")
+    path = _check_gif_args("animate", path, fps, max_frames)
     from matplotlib.animation import FuncAnimation, PillowWriter
 
     traj = _trajectory(scenario, result)
@@ -858,18 +865,8 @@ def animate_tracking(result, path, fps=15, max_frames=200, hold=1.0, title=None,
     Returns:
       ``path``.
     """
-    try:
-        import PIL  # noqa: F401
-    except ImportError:
-        raise ValueError("animate_tracking needs pillow to write GIFs: pip install pillow") from None
+    path = _check_gif_args("animate_tracking", path, fps, max_frames)
     moving = _tracking_data(result)
-    path = os.fspath(path)
-    if not path.lower().endswith(".gif"):
-        raise ValueError(f"animate_tracking writes GIF files; the path must end in .gif, got {path!r}")
-    if not (np.isfinite(fps) and fps > 0):
-        raise ValueError(f"fps must be > 0, got {fps!r}")
-    if int(max_frames) < 2:
-        raise ValueError(f"max_frames must be >= 2, got {max_frames!r}")
     from matplotlib.animation import FuncAnimation, PillowWriter
 
     T = int(result.iterations)
