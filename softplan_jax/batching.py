@@ -8,8 +8,11 @@ vmapped rollout on its own shard (``jax.shard_map``, no cross-device
 communication). On a CPU, ``XLA_FLAGS=--xla_force_host_platform_device_count=K``
 (set before jax is imported) splits the host into K devices.
 
-Several hosts (``jax.distributed``): see the README's "Many scenarios, several
-devices" section; each process plans its own share on its local devices.
+Several hosts (``jax.distributed``): ``devices="global"`` makes the mesh of
+EVERY process's devices (``jax.devices()``), so the same ``shard_map`` program
+runs over all hosts; each process passes the same suite, puts only its own
+devices' shards on them (:func:`shard_batch`), and gets the whole result back
+(:func:`gather`). See the README's "Many scenarios, several devices".
 """
 
 from __future__ import annotations
@@ -23,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-__all__ = ["BATCH_AXIS", "batch_mesh", "pad_batch", "shard_batch", "round_chunk", "Progress"]
+__all__ = ["BATCH_AXIS", "batch_mesh", "is_global", "pad_batch", "shard_batch", "gather", "round_chunk",
+           "Progress"]
 
 BATCH_AXIS = "batch"
 
@@ -33,15 +37,23 @@ def batch_mesh(devices=None) -> Mesh | None:
 
     Args:
       devices: None (every local device: ``jax.local_devices()``), an int k
-        (the first k local devices; 1 = no sharding), or a sequence of distinct
+        (the first k local devices; 1 = no sharding), a sequence of distinct
         local ``jax.Device`` objects (one explicit device: a 1-device mesh, so
-        the batch runs there).
+        the batch runs there), or ``"global"``: every device of every process
+        (``jax.devices()``, after ``jax.distributed.initialize``; with one
+        process, the local devices).
 
     Raises:
       ValueError: an int outside [1, local device count], an empty sequence,
-        something that is not a local device, or a device given twice.
+        something that is not a local device, a device given twice, or a string
+        other than "global".
     """
     local = jax.local_devices()
+    if isinstance(devices, str):
+        if devices != "global":
+            raise ValueError(f'devices must be None, an int, a sequence of jax devices or "global", got {devices!r}')
+        every = jax.devices()
+        return None if len(every) == 1 else Mesh(np.array(every), (BATCH_AXIS,))
     if devices is None:
         chosen = local
     elif isinstance(devices, (bool, np.bool_)):
@@ -89,12 +101,44 @@ def pad_batch(tree, size: int):
     return jax.tree_util.tree_map(pad, tree)
 
 
+def is_global(mesh: Mesh | None) -> bool:
+    """Whether the mesh holds devices of other processes (``devices="global"`` under
+    ``jax.distributed``)."""
+    return mesh is not None and any(d.process_index != jax.process_index() for d in mesh.devices.flat)
+
+
 def shard_batch(mesh: Mesh, batched, shared):
     """``jax.device_put`` the batched tree split along its leading axis over the
-    mesh, and the shared tree replicated on every device."""
-    batched = jax.device_put(batched, NamedSharding(mesh, PartitionSpec(BATCH_AXIS)))
-    shared = jax.device_put(shared, NamedSharding(mesh, PartitionSpec()))
-    return batched, shared
+    mesh, and the shared tree replicated on every device. On a mesh over several
+    processes every process holds the same (host) trees and puts only the shards
+    of its own devices (``jax.make_array_from_callback``)."""
+    split, same = NamedSharding(mesh, PartitionSpec(BATCH_AXIS)), NamedSharding(mesh, PartitionSpec())
+    if not is_global(mesh):
+        return jax.device_put(batched, split), jax.device_put(shared, same)
+
+    def put(sharding):
+        def leaf(x):
+            x = np.asarray(x)
+            return jax.make_array_from_callback(x.shape, sharding, lambda index: x[index])
+
+        return leaf
+
+    return jax.tree_util.tree_map(put(split), batched), jax.tree_util.tree_map(put(same), shared)
+
+
+def gather(tree):
+    """The tree's arrays as NumPy arrays on the host; arrays sharded over several
+    processes are gathered whole on every process
+    (``jax.experimental.multihost_utils.process_allgather``)."""
+
+    def leaf(x):
+        if isinstance(x, jax.Array) and not x.is_fully_addressable:
+            from jax.experimental import multihost_utils
+
+            return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+        return np.asarray(jax.device_get(x))
+
+    return jax.tree_util.tree_map(leaf, tree)
 
 
 def round_chunk(chunk: int | None, batch: int, n_devices: int) -> int:

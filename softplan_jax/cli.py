@@ -207,6 +207,14 @@ def _add_batch_parser(sub) -> None:
                        help="use the first K local devices (default: all)")
     batch.add_argument("--host-devices", type=int, default=None, metavar="K",
                        help="split the CPU into K XLA devices (default: jax's, 1)")
+    batch.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                       help="run as one of several processes (jax.distributed): the address of process 0's "
+                       "coordinator; with --num-processes and --process-id, the same command on every host")
+    batch.add_argument("--num-processes", type=int, default=None, metavar="P",
+                       help="processes of a --coordinator run, >= 1")
+    batch.add_argument("--process-id", type=int, default=None, metavar="I",
+                       help="this process's index in a --coordinator run, 0..P-1 (process 0 prints and "
+                       "writes --out)")
     batch.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
     batch.add_argument("--out", metavar="FILE.npz",
                        help="save per-scenario status, iterations, min clearance, final error, escapes (NumPy)")
@@ -832,6 +840,26 @@ def _cmd_track(args, dtype) -> int:
     return EXIT_OK
 
 
+def _check_distributed_args(args) -> bool:
+    """Whether this is a --coordinator run; its three flags come together, in range,
+    and exclude --devices (the mesh is every device of every process)."""
+    given = [args.coordinator is not None, args.num_processes is not None, args.process_id is not None]
+    if not any(given):
+        return False
+    if not all(given):
+        raise InputError("--coordinator, --num-processes and --process-id go together")
+    if args.num_processes < 1:
+        raise InputError(f"--num-processes must be >= 1, got {args.num_processes}")
+    if not 0 <= args.process_id < args.num_processes:
+        raise InputError(f"--process-id must be in 0..{args.num_processes - 1}, got {args.process_id}")
+    host, _, port = args.coordinator.rpartition(":")
+    if not host or not port.isdigit():
+        raise InputError(f"--coordinator: use HOST:PORT, got {args.coordinator!r}")
+    if args.devices is not None:
+        raise InputError("--devices does not combine with --coordinator (every process's devices are used)")
+    return True
+
+
 def _cmd_batch(args) -> int:
     if args.n < 1:
         raise InputError(f"--n must be >= 1, got {args.n}")
@@ -839,6 +867,7 @@ def _cmd_batch(args) -> int:
         raise InputError(f"--max-steps must be >= 1, got {args.max_steps}")
     if args.chunk < 1:
         raise InputError(f"--chunk must be >= 1, got {args.chunk}")
+    distributed = _check_distributed_args(args)
     if args.host_devices is not None:
         if args.host_devices < 1:
             raise InputError(f"--host-devices must be >= 1, got {args.host_devices}")
@@ -869,6 +898,14 @@ def _cmd_batch(args) -> int:
 
     from .compilation_cache import enable_compilation_cache
 
+    if distributed:
+        try:
+            jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.num_processes,
+                                       process_id=args.process_id)
+        except (RuntimeError, ValueError) as err:
+            raise InputError(f"--coordinator: jax.distributed.initialize failed: {err}") from None
+        args.devices = "global"
+        args.no_progress = args.no_progress or args.process_id != 0
     enable_compilation_cache()
     if not args.float32:
         jax.config.update("jax_enable_x64", True)
@@ -883,7 +920,8 @@ def _cmd_batch(args) -> int:
     dtype = jnp.float32 if args.float32 else jnp.float64
     args.gains_file = _check_gains_arg(args.gains)
     try:
-        n_dev = len(jax.local_devices()) if args.devices is None else int(args.devices)
+        n_dev = (len(jax.local_devices()) if args.devices is None else len(jax.devices())
+                 if args.devices == "global" else int(args.devices))
         t0 = time.perf_counter()
         suite = random_scenarios(args.seed, args.n, obstacles=tuple(args.obstacles), curve_slots=args.slots,
                                  dtype=dtype)
@@ -924,8 +962,12 @@ def _cmd_batch(args) -> int:
         "run_time_s": run_time,
         # Every scan step runs for every scenario, finished or not.
         "scenario_steps_per_s": args.n * (args.max_steps + 1) / run_time,
+        "processes": args.num_processes if distributed else 1,
         "out": None,
     }
+    if distributed and args.process_id != 0:  # every process holds the whole result; process 0 reports it
+        jax.distributed.shutdown()
+        return EXIT_OK
     if args.out is not None:
         try:
             np.savez_compressed(args.out, status=status, iterations=r.iterations, min_clearance=r.min_clearance,
@@ -945,7 +987,8 @@ def _cmd_batch(args) -> int:
             ("method", method),
             ("gains", s["gains"] + (" (gains file)" if s["gains_file"] else " (preset)")),
             ("gain values", _fmt_gain_values(s["gain_values"])),
-            ("devices", f"{s['devices']}, chunks of {s['chunk']}"),
+            ("devices", f"{s['devices']}" + (f" on {s['processes']} processes" if s["processes"] > 1 else "")
+             + f", chunks of {s['chunk']}"),
             ("outcomes", ", ".join(f"{k} {v:,}" for k, v in s["status_counts"].items())),
             ("success / collided", f"{100 * s['success_rate']:.1f} % / {100 * s['collision_rate']:.1f} %"),
             ("mean iterations (reached)", "-" if s["mean_iterations_reached"] is None

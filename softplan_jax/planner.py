@@ -54,7 +54,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .batching import BATCH_AXIS, Progress, batch_mesh, pad_batch, round_chunk, shard_batch
+from .batching import BATCH_AXIS, Progress, batch_mesh, gather, is_global, pad_batch, round_chunk, shard_batch
 from .closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
 from .compilation_cache import load_or_export, rollout_compiler_options
 from .kinematics import motion_bound, points_jacobian, tip_position
@@ -850,7 +850,9 @@ jitted: ``rollout_batch(scenarios, gains, options, max_steps, seed=0, devices=No
 escapes use ``jax.random.split(key(seed), B)[b]`` (or ``seed[b]`` when ``seed`` holds B keys).
 
 With more than one local device the batch is sharded over all of them (``devices``: None = every
-local device, an int k = the first k, 1 = no sharding, or a sequence of jax devices): padded to a
+local device, an int k = the first k, 1 = no sharding, a sequence of jax devices, or ``"global"``:
+every process's devices under ``jax.distributed``, the result then a global array; see
+:func:`plan_batch`, which gathers it on every process): padded to a
 multiple of the device count with copies of its last scenario (dropped from the result), each
 device runs the vmapped rollout on its shard (``jax.shard_map``, no cross-device communication).
 The result agrees with the unsharded call to rounding, not bit for bit (XLA optimises a
@@ -1003,8 +1005,12 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
         of the last scenario, so every call has the same shape and compiles
         once.
       devices: None (every local device), an int k (the first k local devices;
-        1: no sharding) or a sequence of local jax devices. With more than one,
-        every chunk is split over them (see :data:`rollout_batch`).
+        1: no sharding), a sequence of local jax devices, or ``"global"``: every
+        device of every process under ``jax.distributed`` (call it with the
+        same arguments on every process; each process computes its devices'
+        shards and every process gets the whole result as NumPy arrays). With
+        more than one device, every chunk is split over them (see
+        :data:`rollout_batch`).
       progress: write one line per finished chunk to stderr (chunks done,
         scenarios, elapsed time, estimated time left, compile time).
       Other arguments as :func:`plan`.
@@ -1012,7 +1018,8 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
     Returns:
       A batched :class:`Rollout` (leading axis: scenario; time padded to
       max_steps + 1). In one call its arrays are jax arrays; in several chunks
-      they are NumPy arrays assembled on the host, so the devices hold about
+      (or with ``devices="global"`` on several processes) they are NumPy arrays
+      assembled on the host, so the devices hold about
       two chunks at a time. Size: about ``(max_steps + 1) * (8 * (13 + 2 m) + 5)``
       bytes per scenario in float64 (m obstacle slots): 142 kB for 600 steps and
       8 slots, 1.4 GB for 10^4 such scenarios.
@@ -1041,7 +1048,8 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
     size = round_chunk(chunk, batch, n_dev)
     n_chunks = math.ceil(batch / size)
     bar = Progress(n_chunks, batch, n_dev) if progress else None
-    if n_chunks == 1 and bar is None:
+    spread = is_global(mesh)  # several processes: results are gathered on every host
+    if n_chunks == 1 and bar is None and not spread:
         return rollout_batch(scenarios, g, opts, T, seed, devices=devices)
 
     keys = batch_keys(seed, batch)
@@ -1059,10 +1067,10 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
     def collect(a, r):
         nonlocal out, done
         n = min(size, batch - a)
-        if n_chunks == 1:
+        if n_chunks == 1 and not spread:
             out = jax.tree_util.tree_map(lambda x: x[:n], r) if n < size else r
         else:
-            r = jax.device_get(r)
+            r = gather(r)
             if out is None:
                 out = jax.tree_util.tree_map(lambda x: np.empty((batch, *x.shape[1:]), x.dtype), r)
             for o, x in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(r), strict=True):

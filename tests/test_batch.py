@@ -322,3 +322,65 @@ def test_distributed_two_processes_one_host():
     for out in outs:
         assert (out["count"], out["devices"], out["local_devices"]) == (2, 2, 1), out
         assert out["gathered"] == outs[0]["whole"], out
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_batch_command_on_two_processes_is_the_sharded_run(tmp_path):
+    """``softplan batch --coordinator ... --num-processes 2 --process-id I`` (the same command
+    on every host; here 2 processes of 1 CPU device each) runs the SAME shard_map program as
+    one process sharded over 2 host devices: a global mesh, each process computing its own
+    devices' shards, the results gathered. Process 0 writes --out; the per-scenario results
+    equal the one-process run's bit for bit. Not a test on real multi-host hardware."""
+    env = subprocess_env()
+    env["XLA_FLAGS"] = " ".join(f for f in env.get("XLA_FLAGS", "").split()
+                                if "xla_force_host_platform_device_count" not in f)
+    common = ["-m", "softplan_jax.cli", "batch", "--n", "6", "--max-steps", "40", "--chunk", "4", "--no-progress"]
+    port = _free_port()
+    procs = [subprocess.Popen([sys.executable, *common, "--coordinator", f"localhost:{port}", "--num-processes", "2",
+                               "--process-id", str(i), "--json", "--out", str(tmp_path / f"p{i}.npz")],
+                              cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for i in range(2)]
+    outs = []
+    for p in procs:
+        stdout, stderr = p.communicate(timeout=900)
+        assert p.returncode == 0, stderr[-3000:]
+        outs.append(stdout)
+    # jax's CPU collectives (gloo) print one "[Gloo] Rank i is connected ..." line on stdout.
+    def ours(text):
+        return "\n".join(line for line in text.splitlines() if not line.startswith("[Gloo]"))
+
+    summary = json.loads(ours(outs[0]))
+    assert (summary["processes"], summary["devices"], summary["chunk"]) == (2, 2, 4), summary
+    assert ours(outs[1]).strip() == "" and not (tmp_path / "p1.npz").exists()  # only process 0 reports
+    env2 = dict(env, XLA_FLAGS=(env["XLA_FLAGS"] + " --xla_force_host_platform_device_count=2").strip())
+    one = subprocess.run([sys.executable, *common, "--out", str(tmp_path / "one.npz")],
+                         cwd=ROOT, env=env2, capture_output=True, text=True, timeout=900)
+    assert one.returncode == 0, one.stderr[-3000:]
+    a, b = np.load(tmp_path / "p0.npz"), np.load(tmp_path / "one.npz")
+    assert a["status"].shape == (6,)
+    for key in ("status", "iterations", "min_clearance", "final_error", "escapes"):
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+def test_global_mesh_in_one_process():
+    """devices="global" without jax.distributed is every local device: no mesh for one
+    device, and a plan_batch equal to devices=None's."""
+    from softplan_jax.batching import batch_mesh, is_global
+
+    mesh = batch_mesh("global")
+    assert mesh is None if len(jax.devices()) == 1 else mesh.size == len(jax.devices())
+    assert not is_global(mesh)
+    with pytest.raises(ValueError, match='"global"'):
+        batch_mesh("everywhere")
+    batch = sp.stack_scenarios([sp.paper_scenario("sim1", **PAD)] * 2)
+    a = sp.plan_batch(batch, max_steps=5, devices="global")
+    b = sp.plan_batch(batch, max_steps=5)
+    np.testing.assert_array_equal(np.asarray(a.q), np.asarray(b.q))

@@ -502,3 +502,59 @@ def test_moving_benchmark_quick_run(tmp_path):
     assert rep["ratio_single_min"] > 0 and rep["ratio_batch_min"] > 0
     assert "| model | reached and held |" in (tmp_path / "moving.md").read_text()
     assert (tmp_path / "figures" / "moving_outcomes.png").exists()
+
+
+# ----------------------------------------------------------------------------
+# step_kernels.py and throughput.py (issue 25)
+
+
+def test_step_kernels_rejects_bad_arguments(capsys):
+    import step_kernels
+
+    for argv in (["--steps", "0"], ["--rounds", "0"], ["--variants", "no_such_patch"]):
+        with pytest.raises(SystemExit) as e:
+            step_kernels.main(argv)
+        assert e.value.code == 2, argv
+    assert "no_such_patch" in capsys.readouterr().err
+    assert "polish_unrolled" in step_kernels.available_variants()
+
+
+def test_step_kernels_counts_the_scan_body_and_its_fixed_loops():
+    """The thunk counter against programs whose loops are known: a scan of 50 steps whose
+    body holds a fori_loop of n iterations and a while loop of data-dependent length; the
+    fixed loop is expanded (n times its body), the while loop listed apart."""
+    import step_kernels
+
+    def program(n):
+        def f(x):
+            def body(c, _):
+                # (sort: a kernel of its own, so that XLA keeps the loops as loops)
+                c = jax.lax.fori_loop(0, n, lambda i, v: jnp.sin(v) * v + jnp.cos(v * i) + jnp.sort(v), c)
+                c = jax.lax.while_loop(lambda v: jnp.sum(v) > 1.0, lambda v: jnp.sort(v * 0.5 + jnp.exp(-v)), c)
+                return c, jnp.sum(c)
+
+            return jax.lax.scan(body, x, None, length=50)
+
+        return jax.jit(f).lower(jnp.ones(5)).compile().as_text()
+
+    counts = {}
+    for n in (4, 12):
+        got = step_kernels.step_thunks(program(n), 50)
+        assert got["scan_trip"] == 50
+        assert len(got["dynamic_loops"]) == 1 and got["dynamic_loops"][0] >= 1
+        counts[n] = got["per_step"]
+    comps, _ = step_kernels.parse_hlo(program(4))
+    inner = [(body, trip) for name in comps for body, _, trip in step_kernels._loops(comps, name) if trip == 4]
+    assert len(inner) == 1
+    cond = [c for name in comps for body, c, trip in step_kernels._loops(comps, name) if trip == 4][0]
+    per_iteration = step_kernels._static_count(comps, inner[0][0])[0] + step_kernels._static_count(comps, cond)[0]
+    assert counts[12] - counts[4] == 8 * per_iteration
+
+
+def test_throughput_rejects_bad_arguments():
+    import throughput
+
+    for argv in (["--sizes", "0,4"], ["--sizes", "a"], ["--devices", "0"], ["--steps", "0"], ["--rounds", "0"]):
+        with pytest.raises(SystemExit) as e:
+            throughput.parse_args(argv)
+        assert e.value.code == 2, argv

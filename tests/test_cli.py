@@ -296,6 +296,15 @@ def _bad_cases(tmp: str, scenario_file: str):
         ("batch more obstacles than slots", ["batch", "--n", "4", "--obstacles", "1", "9"]),
         ("batch too many devices", ["batch", "--n", "4", "--devices", "64"]),
         ("batch host devices after jax started", ["batch", "--n", "4", "--host-devices", "3"]),
+        ("batch coordinator alone", ["batch", "--n", "4", "--coordinator", "localhost:1234"]),
+        ("batch process id out of range", ["batch", "--n", "4", "--coordinator", "localhost:1234",
+                                           "--num-processes", "2", "--process-id", "2"]),
+        ("batch num processes 0", ["batch", "--n", "4", "--coordinator", "localhost:1234",
+                                   "--num-processes", "0", "--process-id", "0"]),
+        ("batch coordinator without port", ["batch", "--n", "4", "--coordinator", "localhost",
+                                            "--num-processes", "1", "--process-id", "0"]),
+        ("batch devices with coordinator", ["batch", "--n", "4", "--devices", "1", "--coordinator", "localhost:1234",
+                                            "--num-processes", "1", "--process-id", "0"]),
     ]
 
 

@@ -1,0 +1,188 @@
+"""Batched throughput against batch size, on 1 and on 2 host devices (issue 25, item 2).
+
+For each batch size B (``--sizes``, default 1, 4, 16, 64, 256, 1024, 4096) the
+checked rollout that :func:`softplan_jax.plan_batch` runs (collision checks in
+the scan, the safe step, escapes) of ``random_scenarios(0, B)`` with
+``--steps`` steps, the curve method and the 10-point reference, float64, is
+compiled ahead (``rollout_batch.lower(...).compile()``, compile time apart) and
+timed in ``--rounds`` interleaved rounds, results left on the device;
+scenario-steps per second = B x (steps + 1) / wall time (every scan step runs for
+every scenario, finished or not). Each device count runs in its own process
+(``XLA_FLAGS=--xla_force_host_platform_device_count=K``; ``rollout_batch``
+shards the batch over the K devices with ``shard_map``), one after the other.
+
+    python benchmarks/throughput.py                       # ~20 min on 2 CPUs
+    python benchmarks/throughput.py --sizes 1,16,256 --steps 20 --rounds 1 --out /tmp/t   # smoke
+
+Writes ``benchmarks/results/throughput.{md,json}`` and
+``benchmarks/results/figures/throughput.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+METHODS = {"curve": ("curve", 10), "points10": ("points", 10)}
+
+
+def parse_args(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--sizes", default="1,4,16,64,256,1024,4096", help="comma list of batch sizes")
+    ap.add_argument("--devices", default="1,2", help="comma list of host device counts (default 1,2)")
+    ap.add_argument("--steps", type=int, default=100, help="planner steps per rollout (default 100)")
+    ap.add_argument("--rounds", type=int, default=2, help="interleaved timing rounds (default 2)")
+    ap.add_argument("--out", default=None, help="output prefix (default benchmarks/results/throughput)")
+    ap.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    try:
+        args.size_list = [int(x) for x in args.sizes.split(",")]
+        args.device_list = [int(x) for x in args.devices.split(",")]
+    except ValueError:
+        ap.error(f"--sizes and --devices: comma lists of integers, got {args.sizes!r}, {args.devices!r}")
+    if not args.size_list or any(b < 1 for b in args.size_list):
+        ap.error("--sizes: batch sizes must be >= 1")
+    if not args.device_list or any(k < 1 for k in args.device_list):
+        ap.error("--devices: counts must be >= 1")
+    if args.steps < 1 or args.rounds < 1:
+        ap.error("--steps and --rounds must be >= 1")
+    return args
+
+
+def worker(args) -> dict:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    from _common import log
+
+    import softplan_jax as sp
+
+    k = len(jax.local_devices())
+    g = sp.default_gains()
+    calls = {}
+    for method, (name, n_points) in METHODS.items():
+        opts = sp.make_options(name, n_points)
+        for b in args.size_list:
+            suite = sp.random_scenarios(0, b)
+            t0 = time.perf_counter()
+            sp.rollout_batch.lower(suite, g, opts, args.steps, devices=k).compile()
+            compile_s = time.perf_counter() - t0
+            jax.block_until_ready(sp.rollout_batch(suite, g, opts, args.steps, devices=k))  # compiles nothing
+            calls[(method, b)] = (suite, opts, compile_s)
+            log(f"  [{k} device(s)] {method} B={b}: compiled in {compile_s:.1f} s")
+    times = {key: [] for key in calls}
+    for r in range(args.rounds):
+        for (method, b), (suite, opts, _) in calls.items():
+            t0 = time.perf_counter()
+            jax.block_until_ready(sp.rollout_batch(suite, g, opts, args.steps, devices=k).q)
+            times[(method, b)].append(time.perf_counter() - t0)
+        log(f"  [{k} device(s)] round {r + 1}/{args.rounds}")
+    rows = []
+    for (method, b), t in times.items():
+        per = b * (args.steps + 1)
+        rows.append(dict(devices=k, method=method, batch=b, compile_s=calls[(method, b)][2],
+                         min_s=min(t), median_s=statistics.median(t),
+                         steps_per_s_best=per / min(t), steps_per_s_median=per / statistics.median(t)))
+    return dict(devices=k, rows=rows, loadavg_end=[round(x, 2) for x in os.getloadavg()])
+
+
+def run_worker(args, k: int) -> dict:
+    env = dict(os.environ)
+    flags = [f for f in env.get("XLA_FLAGS", "").split() if "xla_force_host_platform_device_count" not in f]
+    env["XLA_FLAGS"] = " ".join(flags + [f"--xla_force_host_platform_device_count={k}"])
+    repo = os.path.dirname(HERE)
+    env["PYTHONPATH"] = os.pathsep.join([repo] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    cmd = [sys.executable, os.path.abspath(__file__), "--worker", str(k), "--sizes", args.sizes,
+           "--steps", str(args.steps), "--rounds", str(args.rounds)]
+    p = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(f"worker with {k} device(s) failed (exit {p.returncode})")
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def plot(rows, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for method, color in (("curve", "C0"), ("points10", "C1")):
+        for k, style in ((1, "-"), (2, "--"), (4, ":")):
+            rs = sorted((r for r in rows if r["method"] == method and r["devices"] == k), key=lambda r: r["batch"])
+            if rs:
+                ax.plot([r["batch"] for r in rs], [r["steps_per_s_median"] for r in rs], style, color=color,
+                        marker="o", label=f"{'curve' if method == 'curve' else '10 points'}, {k} device(s)")
+    ax.axhline(1.5e5, color="grey", lw=0.8, ls=":", label="issue 25 target (curve)")
+    ax.set_xscale("log", base=2)
+    ax.set_yscale("log")
+    ax.set_xlabel("batch size B (scenarios per call)")
+    ax.set_ylabel("checked scenario-steps / s (median)")
+    ax.set_title("plan_batch's rollout, float64, random scenes")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    if args.worker is not None:
+        res = worker(args)
+        print(json.dumps(res))
+        return res
+    from _common import FIGURES_DIR, RESULTS_DIR, finish_machine, log, machine_info, machine_lines, write_results
+
+    out = args.out or os.path.join(RESULTS_DIR, "throughput")
+    machine = machine_info("float64")
+    t0 = time.perf_counter()
+    workers = []
+    for k in args.device_list:
+        log(f"--- {k} host device(s)")
+        workers.append(run_worker(args, k))
+    machine = finish_machine(machine)
+    rows = [r for w in workers for r in w["rows"]]
+    fig = os.path.join(FIGURES_DIR if args.out is None else os.path.dirname(os.path.abspath(out)),
+                       "throughput.png")
+    os.makedirs(os.path.dirname(fig), exist_ok=True)
+    plot(rows, fig)
+    best = {}
+    for r in rows:
+        key = (r["method"], r["devices"])
+        if key not in best or r["steps_per_s_median"] > best[key]["steps_per_s_median"]:
+            best[key] = r
+    lines = ["# Batched throughput against batch size (issue 25, item 2)", "",
+             f"- generated by `python benchmarks/throughput.py{' ' + ' '.join(argv) if argv else ''}` in "
+             f"{time.perf_counter() - t0:.0f} s; checked rollouts (what `plan_batch` runs) of {args.steps} steps "
+             f"of `random_scenarios(0, B)`, float64, {args.rounds} interleaved rounds per device count",
+             *machine_lines(machine), "",
+             "Scenario-steps per second (median over rounds; best in brackets); compile apart.", "",
+             "| devices | method | B | compile | per scenario-step (median) | scenario-steps / s |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['devices']} | {r['method']} | {r['batch']:,} | {r['compile_s']:.1f} s "
+                     f"| {1e6 / r['steps_per_s_median']:.1f} µs | {r['steps_per_s_median']:,.0f} "
+                     f"({r['steps_per_s_best']:,.0f}) |")
+    lines += ["", "Best batch size per (method, devices):", ""]
+    for (method, k), r in sorted(best.items()):
+        lines.append(f"- {method}, {k} device(s): B = {r['batch']:,}, {r['steps_per_s_median']:,.0f} "
+                     "scenario-steps/s")
+    lines += ["", f"![throughput](figures/{os.path.basename(fig)})"]
+    md = "\n".join(lines) + "\n"
+    write_results(out, dict(machine=machine, args={k: v for k, v in vars(args).items()}, rows=rows,
+                            workers=workers), md)
+    log(f"wrote {out}.md/.json and {fig}")
+    print(md)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
