@@ -25,6 +25,18 @@ def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
+def host_devices_env(k: int) -> dict:
+    """The environment of a worker subprocess with k host devices: this process's,
+    with ``XLA_FLAGS=--xla_force_host_platform_device_count=k`` (replacing any such
+    flag) and the repository first on ``PYTHONPATH``."""
+    env = dict(os.environ)
+    flags = [f for f in env.get("XLA_FLAGS", "").split() if "xla_force_host_platform_device_count" not in f]
+    env["XLA_FLAGS"] = " ".join(flags + [f"--xla_force_host_platform_device_count={k}"])
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env["PYTHONPATH"] = os.pathsep.join([repo] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    return env
+
+
 def machine_info(dtype: str) -> dict:
     """Platform, CPU, CPU count, versions, jax backend and devices, dtype, load average."""
     import softplan_jax as sp

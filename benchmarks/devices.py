@@ -140,11 +140,9 @@ def worker(args) -> dict:
 
 
 def run_worker(args, k: int, dump: str) -> dict:
-    env = dict(os.environ)
-    flags = [f for f in env.get("XLA_FLAGS", "").split() if "xla_force_host_platform_device_count" not in f]
-    env["XLA_FLAGS"] = " ".join(flags + [f"--xla_force_host_platform_device_count={k}"])
-    repo = os.path.dirname(HERE)
-    env["PYTHONPATH"] = os.pathsep.join([repo] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    from _common import host_devices_env
+
+    env = host_devices_env(k)
     cmd = [sys.executable, os.path.abspath(__file__), "--worker", str(k), "--n", str(args.n), "--max-steps",
            str(args.max_steps), "--chunk", str(args.chunk), "--seed", str(args.seed), "--dump", dump]
     p = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, text=True)

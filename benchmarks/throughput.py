@@ -95,11 +95,9 @@ def worker(args) -> dict:
 
 
 def run_worker(args, k: int) -> dict:
-    env = dict(os.environ)
-    flags = [f for f in env.get("XLA_FLAGS", "").split() if "xla_force_host_platform_device_count" not in f]
-    env["XLA_FLAGS"] = " ".join(flags + [f"--xla_force_host_platform_device_count={k}"])
-    repo = os.path.dirname(HERE)
-    env["PYTHONPATH"] = os.pathsep.join([repo] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    from _common import host_devices_env
+
+    env = host_devices_env(k)
     cmd = [sys.executable, os.path.abspath(__file__), "--worker", str(k), "--sizes", args.sizes,
            "--steps", str(args.steps), "--rounds", str(args.rounds)]
     p = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, text=True)

@@ -298,20 +298,29 @@ DISTRIBUTED = textwrap.dedent(
 )
 
 
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
+def _one_device_env() -> dict:
+    """The test subprocesses' environment without a host device count: one CPU device."""
+    env = subprocess_env()
+    env["XLA_FLAGS"] = " ".join(f for f in env.get("XLA_FLAGS", "").split()
+                                if "xla_force_host_platform_device_count" not in f)
+    return env
+
+
 @pytest.mark.slow
 def test_distributed_two_processes_one_host():
     """The README's jax.distributed recipe, run as 2 processes on this machine (CPU,
     1 device each): every process plans its share, the summaries are gathered, and
     they are the whole suite's (statuses and iterations). Not a test on real
     multi-host hardware."""
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        port = s.getsockname()[1]
-    env = subprocess_env()
-    env["XLA_FLAGS"] = " ".join(f for f in env.get("XLA_FLAGS", "").split()
-                                if "xla_force_host_platform_device_count" not in f)
+    port, env = _free_port(), _one_device_env()
     procs = [subprocess.Popen([sys.executable, "-c", DISTRIBUTED, f"localhost:{port}", str(i)], cwd=ROOT, env=env,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
     outs = []
@@ -324,14 +333,6 @@ def test_distributed_two_processes_one_host():
         assert out["gathered"] == outs[0]["whole"], out
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        return s.getsockname()[1]
-
-
 @pytest.mark.slow
 def test_batch_command_on_two_processes_is_the_sharded_run(tmp_path):
     """``softplan batch --coordinator ... --num-processes 2 --process-id I`` (the same command
@@ -339,9 +340,7 @@ def test_batch_command_on_two_processes_is_the_sharded_run(tmp_path):
     one process sharded over 2 host devices: a global mesh, each process computing its own
     devices' shards, the results gathered. Process 0 writes --out; the per-scenario results
     equal the one-process run's bit for bit. Not a test on real multi-host hardware."""
-    env = subprocess_env()
-    env["XLA_FLAGS"] = " ".join(f for f in env.get("XLA_FLAGS", "").split()
-                                if "xla_force_host_platform_device_count" not in f)
+    env = _one_device_env()
     common = ["-m", "softplan_jax.cli", "batch", "--n", "6", "--max-steps", "40", "--chunk", "4", "--no-progress"]
     port = _free_port()
     procs = [subprocess.Popen([sys.executable, *common, "--coordinator", f"localhost:{port}", "--num-processes", "2",

@@ -342,17 +342,22 @@ def moving_to_dict(moving, name: str | None = None) -> dict:
 def load_moving_scenario(path, dtype=None):
     """Read a scenario JSON file as a :class:`~softplan_jax.motion.MovingScenario`
     (with its ``motion`` and ``goal_path`` fields; a static file: nothing moves)."""
-    path = os.fspath(path)
-    data = read_json_file(path, "scenario")
-    try:
-        return moving_from_dict(data, dtype=dtype)
-    except ValueError as err:
-        raise ValueError(f"{path}: {err}") from None
+    return _read_scenario_file(path, moving_from_dict, dtype)
 
 
 def save_moving_scenario(moving, path, name: str | None = None, overwrite: bool = False) -> None:
     """Write a MovingScenario as JSON (as :func:`save_scenario`)."""
     write_json_file(path, moving_to_dict(moving, name), overwrite)
+
+
+def _read_scenario_file(path, from_dict, dtype):
+    """``from_dict`` of the scenario file at ``path``; its ValueErrors name the file."""
+    path = os.fspath(path)
+    data = read_json_file(path, "scenario")
+    try:
+        return from_dict(data, dtype=dtype)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
 
 
 def read_json_file(path: str, kind: str):
@@ -373,12 +378,7 @@ def read_json_file(path: str, kind: str):
 
 def load_scenario(path, dtype=None) -> Scenario:
     """Read a scenario JSON file (format ``softplan-scenario/1``, see the README)."""
-    path = os.fspath(path)
-    data = read_json_file(path, "scenario")
-    try:
-        return scenario_from_dict(data, dtype=dtype)
-    except ValueError as err:
-        raise ValueError(f"{path}: {err}") from None
+    return _read_scenario_file(path, scenario_from_dict, dtype)
 
 
 def save_scenario(scenario: Scenario, path, name: str | None = None, overwrite: bool = False) -> None:
