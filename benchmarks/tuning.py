@@ -20,17 +20,21 @@ checks in the scan). Per obstacle model (curve, N = 10, N = 50):
    population ``--cma-popsize``): each candidate is scored by the mean
    :func:`softplan_jax.smoothing.rollout_score` (the gradient's score) on a
    minibatch of ``--pairs`` training scenes shared by the generation;
-   B_grid / ``--fraction`` rollouts; its final mean is the choice.
+   B_grid / ``--fraction`` rollouts; its final mean is the choice. ``cma-g``:
+   the same on the gradient's parameter space (the control for it).
 4. **gradient**: :func:`softplan_jax.smoothing.tune_smoothed` (its defaults:
    SGD with momentum 0.5, step ``--lr`` decaying to a tenth, the mean of the
-   last third of the iterates) on the same three log-gains from the same
-   centre, B_grid / ``--fraction`` rollouts (updates x 2 x pairs).
+   last third of the iterates) from the same centre, B_grid / ``--fraction``
+   rollouts (updates x 2 x pairs), on ``--grad-names`` (default d0 and dt; eta
+   stays at the centre: its gradient is noise, see
+   ``tuning_validation/README.md``) with ``dt`` parametrised against the Euler
+   step's stability bound (``GainSpace(stable_dt=True)``), sigma ``--sigma``.
 5. **gain function** (beyond the grid's reach; with the ablation
    ``gradient+``: the same extra updates on the three gains alone): the 20-parameter
    :class:`~softplan_jax.planner.GainFunction` space (log d0, dt, eta; a
    14-knot repulsion profile over d / d0; 3 segment weights),
-   ``tune_smoothed`` from the gradient's 3-parameter result for
-   ``--fn-updates`` more updates of ``--fn-pairs`` pairs.
+   ``tune_smoothed`` from the gradient's result for ``--fn-updates`` more
+   updates of ``--fn-pairs`` pairs (sigma ``--fn-sigma``, step ``--fn-lr``).
 
 The tuners' settings (start, optimiser, step size, pairs, averaging) were
 chosen on a validation seed (``random_scenarios(2, 256)``), never on the
@@ -61,7 +65,7 @@ sys.path.insert(0, HERE)
 from stats import mcnemar_exact, paired_bootstrap, pct_interval, wilson  # noqa: E402
 
 TUNED = ("d0", "dt", "eta")
-SETTINGS = ("default", "grid", "random", "cma", "gradient", "gradient+", "function")
+SETTINGS = ("default", "grid", "random", "cma", "cma-g", "gradient", "gradient+", "function")
 
 
 def parse_args(argv=None):
@@ -79,8 +83,13 @@ def parse_args(argv=None):
     ap.add_argument("--grid-eta", default="0.001,0.004")
     ap.add_argument("--fraction", type=int, default=5, help="budget of random / CMA / gradient = grid's / this")
     ap.add_argument("--pairs", type=int, default=None, help="antithetic pairs per gradient (default 16; quick 4)")
-    ap.add_argument("--sigma", type=float, default=0.2, help="smoothing scale (log units)")
-    ap.add_argument("--lr", type=float, default=0.1, help="tune_smoothed's first step size (cosine decay to a tenth)")
+    ap.add_argument("--sigma", type=float, default=0.4, help="the gradient's smoothing scale (theta units)")
+    ap.add_argument("--lr", type=float, default=1.0, help="the gradient's first step size (cosine decay to a tenth)")
+    ap.add_argument("--grad-names", default="d0,dt", help="gains the gradient tunes (the others stay at the start)")
+    ap.add_argument("--stable-dt", action=argparse.BooleanOptionalAction, default=True,
+                    help="the gradient's dt as logit(dt k_att / 2) (GainSpace(stable_dt=True))")
+    ap.add_argument("--fn-sigma", type=float, default=0.2, help="smoothing scale of the gain-function stage")
+    ap.add_argument("--fn-lr", type=float, default=0.1, help="first step size of the gain-function stage")
     ap.add_argument("--start", choices=("centre", "default"), default="centre",
                     help="start of CMA-ES and the gradient: the grid box's geometric centre, or the default gains")
     ap.add_argument("--fn-updates", type=int, default=None, help="updates of the gain function (default 24)")
@@ -110,8 +119,12 @@ def parse_args(argv=None):
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     if min(args.pairs, args.fn_pairs, args.fn_knots) < 2:
         raise ValueError("--pairs, --fn-pairs and --fn-knots must be >= 2")
-    if not (math.isfinite(args.sigma) and args.sigma > 0 and math.isfinite(args.lr) and args.lr > 0):
-        raise ValueError("--sigma and --lr must be finite and > 0")
+    if not all(math.isfinite(v) and v > 0 for v in (args.sigma, args.lr, args.fn_sigma, args.fn_lr)):
+        raise ValueError("--sigma, --lr, --fn-sigma and --fn-lr must be finite and > 0")
+    args.grad_names = tuple(args.grad_names.split(","))
+    if not args.grad_names or any(k not in TUNED for k in args.grad_names) or len(set(args.grad_names)) < len(
+            args.grad_names) or len(args.grad_names) < 2:
+        raise ValueError(f"--grad-names must be two or three distinct names of {','.join(TUNED)}")
     args.budget = len(args.grid) * args.n_train // args.fraction
     if args.budget < 2 * args.pairs:
         raise ValueError(f"the budget ({args.budget} rollouts) is below one gradient (2 x {args.pairs} pairs)")
@@ -207,43 +220,48 @@ def main(argv=None) -> dict:
         res["choices"]["random"] = {k: rbest[k] for k in TUNED}
         res["cost"]["random"] = dict(rollouts=n_cfg * args.n_train, seconds=time.perf_counter() - t0)
         res["trace"]["random"] = rrows
-        # ---- 3. CMA-ES on the gradient's score (minibatches of `pairs` scenes per generation)
-        t0 = time.perf_counter()
+        # ---- 3. CMA-ES on the gradient's score (minibatches of `pairs` scenes per generation): "cma" on the
+        # three log-gains, "cma-g" on the gradient's own space (the control for its parametrisation)
         opts = make_options(**plan_kw(m))
-        # Two candidates per call: 2 x pairs rollouts, the gradient's batch shape (one program).
-        per_call = 2
-        es = cma.CMAEvolutionStrategy(np.asarray(space3.encode(start)).tolist(), 0.5,
-                                      dict(popsize=args.cma_popsize, seed=args.seed + 1, verbose=-9))
-        spent, gen, ctrace = 0, 0, []
-        key = jax.random.PRNGKey(args.seed + 7)
-        while spent + args.cma_popsize * args.pairs <= args.budget:
-            xs = es.ask()
-            kg = jax.random.fold_in(key, gen)
-            idx = jax.random.choice(kg, args.n_train, (args.pairs,), replace=args.pairs > args.n_train)
-            esc = jax.random.split(jax.random.fold_in(kg, 1), args.pairs)
-            vals = []
-            for c in range(0, len(xs), per_call):
-                group = (xs[c : c + per_call] + [xs[-1]] * per_call)[:per_call]
-                thetas = jnp.repeat(jnp.asarray(group, jnp.float64), args.pairs, axis=0)
-                scenes = jax.tree_util.tree_map(lambda a, idx=idx: jnp.concatenate([a[idx]] * 2), train)
-                keys = jnp.concatenate([esc] * per_call)
-                L, _, _ = score_batch(thetas, space3, base, scenes, keys, opts, args.train_steps, ScoreWeights())
-                L = np.asarray(L).reshape(per_call, args.pairs).mean(1)
-                vals += L[: min(per_call, len(xs) - c)].tolist()
-            es.tell(xs, vals)
-            spent += len(xs) * args.pairs
-            gen += 1
-            ctrace.append(dict(generation=gen, rollouts=spent, best=float(min(vals)), mean=float(np.mean(vals)),
-                               centre=np.exp(es.mean).tolist()))
-            stamp(f"cma {lab} generation {gen}: mean score {np.mean(vals):.4f} ({spent} rollouts) centre "
-                  + " ".join(f"{x}={v:.3g}" for x, v in zip(TUNED, np.exp(es.mean), strict=True)))
-        res["choices"]["cma"] = dict(zip(TUNED, np.exp(es.mean).tolist(), strict=True))
-        res["cost"]["cma"] = dict(rollouts=spent, seconds=time.perf_counter() - t0)
-        res["trace"]["cma"] = ctrace
-        # ---- 4. gradient (3 log-gains, from the defaults)
+        space_g = GainSpace(args.grad_names, stable_dt=args.stable_dt)
+
+        for tag, space in (("cma", space3), ("cma-g", space_g)):
+            t0 = time.perf_counter()
+            per_call = 2  # two candidates per call: 2 x pairs rollouts, the gradient's batch shape (one program)
+            es = cma.CMAEvolutionStrategy(np.asarray(space.encode(start)).tolist(), 0.5,
+                                          dict(popsize=args.cma_popsize, seed=args.seed + 1, verbose=-9))
+            spent, gen, ctrace = 0, 0, []
+            key = jax.random.PRNGKey(args.seed + 7)
+            while spent + args.cma_popsize * args.pairs <= args.budget:
+                xs = es.ask()
+                kg = jax.random.fold_in(key, gen)
+                idx = jax.random.choice(kg, args.n_train, (args.pairs,), replace=args.pairs > args.n_train)
+                esc = jax.random.split(jax.random.fold_in(kg, 1), args.pairs)
+                vals = []
+                for c in range(0, len(xs), per_call):
+                    group = (xs[c : c + per_call] + [xs[-1]] * per_call)[:per_call]
+                    thetas = jnp.repeat(jnp.asarray(group, jnp.float64), args.pairs, axis=0)
+                    scenes = jax.tree_util.tree_map(lambda a, idx=idx: jnp.concatenate([a[idx]] * 2), train)
+                    keys = jnp.concatenate([esc] * per_call)
+                    L, _, _ = score_batch(thetas, space, base, scenes, keys, opts, args.train_steps, ScoreWeights())
+                    L = np.asarray(L).reshape(per_call, args.pairs).mean(1)
+                    vals += L[: min(per_call, len(xs) - c)].tolist()
+                es.tell(xs, vals)
+                spent += len(xs) * args.pairs
+                gen += 1
+                centre_g = space.decode(jnp.asarray(es.mean, jnp.float64), start)
+                ctrace.append(dict(generation=gen, rollouts=spent, best=float(min(vals)), mean=float(np.mean(vals)),
+                                   centre=[float(getattr(centre_g, k)) for k in TUNED]))
+                stamp(f"{tag} {lab} generation {gen}: mean score {np.mean(vals):.4f} ({spent} rollouts) centre "
+                      + " ".join(f"{x}={v:.3g}" for x, v in zip(TUNED, ctrace[-1]["centre"], strict=True)))
+            final = space.decode(jnp.asarray(es.mean, jnp.float64), start)
+            res["choices"][tag] = {k: float(getattr(final, k)) for k in TUNED}
+            res["cost"][tag] = dict(rollouts=spent, seconds=time.perf_counter() - t0)
+            res["trace"][tag] = ctrace
+        # ---- 4. gradient (its space: --grad-names, --stable-dt), from the same start
         t0 = time.perf_counter()
         updates = args.budget // (2 * args.pairs)
-        tr = tune_smoothed(train, space3, start, updates=updates, pairs=args.pairs, sigma=args.sigma,
+        tr = tune_smoothed(train, space_g, start, updates=updates, pairs=args.pairs, sigma=args.sigma,
                            learning_rate=args.lr, max_steps=args.train_steps, seed=args.seed, **plan_kw(m))
         res["choices"]["gradient"] = {k: float(getattr(tr.gains, k)) for k in TUNED}
         res["cost"]["gradient"] = dict(rollouts=tr.rollouts, seconds=time.perf_counter() - t0,
@@ -253,12 +271,12 @@ def main(argv=None) -> dict:
         t0 = time.perf_counter()
         n_seg = int(train.q0.shape[-2])
         fspace = GainSpace(TUNED, knots=args.fn_knots, segments=n_seg)
-        fr = tune_smoothed(train, fspace, tr.gains, updates=args.fn_updates, pairs=args.fn_pairs, sigma=args.sigma,
-                           learning_rate=args.lr, max_steps=args.train_steps, seed=args.seed + 1, **plan_kw(m))
+        fr = tune_smoothed(train, fspace, tr.gains, updates=args.fn_updates, pairs=args.fn_pairs, sigma=args.fn_sigma,
+                           learning_rate=args.fn_lr, max_steps=args.train_steps, seed=args.seed + 1, **plan_kw(m))
         fgains = fr.gains
         # ---- 5b. ablation: the same extra budget on the three gains alone ("gradient+")
-        pr = tune_smoothed(train, space3, tr.gains, updates=args.fn_updates, pairs=args.fn_pairs, sigma=args.sigma,
-                           learning_rate=args.lr, max_steps=args.train_steps, seed=args.seed + 1, **plan_kw(m))
+        pr = tune_smoothed(train, space3, tr.gains, updates=args.fn_updates, pairs=args.fn_pairs, sigma=args.fn_sigma,
+                           learning_rate=args.fn_lr, max_steps=args.train_steps, seed=args.seed + 1, **plan_kw(m))
         res["choices"]["gradient+"] = {k: float(getattr(pr.gains, k)) for k in TUNED}
         res["cost"]["gradient+"] = dict(rollouts=tr.rollouts + pr.rollouts)
         res["trace"]["gradient+"] = {k: np.asarray(v).tolist() for k, v in pr.history.items()}
@@ -269,6 +287,7 @@ def main(argv=None) -> dict:
         # ---- held-out
         gains_of = dict(default=base, grid=with3(res["choices"]["grid"]), random=with3(res["choices"]["random"]),
                         cma=with3(res["choices"]["cma"]), gradient=tr.gains, function=fgains,
+                        **{"cma-g": with3(res["choices"]["cma-g"])},
                         **{"gradient+": pr.gains})
         held = {}
         for name in SETTINGS:
@@ -283,7 +302,8 @@ def main(argv=None) -> dict:
                                      iterations=h["iterations"].tolist(), path=np.round(h["path"], 5).tolist())
                           for name, h in held.items()}
         res["paired"] = {}
-        for a, b in (("gradient", "grid"), ("gradient", "random"), ("gradient", "cma"), ("gradient", "default"),
+        for a, b in (("gradient", "grid"), ("gradient", "random"), ("gradient", "cma"), ("gradient", "cma-g"),
+                     ("gradient", "default"),
                      ("function", "grid"), ("function", "gradient+"), ("gradient+", "grid")):
             xa = held[a]["reached"] & ~held[a]["collided"]
             xb = held[b]["reached"] & ~held[b]["collided"]
@@ -330,10 +350,13 @@ def report(results: dict, args) -> str:
              "(safe step, escapes, collision checks)")
     L.append(f"- budgets in rollouts of {args.train_steps} steps: grid {len(args.grid)} x {args.n_train} = "
              f"{len(args.grid) * args.n_train}; random, CMA-ES and gradient {args.budget} (1/{args.fraction}); "
-             f"gradient: {args.budget // (2 * args.pairs)} updates of {args.pairs} antithetic pairs, sigma "
-             f"{args.sigma}, SGD from {args.lr} (cosine to a tenth), mean of the last third of the iterates; start: "
+             f"gradient: {args.budget // (2 * args.pairs)} updates of {args.pairs} antithetic pairs on "
+             f"{', '.join(args.grad_names)}{' (dt as logit(dt k_att / 2))' if args.stable_dt else ''}, sigma "
+             f"{args.sigma}, SGD from {args.lr} (cosine to a tenth), mean of the last third of the iterates; "
+             "cma-g: CMA-ES on that same space; start: "
              f"{'the grid box centre' if args.start == 'centre' else 'the default gains'}; gain function "
-             f"({3 + args.fn_knots + 3} parameters): {args.fn_updates} more updates of {args.fn_pairs} pairs")
+             f"({3 + args.fn_knots + 3} parameters): {args.fn_updates} more updates of {args.fn_pairs} pairs, "
+             f"sigma {args.fn_sigma}, SGD from {args.fn_lr}")
     L.append("- success = reached without collision, count (% [95 % Wilson interval]); paired = same held-out "
              "scenes: discordant pairs, exact McNemar p, difference of success rates (points) with a 95 % "
              "paired-bootstrap interval")

@@ -415,9 +415,14 @@ def test_tuning_benchmark_rejects_bad_arguments():
     import tuning as tuning_bench
 
     for argv, match in ((["--pairs", "1"], "pairs"), (["--n-train", "0"], "n-train"), (["--sigma", "0"], "sigma"),
-                        (["--fraction", "1000"], "budget")):
+                        (["--fraction", "1000"], "budget"), (["--grad-names", "dt"], "grad-names"),
+                        (["--grad-names", "d0,nope"], "grad-names"), (["--fn-lr", "-1"], "fn-lr")):
         with pytest.raises(ValueError, match=match):
             tuning_bench.parse_args(argv)
+    import tuning_seeds
+
+    with pytest.raises(ValueError, match="seeds"):
+        tuning_seeds.main(["--seeds", "0,x"])
 
 
 @pytest.mark.slow
@@ -436,10 +441,20 @@ def test_tuning_benchmark_quick_run(tmp_path):
         assert h["n"] == 16 and len(h["status"]) == 16 and 0 <= h["success"] <= 16
     # Equal budgets: random, CMA-ES and the gradient within the grid's / fraction.
     budget = rep["methods"]["curve"]["cost"]["grid"]["rollouts"] // 5
-    for name in ("random", "cma", "gradient"):
+    for name in ("random", "cma", "cma-g", "gradient"):
         assert 0 <= res["cost"][name]["rollouts"] <= budget, name
     assert "Wilson" in (tmp_path / "tuning.md").read_text()
     assert (tmp_path / "figures" / "tuning_heldout.png").exists()
+    # The seed spread script reruns the same tuners: its seed 0 makes the same choices.
+    import tuning_seeds
+
+    spread = tuning_seeds.main(["--quick", "--seeds", "0", "--out", str(out)])
+    row = spread["methods"]["curve"]["rows"][0]
+    assert spread["methods"]["curve"]["grid"] == res["choices"]["grid"]
+    for name in ("gradient", "random"):
+        assert row[name] == pytest.approx(res["choices"][name], rel=1e-12), name
+        assert row[f"{name}_success"] == res["heldout"][name]["success"], name
+    assert (tmp_path / "tuning_seeds.md").exists()
 
 
 # ----------------------------------------------------------------------------

@@ -156,6 +156,33 @@ def test_gain_space_encode_decode_round_trip():
     assert float(back.rep_max) == float(g.rep_max) and float(back.damping) == float(g.damping)
 
 
+def test_stable_dt_keeps_dt_below_the_euler_bound():
+    """GainSpace(stable_dt=True): dt = (2 / k_att) sigmoid(theta_dt), so every theta decodes
+    below the bound 2 / k_att of the attraction's Euler step (e <- (1 - dt k_att) e);
+    encode inverts decode; the other gains stay log-parametrised; a tuned k_att moves the
+    bound with it; the Jacobian of decode is finite everywhere, also at saturation."""
+    space = GainSpace(("d0", "dt", "eta"), stable_dt=True)
+    base = sp.default_gains()
+    for t in (-30.0, -2.0, 0.0, 1.5, 30.0):
+        theta = jnp.array([math.log(0.2), t, math.log(0.002)])
+        g = space.decode(theta, base)
+        bound = 2.0 / float(base.k_att)
+        assert 0.0 <= float(g.dt) <= bound
+        assert float(g.dt) == pytest.approx(bound / (1.0 + math.exp(-t)), rel=1e-12)
+        assert float(g.d0) == pytest.approx(0.2) and float(g.eta) == pytest.approx(0.002)
+        if abs(t) < 20:
+            np.testing.assert_allclose(np.asarray(space.encode(g)), np.asarray(theta), rtol=1e-10, atol=1e-12)
+        jac = np.asarray(jax.jacfwd(lambda th: space.decode(th, base).dt)(theta))
+        assert np.all(np.isfinite(jac))
+    # The default dt = 0.1 with k_att = 2 is a tenth of the bound: theta = logit(0.1).
+    assert float(space.encode(base)[1]) == pytest.approx(math.log(0.1 / 0.9), rel=1e-12)
+    both = GainSpace(("k_att", "dt"), stable_dt=True)
+    g = both.decode(jnp.array([math.log(4.0), 0.0]), base)
+    assert float(g.k_att) == pytest.approx(4.0) and float(g.dt) == pytest.approx(0.25)
+    # Without stable_dt nothing changes: dt = exp(theta_dt).
+    assert float(GainSpace().decode(jnp.array([0.0, 0.0, 0.0]), base).dt) == 1.0
+
+
 @pytest.mark.parametrize(
     "kwargs, match",
     [
@@ -171,6 +198,8 @@ def test_gain_space_encode_decode_round_trip():
         (dict(space=GainSpace((), knots=1)), "knots"),
         (dict(space=GainSpace((), segments=2)), "segments"),
         (dict(space=GainSpace(())), "tunes nothing"),
+        (dict(space=GainSpace(stable_dt="yes")), "stable_dt"),
+        (dict(space=GainSpace(stable_dt=True), gains=sp.default_gains()._replace(dt=jnp.asarray(1.2))), "2 / k_att"),
         (dict(gains=sp.default_gains()._replace(dt=jnp.asarray(float("nan")))), "gain dt"),
         (dict(method="bogus"), "unknown method"),
     ],
