@@ -139,6 +139,25 @@ def plan_kw(m) -> dict:
     return dict(method="curve", n_points=10) if m == "curve" else dict(method="points", n_points=int(m))
 
 
+def box_centre(args) -> dict:
+    """The grid box's geometric centre (the prior random search samples; the start of CMA-ES
+    and the gradient unless ``--start default``)."""
+    return {k: math.sqrt(args.grid_axes[k][0] * args.grid_axes[k][-1]) for k in TUNED}
+
+
+def draw_in_box(args, rng) -> dict:
+    """One random-search setting: d0, dt, eta log-uniform in the grid's box."""
+    lo = np.log([args.grid_axes[k][0] for k in TUNED])
+    hi = np.log([args.grid_axes[k][-1] for k in TUNED])
+    return dict(zip(TUNED, np.exp(rng.uniform(lo, hi)).tolist(), strict=True))
+
+
+def choice_key(reached, collided) -> tuple:
+    """The grid's and random search's choice rule on the training scenes: the most
+    ``reached - 3 collided``, then the most reached (the first such setting wins)."""
+    return int(np.sum(reached)) - 3 * int(np.sum(collided)), int(np.sum(reached))
+
+
 def main(argv=None) -> dict:
     args = parse_args(argv)
     import jax
@@ -172,8 +191,7 @@ def main(argv=None) -> dict:
 
     # CMA-ES and the gradient start from the grid box's geometric centre (the prior random search
     # samples), or from the default gains (--start default).
-    centre = {k: math.sqrt(args.grid_axes[k][0] * args.grid_axes[k][-1]) for k in TUNED}
-    start = with3(centre) if args.start == "centre" else base
+    start = with3(box_centre(args)) if args.start == "centre" else base
 
     def evaluate(suite, gains, m, steps, seed):
         r = sp.plan_batch(suite, gains=gains, max_steps=steps, seed=seed, chunk=args.chunk, **plan_kw(m))
@@ -182,9 +200,6 @@ def main(argv=None) -> dict:
                     iterations=np.asarray(r.iterations),
                     status=[sp.status_name(s) for s in np.asarray(r.status)],
                     path=np.linalg.norm(np.diff(tip, axis=1), axis=-1).sum(1))
-
-    def score(e):
-        return int(e["reached"].sum()) - 3 * int(e["collided"].sum())
 
     results: dict = dict(machine=machine, args={k: v for k, v in vars(args).items() if k != "grid"}, methods={})
     for m in args.method_list:
@@ -196,7 +211,8 @@ def main(argv=None) -> dict:
         rows = []
         for k, (d0, dt, eta) in enumerate(args.grid):
             e = evaluate(train, with3(dict(d0=d0, dt=dt, eta=eta)), m, args.train_steps, args.train_seed)
-            rows.append(dict(d0=d0, dt=dt, eta=eta, score=score(e), reached=int(e["reached"].sum()),
+            rows.append(dict(d0=d0, dt=dt, eta=eta, score=choice_key(e["reached"], e["collided"])[0],
+                             reached=int(e["reached"].sum()),
                              collided=int(e["collided"].sum())))
             stamp(f"grid {lab} {k + 1}/{len(args.grid)} d0={d0:g} dt={dt:g} eta={eta:g}: score {rows[-1]['score']}")
         best = max(rows, key=lambda r: (r["score"], r["reached"]))
@@ -207,13 +223,11 @@ def main(argv=None) -> dict:
         t0 = time.perf_counter()
         rng = np.random.default_rng(args.seed)
         n_cfg = args.budget // args.n_train
-        lo = np.log([args.grid_axes[k][0] for k in TUNED])
-        hi = np.log([args.grid_axes[k][-1] for k in TUNED])
         rrows = []
         for k in range(n_cfg):
-            d = dict(zip(TUNED, np.exp(rng.uniform(lo, hi)).tolist(), strict=True))
+            d = draw_in_box(args, rng)
             e = evaluate(train, with3(d), m, args.train_steps, args.train_seed)
-            rrows.append(dict(d, score=score(e), reached=int(e["reached"].sum())))
+            rrows.append(dict(d, score=choice_key(e["reached"], e["collided"])[0], reached=int(e["reached"].sum())))
             stamp(f"random {lab} {k + 1}/{n_cfg} " + " ".join(f"{x}={d[x]:.3g}" for x in TUNED)
                   + f": score {rrows[-1]['score']}")
         rbest = max(rrows, key=lambda r: (r["score"], r["reached"]))

@@ -27,7 +27,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
 from stats import paired_bootstrap, wilson  # noqa: E402
-from tuning import TUNED, mlabel, parse_args, plan_kw  # noqa: E402
+from tuning import TUNED, box_centre, choice_key, draw_in_box, mlabel, parse_args, plan_kw  # noqa: E402
 
 
 def main(argv=None) -> dict:
@@ -55,12 +55,12 @@ def main(argv=None) -> dict:
     train = sp.random_scenarios(args.train_seed, args.n_train)
     heldout = sp.random_scenarios(args.eval_seed, args.n_eval)
     base = sp.default_gains(jnp.float64)
-    centre = {k: float(np.sqrt(args.grid_axes[k][0] * args.grid_axes[k][-1])) for k in TUNED}
-    start = base._replace(**{k: jnp.asarray(v, jnp.float64) for k, v in centre.items()})
     space_g = GainSpace(args.grad_names, stable_dt=args.stable_dt)
 
     def with3(d):
         return base._replace(**{k: jnp.asarray(d[k], jnp.float64) for k in TUNED})
+
+    start = with3(box_centre(args)) if args.start == "centre" else base  # as tuning.py
 
     def success(suite, gains, m, steps, seed):
         r = sp.plan_batch(suite, gains=gains, max_steps=steps, seed=seed, chunk=args.chunk, **plan_kw(m))
@@ -74,13 +74,12 @@ def main(argv=None) -> dict:
         for d0, dt, eta in args.grid:
             r = sp.plan_batch(train, gains=with3(dict(d0=d0, dt=dt, eta=eta)), max_steps=args.train_steps,
                               seed=args.train_seed, chunk=args.chunk, **plan_kw(m))
-            key = (int(np.sum(r.reached)) - 3 * int(np.sum(r.collided)), int(np.sum(r.reached)))
+            key = choice_key(r.reached, r.collided)
             if best is None or key > best[0]:
                 best = (key, dict(d0=d0, dt=dt, eta=eta))
         grid_ok = success(heldout, with3(best[1]), m, args.max_steps, args.eval_seed)
         log(f"[seeds {time.perf_counter() - t_all:5.0f} s] {lab} grid {best[1]}: {grid_ok.mean():.3f}")
         rows = []
-        lo, hi = np.log([args.grid_axes[k][0] for k in TUNED]), np.log([args.grid_axes[k][-1] for k in TUNED])
         for seed in seeds:
             tr = tune_smoothed(train, space_g, start, updates=args.budget // (2 * args.pairs), pairs=args.pairs,
                                sigma=args.sigma, learning_rate=args.lr, max_steps=args.train_steps, seed=seed,
@@ -88,10 +87,10 @@ def main(argv=None) -> dict:
             rng = np.random.default_rng(seed)
             rbest = None
             for _ in range(args.budget // args.n_train):
-                d = dict(zip(TUNED, np.exp(rng.uniform(lo, hi)).tolist(), strict=True))
+                d = draw_in_box(args, rng)
                 r = sp.plan_batch(train, gains=with3(d), max_steps=args.train_steps, seed=args.train_seed,
                                   chunk=args.chunk, **plan_kw(m))
-                key = (int(np.sum(r.reached)) - 3 * int(np.sum(r.collided)), int(np.sum(r.reached)))
+                key = choice_key(r.reached, r.collided)
                 if rbest is None or key > rbest[0]:
                     rbest = (key, d)
             g_ok = success(heldout, tr.gains, m, args.max_steps, args.eval_seed)
