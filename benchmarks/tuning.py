@@ -28,13 +28,17 @@ checks in the scan). Per obstacle model (curve, N = 10, N = 50):
    rollouts (updates x 2 x pairs), on ``--grad-names`` (default d0 and dt; eta
    stays at the centre: its gradient is noise, see
    ``tuning_validation/README.md``) with ``dt`` parametrised against the Euler
-   step's stability bound (``GainSpace(stable_dt=True)``), sigma ``--sigma``.
+   step's stability bound (``GainSpace(stable_dt=True)``), sigma ``--sigma``,
+   each update clipped to ``--max-step`` per coordinate (``--box``: projected
+   onto the grid's box instead or as well; validation chose the clip).
 5. **gain function** (beyond the grid's reach; with the ablation
    ``gradient+``: the same extra updates on the three gains alone): the 20-parameter
    :class:`~softplan_jax.planner.GainFunction` space (log d0, dt, eta; a
    14-knot repulsion profile over d / d0; 3 segment weights),
    ``tune_smoothed`` from the gradient's result for ``--fn-updates`` more
-   updates of ``--fn-pairs`` pairs (sigma ``--fn-sigma``, step ``--fn-lr``).
+   updates of ``--fn-pairs`` pairs (sigma ``--fn-sigma``, step ``--fn-lr``;
+   ``--fn-stable-dt``: dt as in the gradient's space, which validation
+   found no better).
 
 The tuners' settings (start, optimiser, step size, pairs, averaging) were
 chosen on a validation seed (``random_scenarios(2, 256)``), never on the
@@ -88,6 +92,12 @@ def parse_args(argv=None):
     ap.add_argument("--grad-names", default="d0,dt", help="gains the gradient tunes (the others stay at the start)")
     ap.add_argument("--stable-dt", action=argparse.BooleanOptionalAction, default=True,
                     help="the gradient's dt as logit(dt k_att / 2) (GainSpace(stable_dt=True))")
+    ap.add_argument("--box", action=argparse.BooleanOptionalAction, default=False,
+                    help="project the gradient's iterates onto the grid's box (tune_smoothed bounds=)")
+    ap.add_argument("--max-step", type=float, default=0.3,
+                    help="clip each coordinate of each gradient update (theta units; 0: no clipping)")
+    ap.add_argument("--fn-stable-dt", action=argparse.BooleanOptionalAction, default=False,
+                    help="the gain-function stage (and its ablation) with dt as logit(dt k_att / 2)")
     ap.add_argument("--fn-sigma", type=float, default=0.2, help="smoothing scale of the gain-function stage")
     ap.add_argument("--fn-lr", type=float, default=0.1, help="first step size of the gain-function stage")
     ap.add_argument("--start", choices=("centre", "default"), default="centre",
@@ -121,6 +131,8 @@ def parse_args(argv=None):
         raise ValueError("--pairs, --fn-pairs and --fn-knots must be >= 2")
     if not all(math.isfinite(v) and v > 0 for v in (args.sigma, args.lr, args.fn_sigma, args.fn_lr)):
         raise ValueError("--sigma, --lr, --fn-sigma and --fn-lr must be finite and > 0")
+    if not (math.isfinite(args.max_step) and args.max_step >= 0):
+        raise ValueError(f"--max-step must be finite and >= 0, got {args.max_step}")
     args.grad_names = tuple(args.grad_names.split(","))
     if not args.grad_names or any(k not in TUNED for k in args.grad_names) or len(set(args.grad_names)) < len(
             args.grad_names) or len(args.grad_names) < 2:
@@ -150,6 +162,14 @@ def draw_in_box(args, rng) -> dict:
     lo = np.log([args.grid_axes[k][0] for k in TUNED])
     hi = np.log([args.grid_axes[k][-1] for k in TUNED])
     return dict(zip(TUNED, np.exp(rng.uniform(lo, hi)).tolist(), strict=True))
+
+
+def grad_kwargs(args) -> dict:
+    """The gradient's step settings for :func:`softplan_jax.smoothing.tune_smoothed`
+    (shared by tuning.py and tuning_seeds.py): sigma, first step, and the guards
+    (``--box``: the grid's box on the tuned gains; ``--max-step``)."""
+    bounds = {k: (args.grid_axes[k][0], args.grid_axes[k][-1]) for k in args.grad_names} if args.box else None
+    return dict(sigma=args.sigma, learning_rate=args.lr, bounds=bounds, max_step=args.max_step or None)
 
 
 def choice_key(reached, collided) -> tuple:
@@ -275,8 +295,8 @@ def main(argv=None) -> dict:
         # ---- 4. gradient (its space: --grad-names, --stable-dt), from the same start
         t0 = time.perf_counter()
         updates = args.budget // (2 * args.pairs)
-        tr = tune_smoothed(train, space_g, start, updates=updates, pairs=args.pairs, sigma=args.sigma,
-                           learning_rate=args.lr, max_steps=args.train_steps, seed=args.seed, **plan_kw(m))
+        tr = tune_smoothed(train, space_g, start, updates=updates, pairs=args.pairs, max_steps=args.train_steps,
+                           seed=args.seed, **grad_kwargs(args), **plan_kw(m))
         res["choices"]["gradient"] = {k: float(getattr(tr.gains, k)) for k in TUNED}
         res["cost"]["gradient"] = dict(rollouts=tr.rollouts, seconds=time.perf_counter() - t0,
                                        compile_seconds=tr.compile_seconds)
@@ -284,12 +304,13 @@ def main(argv=None) -> dict:
         # ---- 5. the gain function (log d0, dt, eta + repulsion profile + segment weights), from the gradient's result
         t0 = time.perf_counter()
         n_seg = int(train.q0.shape[-2])
-        fspace = GainSpace(TUNED, knots=args.fn_knots, segments=n_seg)
+        fspace = GainSpace(TUNED, knots=args.fn_knots, segments=n_seg, stable_dt=args.fn_stable_dt)
         fr = tune_smoothed(train, fspace, tr.gains, updates=args.fn_updates, pairs=args.fn_pairs, sigma=args.fn_sigma,
                            learning_rate=args.fn_lr, max_steps=args.train_steps, seed=args.seed + 1, **plan_kw(m))
         fgains = fr.gains
         # ---- 5b. ablation: the same extra budget on the three gains alone ("gradient+")
-        pr = tune_smoothed(train, space3, tr.gains, updates=args.fn_updates, pairs=args.fn_pairs, sigma=args.fn_sigma,
+        pr = tune_smoothed(train, GainSpace(TUNED, stable_dt=args.fn_stable_dt), tr.gains, updates=args.fn_updates,
+                           pairs=args.fn_pairs, sigma=args.fn_sigma,
                            learning_rate=args.fn_lr, max_steps=args.train_steps, seed=args.seed + 1, **plan_kw(m))
         res["choices"]["gradient+"] = {k: float(getattr(pr.gains, k)) for k in TUNED}
         res["cost"]["gradient+"] = dict(rollouts=tr.rollouts + pr.rollouts)
@@ -366,11 +387,14 @@ def report(results: dict, args) -> str:
              f"{len(args.grid) * args.n_train}; random, CMA-ES and gradient {args.budget} (1/{args.fraction}); "
              f"gradient: {args.budget // (2 * args.pairs)} updates of {args.pairs} antithetic pairs on "
              f"{', '.join(args.grad_names)}{' (dt as logit(dt k_att / 2))' if args.stable_dt else ''}, sigma "
-             f"{args.sigma}, SGD from {args.lr} (cosine to a tenth), mean of the last third of the iterates; "
+             f"{args.sigma}, SGD from {args.lr} (cosine to a tenth), mean of the last third of the iterates"
+             f"{', projected onto the grid box' if args.box else ''}"
+             f"{f', each update clipped to {args.max_step}' if args.max_step else ''}; "
              "cma-g: CMA-ES on that same space; start: "
              f"{'the grid box centre' if args.start == 'centre' else 'the default gains'}; gain function "
-             f"({3 + args.fn_knots + 3} parameters): {args.fn_updates} more updates of {args.fn_pairs} pairs, "
-             f"sigma {args.fn_sigma}, SGD from {args.fn_lr}")
+             f"({3 + args.fn_knots + 3} parameters): {args.fn_updates} more updates of {args.fn_pairs} pairs"
+             f"{', dt as logit(dt k_att / 2)' if args.fn_stable_dt else ''}, sigma {args.fn_sigma}, SGD from "
+             f"{args.fn_lr}")
     L.append("- success = reached without collision, count (% [95 % Wilson interval]); paired = same held-out "
              "scenes: discordant pairs, exact McNemar p, difference of success rates (points) with a 95 % "
              "paired-bootstrap interval")

@@ -27,7 +27,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
 from stats import paired_bootstrap, wilson  # noqa: E402
-from tuning import TUNED, box_centre, choice_key, draw_in_box, mlabel, parse_args, plan_kw  # noqa: E402
+from tuning import TUNED, box_centre, choice_key, draw_in_box, grad_kwargs, mlabel, parse_args, plan_kw  # noqa: E402
 
 
 def main(argv=None) -> dict:
@@ -82,8 +82,8 @@ def main(argv=None) -> dict:
         rows = []
         for seed in seeds:
             tr = tune_smoothed(train, space_g, start, updates=args.budget // (2 * args.pairs), pairs=args.pairs,
-                               sigma=args.sigma, learning_rate=args.lr, max_steps=args.train_steps, seed=seed,
-                               progress=False, **plan_kw(m))
+                               max_steps=args.train_steps, seed=seed, progress=False, **grad_kwargs(args),
+                               **plan_kw(m))
             rng = np.random.default_rng(seed)
             rbest = None
             for _ in range(args.budget // args.n_train):

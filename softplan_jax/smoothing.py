@@ -436,10 +436,44 @@ class TuneResult(NamedTuple):
     seconds: float
 
 
+def _theta_box(space: GainSpace, base, bounds, theta):
+    """``bounds`` ({name: (lo, hi)} in gains units) as theta-space arrays (lo, hi),
+    or (None, None) without bounds. Checks the names, the numbers and that the
+    start ``theta`` lies in the box."""
+    if bounds is None:
+        return None, None
+    if not isinstance(bounds, dict) or not bounds:
+        raise ValueError(f"bounds must be a non-empty dict {{name: (lo, hi)}}, got {bounds!r}")
+    lo = np.full(space.size, -np.inf)
+    hi = np.full(space.size, np.inf)
+    for k, pair in bounds.items():
+        if k not in space.names:
+            raise ValueError(f"bounds names {k!r}, which this GainSpace does not tune ({list(space.names)})")
+        try:
+            a, b = (float(v) for v in pair)
+        except (TypeError, ValueError):
+            raise ValueError(f"bounds[{k!r}] must be a pair of numbers (lo, hi), got {pair!r}") from None
+        if not (math.isfinite(a) and math.isfinite(b) and 0 < a < b):
+            raise ValueError(f"bounds[{k!r}] must satisfy 0 < lo < hi (finite), got {pair!r}")
+        i = space.names.index(k)
+        ends = [float(space.encode(base._replace(**{k: jnp.asarray(v, base.k_att.dtype)}))[i]) for v in (a, b)]
+        if not all(math.isfinite(e) for e in ends):
+            raise ValueError(f"bounds[{k!r}] = {pair!r} has no finite parameters in this GainSpace "
+                             "(with stable_dt, dt must be below 2 / k_att)")
+        lo[i], hi[i] = ends
+    t = np.asarray(theta, float)
+    outside = [space.names[i] for i in range(len(space.names)) if not lo[i] - 1e-9 <= t[i] <= hi[i] + 1e-9]
+    if outside:
+        raise ValueError(f"the start gains lie outside bounds for {outside}")
+    dtype = jnp.result_type(theta)
+    return jnp.asarray(lo, dtype), jnp.asarray(hi, dtype)
+
+
 def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=None, *, updates: int = 24,
                   pairs: int = 16, sigma: float = 0.2, learning_rate: float = 0.1, method: str = "curve",
                   n_points: int = 10, max_steps: int = 100, weights: ScoreWeights = ScoreWeights(), seed: int = 0,
-                  average: float = 1 / 3, optimizer=None, progress: bool = True) -> TuneResult:
+                  average: float = 1 / 3, optimizer=None, bounds=None, max_step: float | None = None,
+                  progress: bool = True) -> TuneResult:
     """Tune gains by stochastic gradient descent (optax) on the smoothed objective.
 
     Each update draws ``pairs`` training scenes and one perturbation each
@@ -461,9 +495,19 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
     The defaults are conservative (log-gains, sigma 0.2, step 0.1). The recipe
     ``benchmarks/tuning.py`` uses, chosen on that validation seed, is
     ``space=GainSpace(("d0", "dt"), stable_dt=True), sigma=0.4,
-    learning_rate=1.0`` from the centre of the grid's box: closer to the grid
-    at a fifth of its rollouts, but its outcome varies with ``seed`` and nothing
-    bounds a step (README, "Tuning the gains").
+    learning_rate=1.0, max_step=0.3`` from the centre of the grid's box: close
+    to the grid at a fifth of its rollouts, but its outcome still varies with
+    ``seed`` (README, "Tuning the gains").
+
+    Two guards keep a noisy step from running away (off by default): ``bounds``
+    projects theta onto a box after every update (projected stochastic gradient
+    descent; the averaged iterate stays in the box, which is convex), and
+    ``max_step`` clips every coordinate of every update (``optax.clip`` chained
+    after the optimiser). Without them one large noisy gradient can throw a
+    gain so far out that every rollout fails and the objective is flat, with
+    nothing to bring it back. On the validation seed the clip (0.3) was the
+    better guard for the recipe above; the grid's box cost a point
+    (``benchmarks/tuning_validation/val7.py``).
 
     Args:
       scenarios: the training suite (a batched Scenario, e.g.
@@ -477,6 +521,14 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
       average: return the mean of the last ``ceil(average * updates)`` iterates
         (Polyak-Ruppert averaging of the noisy steps) instead of the last one; 0: the last.
       optimizer: an optax GradientTransformation (overrides learning_rate).
+      bounds: ``{name: (lo, hi)}`` for scalar gains in ``space.names``, in the
+        gains' own units (``0 < lo < hi``; with ``stable_dt``, a dt bound below
+        ``2 / k_att`` of the start): theta is projected onto the box after every
+        update. The start must lie in it. With ``stable_dt`` and a tuned
+        ``k_att``, the dt bound holds at the start's ``k_att`` (it bounds the
+        fraction ``dt k_att / 2``).
+      max_step: clip each coordinate of each update to ``[-max_step, max_step]``
+        (theta units, > 0); None: no clipping.
       progress: one line per update on stderr.
 
     Returns:
@@ -505,7 +557,13 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
     if not np.all(np.isfinite(np.asarray(theta))):
         bound = " (with stable_dt, dt must be below 2 / k_att)" if space.stable_dt else ""
         raise ValueError(f"the start gains have no finite parameters in this GainSpace{bound}: {np.asarray(theta)}")
+    lo, hi = _theta_box(space, base, bounds, theta)
+    if max_step is not None and (isinstance(max_step, bool) or not isinstance(max_step, (int, float))
+                                 or not math.isfinite(max_step) or max_step <= 0):
+        raise ValueError(f"max_step must be None or a finite number > 0, got {max_step!r}")
     opt = optimizer or optax.sgd(optax.cosine_decay_schedule(learning_rate, int(updates), alpha=0.1), momentum=0.5)
+    if max_step is not None:
+        opt = optax.chain(opt, optax.clip(float(max_step)))
     state = opt.init(theta)
     hist = {k: [] for k in ("objective", "objective_se", "grad_norm", "success")}
     thetas = [np.asarray(theta)]
@@ -528,6 +586,8 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
         with jax.numpy_dtype_promotion("standard"):  # optax mixes Python floats with int32 counts
             updates_, state = opt.update(jnp.asarray(est.grad, dtype), state, theta)
             theta = optax.apply_updates(theta, updates_)
+        if lo is not None:
+            theta = jnp.clip(theta, lo, hi)  # projection onto the box (projected SGD)
         hist["objective"].append(est.value)
         hist["objective_se"].append(est.value_se)
         hist["grad_norm"].append(float(np.linalg.norm(est.grad)))

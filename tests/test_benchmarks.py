@@ -416,9 +416,15 @@ def test_tuning_benchmark_rejects_bad_arguments():
 
     for argv, match in ((["--pairs", "1"], "pairs"), (["--n-train", "0"], "n-train"), (["--sigma", "0"], "sigma"),
                         (["--fraction", "1000"], "budget"), (["--grad-names", "dt"], "grad-names"),
-                        (["--grad-names", "d0,nope"], "grad-names"), (["--fn-lr", "-1"], "fn-lr")):
+                        (["--grad-names", "d0,nope"], "grad-names"), (["--fn-lr", "-1"], "fn-lr"),
+                        (["--max-step", "-0.1"], "max-step"), (["--max-step", "nan"], "max-step")):
         with pytest.raises(ValueError, match=match):
             tuning_bench.parse_args(argv)
+    # The guards reach tune_smoothed: by default the clip 0.3; --box: the grid's box; 0: no clip.
+    kw = tuning_bench.grad_kwargs(tuning_bench.parse_args([]))
+    assert kw["bounds"] is None and kw["max_step"] == 0.3
+    kw = tuning_bench.grad_kwargs(tuning_bench.parse_args(["--box", "--max-step", "0"]))
+    assert kw["bounds"] == dict(d0=(0.07, 0.4), dt=(0.1, 0.8)) and kw["max_step"] is None
     import tuning_seeds
 
     with pytest.raises(ValueError, match="seeds"):

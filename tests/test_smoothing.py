@@ -125,6 +125,33 @@ def test_tune_smoothed_history_budget_progress_and_file(suite, tmp_path, capsys)
         assert float(getattr(back, k)) == pytest.approx(float(getattr(res.gains, k)), rel=1e-15)
 
 
+def test_tune_smoothed_guards_bound_and_clip_the_steps(suite):
+    """bounds: every iterate is the projection of the SGD step onto the box (the first
+    one exactly clip(theta_0 - lr grad_0, lo, hi)); max_step: the first update is
+    -lr grad_0 clipped per coordinate. A large step makes both guards act."""
+    space = GainSpace()
+    box = dict(d0=(0.05, 0.1), dt=(0.05, 0.2), eta=(0.0005, 0.002))
+    lo, hi = (np.log([box[k][i] for k in space.names]) for i in (0, 1))
+    kw = dict(updates=2, pairs=PAIRS, sigma=SIGMA, max_steps=STEPS, learning_rate=50.0, progress=False)
+    first = estimate_objective(smoothing_sample(space.encode(sp.default_gains()), space, sp.default_gains(), suite,
+                                                jax.random.fold_in(jax.random.PRNGKey(0), 0), pairs=PAIRS,
+                                                sigma=SIGMA, max_steps=STEPS))
+    step = -50.0 * first.grad
+    free = tune_smoothed(suite, space, **kw)
+    boxed = tune_smoothed(suite, space, bounds=box, **kw)
+    clipped = tune_smoothed(suite, space, max_step=0.05, **kw)
+    t0 = free.history["theta"][0]
+    np.testing.assert_allclose(free.history["theta"][1], t0 + step, rtol=1e-10)
+    assert np.any((t0 + step < lo) | (t0 + step > hi))  # unguarded, the step leaves the box
+    np.testing.assert_allclose(boxed.history["theta"][1], np.clip(t0 + step, lo, hi), rtol=1e-10)
+    assert np.all(boxed.history["theta"] >= lo - 1e-12) and np.all(boxed.history["theta"] <= hi + 1e-12)
+    for k in space.names:  # the averaged result stays in the box too
+        assert box[k][0] * (1 - 1e-9) <= float(getattr(boxed.gains, k)) <= box[k][1] * (1 + 1e-9)
+    assert np.any(np.abs(step) > 0.05)
+    np.testing.assert_allclose(clipped.history["theta"][1], t0 + np.clip(step, -0.05, 0.05), rtol=1e-10)
+    assert np.all(np.abs(np.diff(clipped.history["theta"], axis=0)) <= 0.05 + 1e-12)
+
+
 def test_gain_function_generalises_gains():
     """A GainFunction with zero profile and weights steps exactly as its Gains; a
     constant log-profile c (or constant segment weights c) steps as eta * exp(c).
@@ -202,6 +229,17 @@ def test_stable_dt_keeps_dt_below_the_euler_bound():
         (dict(space=GainSpace(stable_dt=True), gains=sp.default_gains()._replace(dt=jnp.asarray(1.2))), "2 / k_att"),
         (dict(gains=sp.default_gains()._replace(dt=jnp.asarray(float("nan")))), "gain dt"),
         (dict(method="bogus"), "unknown method"),
+        (dict(bounds={}), "non-empty dict"),
+        (dict(bounds={"nope": (0.01, 0.2)}), "does not tune"),
+        (dict(bounds={"d0": (0.2, 0.1)}), "0 < lo < hi"),
+        (dict(bounds={"d0": (0.0, 0.1)}), "0 < lo < hi"),
+        (dict(bounds={"d0": (0.01, float("inf"))}), "0 < lo < hi"),
+        (dict(bounds={"d0": (0.1,)}), "pair of numbers"),
+        (dict(bounds={"d0": (0.1, 0.2)}), "outside bounds"),  # the default d0 = 0.07 is outside
+        (dict(space=GainSpace(stable_dt=True), bounds={"dt": (0.05, 1.5)}), "2 / k_att"),
+        (dict(max_step=0.0), "max_step"),
+        (dict(max_step=float("nan")), "max_step"),
+        (dict(max_step=True), "max_step"),
     ],
 )
 def test_tune_smoothed_rejects_bad_input(suite, kwargs, match):
