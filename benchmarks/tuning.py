@@ -85,7 +85,8 @@ def parse_args(argv=None):
     ap.add_argument("--grid-d0", default="0.07,0.1,0.15,0.2,0.3,0.4")
     ap.add_argument("--grid-dt", default="0.1,0.2,0.4,0.6,0.8")
     ap.add_argument("--grid-eta", default="0.001,0.004")
-    ap.add_argument("--fraction", type=int, default=5, help="budget of random / CMA / gradient = grid's / this")
+    ap.add_argument("--fraction", type=float, default=5.0,
+                    help="budget of random / CMA / gradient = grid's / this (a number >= 1, e.g. 2.5)")
     ap.add_argument("--pairs", type=int, default=None, help="antithetic pairs per gradient (default 16; quick 4)")
     ap.add_argument("--sigma", type=float, default=0.4, help="the gradient's smoothing scale (theta units)")
     ap.add_argument("--lr", type=float, default=1.0, help="the gradient's first step size (cosine decay to a tenth)")
@@ -124,6 +125,8 @@ def parse_args(argv=None):
     if q:
         args.grid_axes = {k: v[:: max(1, len(v) // 2)] for k, v in args.grid_axes.items()}
     args.grid = [(a, b, c) for a in args.grid_axes["d0"] for b in args.grid_axes["dt"] for c in args.grid_axes["eta"]]
+    if not math.isfinite(args.fraction):
+        raise ValueError(f"--fraction must be finite, got {args.fraction}")
     for name in ("n_train", "n_eval", "train_steps", "max_steps", "fraction", "fn_updates", "chunk", "cma_popsize"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
@@ -137,7 +140,7 @@ def parse_args(argv=None):
     if not args.grad_names or any(k not in TUNED for k in args.grad_names) or len(set(args.grad_names)) < len(
             args.grad_names) or len(args.grad_names) < 2:
         raise ValueError(f"--grad-names must be two or three distinct names of {','.join(TUNED)}")
-    args.budget = len(args.grid) * args.n_train // args.fraction
+    args.budget = int(len(args.grid) * args.n_train / args.fraction)
     if args.budget < 2 * args.pairs:
         raise ValueError(f"the budget ({args.budget} rollouts) is below one gradient (2 x {args.pairs} pairs)")
     return args
@@ -384,7 +387,7 @@ def report(results: dict, args) -> str:
              f"{args.eval_seed} ({args.n_eval} scenes, {args.max_steps} steps); the library's default planner "
              "(safe step, escapes, collision checks)")
     L.append(f"- budgets in rollouts of {args.train_steps} steps: grid {len(args.grid)} x {args.n_train} = "
-             f"{len(args.grid) * args.n_train}; random, CMA-ES and gradient {args.budget} (1/{args.fraction}); "
+             f"{len(args.grid) * args.n_train}; random, CMA-ES and gradient {args.budget} (1/{args.fraction:g}); "
              f"gradient: {args.budget // (2 * args.pairs)} updates of {args.pairs} antithetic pairs on "
              f"{', '.join(args.grad_names)}{' (dt as logit(dt k_att / 2))' if args.stable_dt else ''}, sigma "
              f"{args.sigma}, SGD from {args.lr} (cosine to a tenth), mean of the last third of the iterates"

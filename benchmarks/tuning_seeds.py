@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import sys
 import time
 
@@ -34,7 +35,8 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", default="0,1,2,3,4", help="comma list of tuner seeds")
     ap.add_argument("--quick", action="store_true")
-    own, rest = ap.parse_known_args(argv)
+    given = sys.argv[1:] if argv is None else list(argv)
+    own, rest = ap.parse_known_args(given)
     args = parse_args((["--quick"] if own.quick else []) + rest)
     try:
         seeds = [int(s) for s in own.seeds.split(",")]
@@ -66,7 +68,7 @@ def main(argv=None) -> dict:
         r = sp.plan_batch(suite, gains=gains, max_steps=steps, seed=seed, chunk=args.chunk, **plan_kw(m))
         return np.asarray(r.reached) & ~np.asarray(r.collided)
 
-    res: dict = dict(machine=machine_info("float64"), seeds=seeds, methods={})
+    res: dict = dict(machine=machine_info("float64"), argv=given, seeds=seeds, methods={})
     for m in args.method_list:
         lab = mlabel(m)
         # the grid's choice: the best `reached - 3 collided` on the training scenes (tuning.py's rule)
@@ -110,11 +112,12 @@ def main(argv=None) -> dict:
     with open(out + ".json", "w", encoding="utf-8") as fh:
         json.dump(res, fh, indent=1)
     L = ["# Tuning: the spread over tuner seeds (held-out success, paired with the grid's choice)", "",
-         f"- command: `python benchmarks/tuning_seeds.py{' --quick' if own.quick else ''}`; wall time "
+         f"- command: `{shlex.join(['python', 'benchmarks/tuning_seeds.py', *given])}`; wall time "
          f"{res['seconds']:.0f} s; training seed {args.train_seed} ({args.n_train} scenes), held-out seed "
          f"{args.eval_seed} ({args.n_eval} scenes, {args.max_steps} steps); budget {args.budget} rollouts each",
-         "- the gradient as `benchmarks/tuning.py` runs it (same space, sigma, step, pairs); random search log-uniform "
-         "in the grid's box, same choice rule; success % [95 % Wilson]; differences in points [95 % paired bootstrap]",
+         f"- the gradient as `benchmarks/tuning.py` runs it with these arguments (same space, sigma, step, clip; "
+         f"{args.budget // (2 * args.pairs)} updates of {args.pairs} pairs); random search log-uniform in the grid's "
+         "box, same choice rule; success % [95 % Wilson]; differences in points [95 % paired bootstrap]",
          "", "| model | seed | gradient | random | gradient - grid | random - grid | gradient - random |",
          "|---|---|---|---|---|---|---|"]
 

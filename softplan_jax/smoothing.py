@@ -289,7 +289,7 @@ class SmoothingSample(NamedTuple):
 def smoothing_sample(theta0, space: GainSpace, base, scenarios: Scenario, key, *, pairs: int = 32,
                      sigma: float = 0.2, method: str = "curve", n_points: int = 10, max_steps: int = 100,
                      weights: ScoreWeights = ScoreWeights(), options: PlanOptions | None = None,
-                     eps=None) -> SmoothingSample:
+                     eps=None, scene_index=None) -> SmoothingSample:
     """Roll out ``2 * pairs`` perturbed gain settings around ``theta0`` (one vmapped batch).
 
     Args:
@@ -309,6 +309,8 @@ def smoothing_sample(theta0, space: GainSpace, base, scenarios: Scenario, key, *
       options: PlanOptions, overriding method / n_points.
       eps: (N, P) perturbations to use instead of the key's (scenes and escape keys
         still come from the key).
+      scene_index: (N,) ints, the suite's scenes to use instead of the key's draw
+        (scene n for pair n; perturbations and escape keys still come from the key).
 
     Returns:
       :class:`SmoothingSample`.
@@ -328,6 +330,14 @@ def smoothing_sample(theta0, space: GainSpace, base, scenarios: Scenario, key, *
         raise ValueError("scenarios must be a non-empty batched Scenario (random_scenarios, stack_scenarios)")
     idx, draw_eps, esc = _draw(key, theta0, scenarios, int(pairs), sigma)
     eps = draw_eps if eps is None else jnp.asarray(eps, dtype)
+    if scene_index is not None:
+        idx = np.asarray(scene_index)
+        if idx.shape != (int(pairs),) or idx.dtype.kind not in "iu":
+            raise ValueError(f"scene_index must be {pairs} ints, got {idx.dtype} of shape {idx.shape}")
+        if idx.min() < 0 or idx.max() >= scenarios.q0.shape[0]:
+            raise ValueError(f"scene_index must index the suite's {scenarios.q0.shape[0]} scenes, got "
+                             f"{idx.min()}..{idx.max()}")
+        idx = jnp.asarray(idx)
     if eps.shape != (int(pairs), space.size):
         raise ValueError(f"eps must have shape ({pairs}, {space.size}), got {eps.shape}")
     x = jnp.concatenate([theta0 + sigma * eps, theta0 - sigma * eps])
@@ -420,8 +430,9 @@ class TuneResult(NamedTuple):
       history: dict of arrays, one row per update: ``objective`` and
         ``objective_se`` (the estimate of J at that update's theta, before the
         update), ``grad_norm``, ``success`` (fraction of that update's rollouts
-        that reached without collision), ``theta`` (updates + 1, P: the start
-        and after each update), ``rollouts`` (cumulative).
+        that reached without collision), ``scenes`` (updates, pairs: the suite's
+        scenes each update used), ``theta`` (updates + 1, P: the start and after
+        each update), ``rollouts`` (cumulative).
       rollouts: rollouts spent in all.
       compile_seconds: compile time of the estimate's program (0 when cached).
       seconds: wall time of the updates, compile excluded.
@@ -469,11 +480,21 @@ def _theta_box(space: GainSpace, base, bounds, theta):
     return jnp.asarray(lo, dtype), jnp.asarray(hi, dtype)
 
 
+def _reshuffled(key, n_suite: int, pairs: int, it: int) -> np.ndarray:
+    """The scenes of update ``it`` under random reshuffling: positions ``it * pairs`` to
+    ``(it + 1) * pairs - 1`` of the stream of suite permutations, one per epoch, drawn
+    from ``key`` folded with 2**30 + epoch (update keys fold ``it`` < 2**30)."""
+    pos = np.arange(it * pairs, (it + 1) * pairs)
+    perms = {e: np.asarray(jax.random.permutation(jax.random.fold_in(key, 2**30 + e), n_suite))
+             for e in np.unique(pos // n_suite)}
+    return np.array([perms[p // n_suite][p % n_suite] for p in pos])
+
+
 def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=None, *, updates: int = 24,
                   pairs: int = 16, sigma: float = 0.2, learning_rate: float = 0.1, method: str = "curve",
                   n_points: int = 10, max_steps: int = 100, weights: ScoreWeights = ScoreWeights(), seed: int = 0,
                   average: float = 1 / 3, optimizer=None, bounds=None, max_step: float | None = None,
-                  progress: bool = True) -> TuneResult:
+                  reshuffle: bool = False, progress: bool = True) -> TuneResult:
     """Tune gains by stochastic gradient descent (optax) on the smoothed objective.
 
     Each update draws ``pairs`` training scenes and one perturbation each
@@ -529,6 +550,13 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
         fraction ``dt k_att / 2``).
       max_step: clip each coordinate of each update to ``[-max_step, max_step]``
         (theta units, > 0); None: no clipping.
+      reshuffle: draw the updates' scenes epoch by epoch (random reshuffling): the
+        suite in a fresh permutation per epoch, consecutive blocks of ``pairs``
+        scenes per update, so that every scene is used once before any is used
+        again. False: each update draws its ``pairs`` scenes independently
+        (:func:`smoothing_sample`'s draw). Perturbations and escape keys are the
+        same either way. For the recipe above it did not narrow the spread over
+        tuner seeds on the validation seed (``benchmarks/tuning_validation/val9.py``).
       progress: one line per update on stderr.
 
     Returns:
@@ -565,15 +593,22 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
     if max_step is not None:
         opt = optax.chain(opt, optax.clip(float(max_step)))
     state = opt.init(theta)
-    hist = {k: [] for k in ("objective", "objective_se", "grad_norm", "success")}
+    if not isinstance(reshuffle, (bool, np.bool_)):
+        raise ValueError(f"reshuffle must be a bool, got {reshuffle!r}")
+    hist = {k: [] for k in ("objective", "objective_se", "grad_norm", "success", "scenes")}
     thetas = [np.asarray(theta)]
     key = jax.random.PRNGKey(seed)
     compile_s, t_run, spent = 0.0, 0.0, 0
     for it in range(int(updates)):
         t0 = time.perf_counter()
         before = _scores_jit(opts.method)._cache_size()
-        sample = smoothing_sample(theta, space, base, scenarios, jax.random.fold_in(key, it), pairs=pairs,
-                                  sigma=sigma, max_steps=max_steps, weights=weights, options=opts)
+        k_it = jax.random.fold_in(key, it)
+        if reshuffle:
+            scenes = _reshuffled(key, scenarios.q0.shape[0], int(pairs), it)
+        else:
+            scenes = np.asarray(_draw(k_it, theta, scenarios, int(pairs), sigma)[0])
+        sample = smoothing_sample(theta, space, base, scenarios, k_it, pairs=pairs, sigma=sigma, max_steps=max_steps,
+                                  weights=weights, options=opts, scene_index=scenes)
         est = estimate_objective(sample)
         dt = time.perf_counter() - t0
         if _scores_jit(opts.method)._cache_size() > before:
@@ -592,6 +627,7 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
         hist["objective_se"].append(est.value_se)
         hist["grad_norm"].append(float(np.linalg.norm(est.grad)))
         hist["success"].append(est.success)
+        hist["scenes"].append(scenes)
         thetas.append(np.asarray(theta))
         if progress:
             now = space.decode(theta, base)  # the gains themselves (dt decoded also with stable_dt)

@@ -417,9 +417,12 @@ def test_tuning_benchmark_rejects_bad_arguments():
     for argv, match in ((["--pairs", "1"], "pairs"), (["--n-train", "0"], "n-train"), (["--sigma", "0"], "sigma"),
                         (["--fraction", "1000"], "budget"), (["--grad-names", "dt"], "grad-names"),
                         (["--grad-names", "d0,nope"], "grad-names"), (["--fn-lr", "-1"], "fn-lr"),
-                        (["--max-step", "-0.1"], "max-step"), (["--max-step", "nan"], "max-step")):
+                        (["--max-step", "-0.1"], "max-step"), (["--max-step", "nan"], "max-step"),
+                        (["--fraction", "nan"], "fraction"), (["--fraction", "0.5"], "fraction")):
         with pytest.raises(ValueError, match=match):
             tuning_bench.parse_args(argv)
+    # A fractional budget: 2/5 of the grid's 60 x 64 rollouts.
+    assert tuning_bench.parse_args(["--fraction", "2.5", "--pairs", "32"]).budget == 1536
     # The guards reach tune_smoothed: by default the clip 0.3; --box: the grid's box; 0: no clip.
     kw = tuning_bench.grad_kwargs(tuning_bench.parse_args([]))
     assert kw["bounds"] is None and kw["max_step"] == 0.3
@@ -460,7 +463,9 @@ def test_tuning_benchmark_quick_run(tmp_path):
     for name in ("gradient", "random"):
         assert row[name] == pytest.approx(res["choices"][name], rel=1e-12), name
         assert row[f"{name}_success"] == res["heldout"][name]["success"], name
-    assert (tmp_path / "tuning_seeds.md").exists()
+    # The report names the arguments it ran with (e.g. a budget other than the default's).
+    assert spread["argv"] == ["--quick", "--seeds", "0", "--out", str(out)]
+    assert "tuning_seeds.py --quick --seeds 0 --out" in (tmp_path / "tuning_seeds.md").read_text()
 
 
 # ----------------------------------------------------------------------------

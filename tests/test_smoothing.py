@@ -152,6 +152,34 @@ def test_tune_smoothed_guards_bound_and_clip_the_steps(suite):
     assert np.all(np.abs(np.diff(clipped.history["theta"], axis=0)) <= 0.05 + 1e-12)
 
 
+def test_tune_smoothed_reshuffle_uses_every_scene_once_per_epoch(suite):
+    """reshuffle: each block of len(suite) / pairs updates uses every scene of the suite
+    exactly once, and the first update is the SGD step on the sample of those scenes
+    (with the update's own key for perturbations and escapes). Without it, the recorded
+    scenes are smoothing_sample's own draw."""
+    space = GainSpace()
+    kw = dict(updates=4, pairs=PAIRS, sigma=SIGMA, max_steps=STEPS, learning_rate=0.2, progress=False)
+    res = tune_smoothed(suite, space, reshuffle=True, **kw)
+    scenes = res.history["scenes"]
+    assert scenes.shape == (4, PAIRS)
+    n = suite.q0.shape[0]
+    for epoch in (scenes[:2], scenes[2:]):
+        np.testing.assert_array_equal(np.sort(epoch.ravel()), np.arange(n))
+    assert not np.array_equal(scenes[:2], scenes[2:])  # a fresh permutation per epoch
+    k0 = jax.random.fold_in(jax.random.PRNGKey(0), 0)
+    first = estimate_objective(smoothing_sample(res.history["theta"][0], space, sp.default_gains(), suite, k0,
+                                                pairs=PAIRS, sigma=SIGMA, max_steps=STEPS, scene_index=scenes[0]))
+    np.testing.assert_allclose(res.history["theta"][1], res.history["theta"][0] - 0.2 * first.grad, rtol=1e-10)
+    # Independent draws (the default) repeat scenes within an epoch's worth of updates.
+    free = tune_smoothed(suite, space, **kw).history["scenes"]
+    assert any(len(np.unique(free[i:i + 2])) < n for i in (0, 2))
+    for bad, match in ((np.arange(PAIRS - 1), "scene_index"), (np.arange(PAIRS) + n - 1, "index the suite"),
+                       (np.zeros(PAIRS), "ints")):
+        with pytest.raises(ValueError, match=match):
+            smoothing_sample(res.history["theta"][0], space, sp.default_gains(), suite, k0, pairs=PAIRS,
+                             max_steps=STEPS, scene_index=bad)
+
+
 def test_gain_function_generalises_gains():
     """A GainFunction with zero profile and weights steps exactly as its Gains; a
     constant log-profile c (or constant segment weights c) steps as eta * exp(c).
@@ -240,6 +268,7 @@ def test_stable_dt_keeps_dt_below_the_euler_bound():
         (dict(max_step=0.0), "max_step"),
         (dict(max_step=float("nan")), "max_step"),
         (dict(max_step=True), "max_step"),
+        (dict(reshuffle="yes"), "reshuffle"),
     ],
 )
 def test_tune_smoothed_rejects_bad_input(suite, kwargs, match):

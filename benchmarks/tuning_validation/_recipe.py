@@ -1,4 +1,4 @@
-"""What val7.py and val8.py share: the training and validation suites, the
+"""What val7.py, val8.py and val9.py share: the training and validation suites, the
 validation score, the grid box's centre (the start) and the benchmark's gradient
 recipe (benchmarks/tuning.py's defaults: d0 and dt with stable_dt, sigma 0.4,
 first step 1.0, 24 updates of 16 pairs = 768 rollouts). The caller enables
@@ -32,7 +32,8 @@ def validation_success(gains, m) -> float:
     return round((np.asarray(r.reached) & ~np.asarray(r.collided)).mean(), 3)
 
 
-def tune_recipe(m, seed: int, **guard):
-    """The benchmark's gradient recipe from CENTRE on TRAIN, with ``guard`` (bounds= / max_step=)."""
-    return tune_smoothed(TRAIN, GainSpace(("d0", "dt"), stable_dt=True), CENTRE, sigma=0.4, pairs=16, updates=24,
-                         learning_rate=1.0, seed=seed, progress=False, **guard, **plan_kw(m))
+def tune_recipe(m, seed: int, start=CENTRE, **changes):
+    """The benchmark's gradient recipe from ``start`` (CENTRE) on TRAIN, with ``changes`` to
+    tune_smoothed's keywords (bounds= / max_step= / sigma= / ...)."""
+    kw = dict(sigma=0.4, pairs=16, updates=24, learning_rate=1.0, seed=seed, progress=False) | changes
+    return tune_smoothed(TRAIN, GainSpace(("d0", "dt"), stable_dt=True), start, **kw, **plan_kw(m))
