@@ -276,6 +276,7 @@ class SmoothingSample(NamedTuple):
       scores: (2N,) :func:`rollout_score` of each rollout.
       reached, collided: (2N,) bool outcomes of each rollout.
       sigma: () the smoothing scale.
+      scenes: (N,) the suite's scene of each pair (its two rollouts).
     """
 
     theta0: jax.Array
@@ -284,6 +285,7 @@ class SmoothingSample(NamedTuple):
     reached: jax.Array
     collided: jax.Array
     sigma: jax.Array
+    scenes: jax.Array
 
 
 def smoothing_sample(theta0, space: GainSpace, base, scenarios: Scenario, key, *, pairs: int = 32,
@@ -344,7 +346,7 @@ def smoothing_sample(theta0, space: GainSpace, base, scenarios: Scenario, key, *
     scenes = jax.tree_util.tree_map(lambda a: jnp.concatenate([a[idx], a[idx]]), scenarios)
     keys = jnp.concatenate([esc, esc])
     L, reached, collided = _scores_jit(opts.method)(x, space, base, scenes, keys, opts, int(max_steps), weights)
-    return SmoothingSample(theta0, x, L, reached, collided, jnp.asarray(sigma, dtype))
+    return SmoothingSample(theta0, x, L, reached, collided, jnp.asarray(sigma, dtype), idx)
 
 
 def smoothed_objective(theta, sample: SmoothingSample):
@@ -480,14 +482,13 @@ def _theta_box(space: GainSpace, base, bounds, theta):
     return jnp.asarray(lo, dtype), jnp.asarray(hi, dtype)
 
 
-def _reshuffled(key, n_suite: int, pairs: int, it: int) -> np.ndarray:
-    """The scenes of update ``it`` under random reshuffling: positions ``it * pairs`` to
-    ``(it + 1) * pairs - 1`` of the stream of suite permutations, one per epoch, drawn
-    from ``key`` folded with 2**30 + epoch (update keys fold ``it`` < 2**30)."""
-    pos = np.arange(it * pairs, (it + 1) * pairs)
-    perms = {e: np.asarray(jax.random.permutation(jax.random.fold_in(key, 2**30 + e), n_suite))
-             for e in np.unique(pos // n_suite)}
-    return np.array([perms[p // n_suite][p % n_suite] for p in pos])
+def _reshuffled(key, n_suite: int, length: int) -> np.ndarray:
+    """The first ``length`` scenes of the random-reshuffling stream: suite permutations
+    one after another, epoch e's drawn from ``key`` folded with 2**30 + e (update keys
+    fold ``it`` < 2**30). Update ``it`` takes positions ``it * pairs`` to ``(it + 1) * pairs - 1``."""
+    perms = [np.asarray(jax.random.permutation(jax.random.fold_in(key, 2**30 + e), n_suite))
+             for e in range(math.ceil(length / n_suite))]
+    return np.concatenate(perms)[:length]
 
 
 def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=None, *, updates: int = 24,
@@ -589,26 +590,23 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
     if max_step is not None and (isinstance(max_step, bool) or not isinstance(max_step, (int, float))
                                  or not math.isfinite(max_step) or max_step <= 0):
         raise ValueError(f"max_step must be None or a finite number > 0, got {max_step!r}")
+    if not isinstance(reshuffle, (bool, np.bool_)):
+        raise ValueError(f"reshuffle must be a bool, got {reshuffle!r}")
     opt = optimizer or optax.sgd(optax.cosine_decay_schedule(learning_rate, int(updates), alpha=0.1), momentum=0.5)
     if max_step is not None:
         opt = optax.chain(opt, optax.clip(float(max_step)))
     state = opt.init(theta)
-    if not isinstance(reshuffle, (bool, np.bool_)):
-        raise ValueError(f"reshuffle must be a bool, got {reshuffle!r}")
     hist = {k: [] for k in ("objective", "objective_se", "grad_norm", "success", "scenes")}
     thetas = [np.asarray(theta)]
     key = jax.random.PRNGKey(seed)
+    stream = _reshuffled(key, scenarios.q0.shape[0], int(updates) * int(pairs)) if reshuffle else None
     compile_s, t_run, spent = 0.0, 0.0, 0
     for it in range(int(updates)):
         t0 = time.perf_counter()
         before = _scores_jit(opts.method)._cache_size()
-        k_it = jax.random.fold_in(key, it)
-        if reshuffle:
-            scenes = _reshuffled(key, scenarios.q0.shape[0], int(pairs), it)
-        else:
-            scenes = np.asarray(_draw(k_it, theta, scenarios, int(pairs), sigma)[0])
-        sample = smoothing_sample(theta, space, base, scenarios, k_it, pairs=pairs, sigma=sigma, max_steps=max_steps,
-                                  weights=weights, options=opts, scene_index=scenes)
+        scenes = None if stream is None else stream[it * int(pairs):(it + 1) * int(pairs)]
+        sample = smoothing_sample(theta, space, base, scenarios, jax.random.fold_in(key, it), pairs=pairs,
+                                  sigma=sigma, max_steps=max_steps, weights=weights, options=opts, scene_index=scenes)
         est = estimate_objective(sample)
         dt = time.perf_counter() - t0
         if _scores_jit(opts.method)._cache_size() > before:
@@ -627,7 +625,7 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
         hist["objective_se"].append(est.value_se)
         hist["grad_norm"].append(float(np.linalg.norm(est.grad)))
         hist["success"].append(est.success)
-        hist["scenes"].append(scenes)
+        hist["scenes"].append(np.asarray(sample.scenes))
         thetas.append(np.asarray(theta))
         if progress:
             now = space.decode(theta, base)  # the gains themselves (dt decoded also with stable_dt)
