@@ -21,24 +21,28 @@ checks in the scan). Per obstacle model (curve, N = 10, N = 50):
    :func:`softplan_jax.smoothing.rollout_score` (the gradient's score) on a
    minibatch of ``--pairs`` training scenes shared by the generation;
    B_grid / ``--fraction`` rollouts; its final mean is the choice. ``cma-g``:
-   the same on the gradient's parameter space (the control for it).
+   the same on the gradient's parameter space, with the gradient's per-coordinate
+   scales (``CMA_stds`` proportional to ``--sigma``, geometric mean 1): the control for it.
 4. **gradient**: :func:`softplan_jax.smoothing.tune_smoothed` (its defaults:
    SGD with momentum 0.5, step ``--lr`` decaying to a tenth, the mean of the
    last third of the iterates) from the same centre, B_grid / ``--fraction``
    rollouts (updates x 2 x pairs), on ``--grad-names`` (default d0 and dt; eta
    stays at the centre: its gradient is noise, see
    ``tuning_validation/README.md``) with ``dt`` parametrised against the Euler
-   step's stability bound (``GainSpace(stable_dt=True)``), sigma ``--sigma``,
-   each update clipped to ``--max-step`` per coordinate (``--box``: projected
-   onto the grid's box instead or as well; validation chose the clip).
+   step's stability bound (``GainSpace(stable_dt=True)``), sigma ``--sigma``
+   (one per tuned gain: 0.3 for log d0, 0.7 for dt's logit), stepping along the
+   natural gradient ``sigma^2 grad J`` (``--natural``), each update clipped to
+   ``--max-step`` per coordinate (``--box``: projected onto the grid's box
+   instead or as well; validation chose the clip).
 5. **gain function** (beyond the grid's reach; with the ablation
    ``gradient+``: the same extra updates on the three gains alone): the 20-parameter
    :class:`~softplan_jax.planner.GainFunction` space (log d0, dt, eta; a
    14-knot repulsion profile over d / d0; 3 segment weights),
    ``tune_smoothed`` from the gradient's result for ``--fn-updates`` more
-   updates of ``--fn-pairs`` pairs (sigma ``--fn-sigma``, step ``--fn-lr``;
-   ``--fn-stable-dt``: dt as in the gradient's space, which validation
-   found no better).
+   updates of ``--fn-pairs`` pairs: dt as in the gradient's space
+   (``--fn-stable-dt``), sigma ``--fn-gain-sigma`` for d0, dt, eta and
+   ``--fn-sigma`` for the profile and the weights, the natural gradient from
+   step ``--fn-lr`` (``--fn-natural``), clipped as the gradient's.
 
 The tuners' settings (start, optimiser, step size, pairs, averaging) were
 chosen on a validation seed (``random_scenarios(2, 256)``), never on the
@@ -88,8 +92,12 @@ def parse_args(argv=None):
     ap.add_argument("--fraction", type=float, default=5.0,
                     help="budget of random / CMA / gradient = grid's / this (a number >= 1, e.g. 2.5)")
     ap.add_argument("--pairs", type=int, default=None, help="antithetic pairs per gradient (default 16; quick 4)")
-    ap.add_argument("--sigma", type=float, default=0.4, help="the gradient's smoothing scale (theta units)")
-    ap.add_argument("--lr", type=float, default=1.0, help="the gradient's first step size (cosine decay to a tenth)")
+    ap.add_argument("--sigma", default="0.3,0.7", help="the gradient's smoothing scale (theta units): one number, "
+                    "or one per --grad-names entry")
+    ap.add_argument("--natural", action=argparse.BooleanOptionalAction, default=True,
+                    help="the gradient's step along the natural gradient sigma^2 * grad J (tune_smoothed natural=)")
+    ap.add_argument("--lr", type=float, default=3.75, help="the gradient's first step size (cosine decay to a tenth; "
+                    "with --natural in units of sigma^2)")
     ap.add_argument("--grad-names", default="d0,dt", help="gains the gradient tunes (the others stay at the start)")
     ap.add_argument("--stable-dt", action=argparse.BooleanOptionalAction, default=True,
                     help="the gradient's dt as logit(dt k_att / 2) (GainSpace(stable_dt=True))")
@@ -97,10 +105,15 @@ def parse_args(argv=None):
                     help="project the gradient's iterates onto the grid's box (tune_smoothed bounds=)")
     ap.add_argument("--max-step", type=float, default=0.3,
                     help="clip each coordinate of each gradient update (theta units; 0: no clipping)")
-    ap.add_argument("--fn-stable-dt", action=argparse.BooleanOptionalAction, default=False,
+    ap.add_argument("--fn-stable-dt", action=argparse.BooleanOptionalAction, default=True,
                     help="the gain-function stage (and its ablation) with dt as logit(dt k_att / 2)")
-    ap.add_argument("--fn-sigma", type=float, default=0.2, help="smoothing scale of the gain-function stage")
-    ap.add_argument("--fn-lr", type=float, default=0.1, help="first step size of the gain-function stage")
+    ap.add_argument("--fn-gain-sigma", default="0.3,0.7,0.3",
+                    help="smoothing scales of d0, dt, eta in the gain-function stage and its ablation")
+    ap.add_argument("--fn-sigma", type=float, default=0.3,
+                    help="smoothing scale of the repulsion profile and the segment weights")
+    ap.add_argument("--fn-natural", action=argparse.BooleanOptionalAction, default=True,
+                    help="the gain-function stage (and its ablation) along the natural gradient")
+    ap.add_argument("--fn-lr", type=float, default=3.75, help="first step size of the gain-function stage")
     ap.add_argument("--start", choices=("centre", "default"), default="centre",
                     help="start of CMA-ES and the gradient: the grid box's geometric centre, or the default gains")
     ap.add_argument("--fn-updates", type=int, default=None, help="updates of the gain function (default 24)")
@@ -132,14 +145,27 @@ def parse_args(argv=None):
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     if min(args.pairs, args.fn_pairs, args.fn_knots) < 2:
         raise ValueError("--pairs, --fn-pairs and --fn-knots must be >= 2")
-    if not all(math.isfinite(v) and v > 0 for v in (args.sigma, args.lr, args.fn_sigma, args.fn_lr)):
-        raise ValueError("--sigma, --lr, --fn-sigma and --fn-lr must be finite and > 0")
+    for name in ("sigma", "fn_gain_sigma"):
+        try:
+            setattr(args, name, [float(x) for x in str(getattr(args, name)).split(",")])
+        except ValueError:
+            raise ValueError(f"--{name.replace('_', '-')} must be a number or a comma list of numbers, "
+                             f"got {getattr(args, name)!r}") from None
+    if not all(math.isfinite(v) and v > 0 for v in (*args.sigma, *args.fn_gain_sigma, args.lr, args.fn_sigma,
+                                                     args.fn_lr)):
+        raise ValueError("--sigma, --lr, --fn-gain-sigma, --fn-sigma and --fn-lr must be finite and > 0")
+    if len(args.fn_gain_sigma) not in (1, len(TUNED)):
+        raise ValueError(f"--fn-gain-sigma must give one number or {len(TUNED)} (d0, dt, eta), "
+                         f"got {len(args.fn_gain_sigma)}")
     if not (math.isfinite(args.max_step) and args.max_step >= 0):
         raise ValueError(f"--max-step must be finite and >= 0, got {args.max_step}")
     args.grad_names = tuple(args.grad_names.split(","))
     if not args.grad_names or any(k not in TUNED for k in args.grad_names) or len(set(args.grad_names)) < len(
             args.grad_names) or len(args.grad_names) < 2:
         raise ValueError(f"--grad-names must be two or three distinct names of {','.join(TUNED)}")
+    if len(args.sigma) not in (1, len(args.grad_names)):
+        raise ValueError(f"--sigma must give one number or {len(args.grad_names)} (one per --grad-names entry), "
+                         f"got {len(args.sigma)}")
     args.budget = int(len(args.grid) * args.n_train / args.fraction)
     if args.budget < 2 * args.pairs:
         raise ValueError(f"the budget ({args.budget} rollouts) is below one gradient (2 x {args.pairs} pairs)")
@@ -169,10 +195,23 @@ def draw_in_box(args, rng) -> dict:
 
 def grad_kwargs(args) -> dict:
     """The gradient's step settings for :func:`softplan_jax.smoothing.tune_smoothed`
-    (shared by tuning.py and tuning_seeds.py): sigma, first step, and the guards
-    (``--box``: the grid's box on the tuned gains; ``--max-step``)."""
+    (shared by tuning.py and tuning_seeds.py): sigma (one, or one per tuned gain), the
+    natural gradient, first step, and the guards (``--box``: the grid's box on the tuned
+    gains; ``--max-step``)."""
     bounds = {k: (args.grid_axes[k][0], args.grid_axes[k][-1]) for k in args.grad_names} if args.box else None
-    return dict(sigma=args.sigma, learning_rate=args.lr, bounds=bounds, max_step=args.max_step or None)
+    sigma = args.sigma[0] if len(args.sigma) == 1 else tuple(args.sigma)
+    return dict(sigma=sigma, natural=args.natural, learning_rate=args.lr, bounds=bounds,
+                max_step=args.max_step or None)
+
+
+def fn_kwargs(args, space) -> dict:
+    """The gain-function stage's settings for :func:`softplan_jax.smoothing.tune_smoothed` on
+    ``space`` (the 20-parameter function, or its ablation on the three gains): sigma
+    ``--fn-gain-sigma`` for d0, dt, eta and ``--fn-sigma`` for the profile and segment weights,
+    the natural gradient (``--fn-natural``), first step ``--fn-lr``, the clip ``--max-step``."""
+    gain_sigma = args.fn_gain_sigma * (len(TUNED) if len(args.fn_gain_sigma) == 1 else 1)
+    sigma = tuple(gain_sigma) + (args.fn_sigma,) * (space.size - len(TUNED))
+    return dict(sigma=sigma, natural=args.fn_natural, learning_rate=args.fn_lr, max_step=args.max_step or None)
 
 
 def choice_key(reached, collided) -> tuple:
@@ -265,8 +304,11 @@ def main(argv=None) -> dict:
         for tag, space in (("cma", space3), ("cma-g", space_g)):
             t0 = time.perf_counter()
             per_call = 2  # two candidates per call: 2 x pairs rollouts, the gradient's batch shape (one program)
-            es = cma.CMAEvolutionStrategy(np.asarray(space.encode(start)).tolist(), 0.5,
-                                          dict(popsize=args.cma_popsize, seed=args.seed + 1, verbose=-9))
+            cma_opts = dict(popsize=args.cma_popsize, seed=args.seed + 1, verbose=-9)
+            if tag == "cma-g" and len(args.sigma) > 1:
+                # the gradient's per-coordinate scales, at the same overall step (geometric mean 1)
+                cma_opts["CMA_stds"] = (np.asarray(args.sigma) / np.exp(np.mean(np.log(args.sigma)))).tolist()
+            es = cma.CMAEvolutionStrategy(np.asarray(space.encode(start)).tolist(), 0.5, cma_opts)
             spent, gen, ctrace = 0, 0, []
             key = jax.random.PRNGKey(args.seed + 7)
             while spent + args.cma_popsize * args.pairs <= args.budget:
@@ -308,13 +350,13 @@ def main(argv=None) -> dict:
         t0 = time.perf_counter()
         n_seg = int(train.q0.shape[-2])
         fspace = GainSpace(TUNED, knots=args.fn_knots, segments=n_seg, stable_dt=args.fn_stable_dt)
-        fr = tune_smoothed(train, fspace, tr.gains, updates=args.fn_updates, pairs=args.fn_pairs, sigma=args.fn_sigma,
-                           learning_rate=args.fn_lr, max_steps=args.train_steps, seed=args.seed + 1, **plan_kw(m))
+        fr = tune_smoothed(train, fspace, tr.gains, updates=args.fn_updates, pairs=args.fn_pairs,
+                           max_steps=args.train_steps, seed=args.seed + 1, **fn_kwargs(args, fspace), **plan_kw(m))
         fgains = fr.gains
         # ---- 5b. ablation: the same extra budget on the three gains alone ("gradient+")
-        pr = tune_smoothed(train, GainSpace(TUNED, stable_dt=args.fn_stable_dt), tr.gains, updates=args.fn_updates,
-                           pairs=args.fn_pairs, sigma=args.fn_sigma,
-                           learning_rate=args.fn_lr, max_steps=args.train_steps, seed=args.seed + 1, **plan_kw(m))
+        pspace = GainSpace(TUNED, stable_dt=args.fn_stable_dt)
+        pr = tune_smoothed(train, pspace, tr.gains, updates=args.fn_updates, pairs=args.fn_pairs,
+                           max_steps=args.train_steps, seed=args.seed + 1, **fn_kwargs(args, pspace), **plan_kw(m))
         res["choices"]["gradient+"] = {k: float(getattr(pr.gains, k)) for k in TUNED}
         res["cost"]["gradient+"] = dict(rollouts=tr.rollouts + pr.rollouts)
         res["trace"]["gradient+"] = {k: np.asarray(v).tolist() for k, v in pr.history.items()}
@@ -390,14 +432,19 @@ def report(results: dict, args) -> str:
              f"{len(args.grid) * args.n_train}; random, CMA-ES and gradient {args.budget} (1/{args.fraction:g}); "
              f"gradient: {args.budget // (2 * args.pairs)} updates of {args.pairs} antithetic pairs on "
              f"{', '.join(args.grad_names)}{' (dt as logit(dt k_att / 2))' if args.stable_dt else ''}, sigma "
-             f"{args.sigma}, SGD from {args.lr} (cosine to a tenth), mean of the last third of the iterates"
+             f"{', '.join(f'{x:g}' for x in args.sigma)}, SGD from {args.lr:g}"
+             f"{' along the natural gradient sigma^2 grad J' if args.natural else ''} (cosine to a tenth), mean of "
+             "the last third of the iterates"
              f"{', projected onto the grid box' if args.box else ''}"
              f"{f', each update clipped to {args.max_step}' if args.max_step else ''}; "
-             "cma-g: CMA-ES on that same space; start: "
+             f"cma-g: CMA-ES on that same space{' with the same per-coordinate scales' if len(args.sigma) > 1 else ''}"
+             "; start: "
              f"{'the grid box centre' if args.start == 'centre' else 'the default gains'}; gain function "
              f"({3 + args.fn_knots + 3} parameters): {args.fn_updates} more updates of {args.fn_pairs} pairs"
-             f"{', dt as logit(dt k_att / 2)' if args.fn_stable_dt else ''}, sigma {args.fn_sigma}, SGD from "
-             f"{args.fn_lr}")
+             f"{', dt as logit(dt k_att / 2)' if args.fn_stable_dt else ''}, sigma "
+             f"{', '.join(f'{x:g}' for x in args.fn_gain_sigma)} (d0, dt, eta) and {args.fn_sigma:g} (profile, "
+             f"weights), SGD from {args.fn_lr:g}{' along the natural gradient' if args.fn_natural else ''}"
+             f"{f', clipped to {args.max_step}' if args.max_step else ''}")
     L.append("- success = reached without collision, count (% [95 % Wilson interval]); paired = same held-out "
              "scenes: discordant pairs, exact McNemar p, difference of success rates (points) with a 95 % "
              "paired-bootstrap interval")

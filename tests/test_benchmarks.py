@@ -418,7 +418,10 @@ def test_tuning_benchmark_rejects_bad_arguments():
                         (["--fraction", "1000"], "budget"), (["--grad-names", "dt"], "grad-names"),
                         (["--grad-names", "d0,nope"], "grad-names"), (["--fn-lr", "-1"], "fn-lr"),
                         (["--max-step", "-0.1"], "max-step"), (["--max-step", "nan"], "max-step"),
-                        (["--fraction", "nan"], "fraction"), (["--fraction", "0.5"], "fraction")):
+                        (["--fraction", "nan"], "fraction"), (["--fraction", "0.5"], "fraction"),
+                        (["--sigma", "0.3,0.7,0.5"], "one per --grad-names"), (["--sigma", "0.3,x"], "comma list"),
+                        (["--sigma", "0.3,-1"], "sigma"), (["--fn-gain-sigma", "0.3,0.7"], "fn-gain-sigma"),
+                        (["--fn-gain-sigma", "0,0.7,0.3"], "fn-gain-sigma")):
         with pytest.raises(ValueError, match=match):
             tuning_bench.parse_args(argv)
     # A fractional budget: 2/5 of the grid's 60 x 64 rollouts.
@@ -426,8 +429,19 @@ def test_tuning_benchmark_rejects_bad_arguments():
     # The guards reach tune_smoothed: by default the clip 0.3; --box: the grid's box; 0: no clip.
     kw = tuning_bench.grad_kwargs(tuning_bench.parse_args([]))
     assert kw["bounds"] is None and kw["max_step"] == 0.3
-    kw = tuning_bench.grad_kwargs(tuning_bench.parse_args(["--box", "--max-step", "0"]))
+    # The recipe (val10.py): one sigma per tuned gain, the natural gradient from 3.75.
+    assert kw["sigma"] == (0.3, 0.7) and kw["natural"] is True and kw["learning_rate"] == 3.75
+    kw = tuning_bench.grad_kwargs(tuning_bench.parse_args(["--box", "--max-step", "0", "--sigma", "0.4",
+                                                           "--no-natural"]))
     assert kw["bounds"] == dict(d0=(0.07, 0.4), dt=(0.1, 0.8)) and kw["max_step"] is None
+    assert kw["sigma"] == 0.4 and kw["natural"] is False
+    # The gain-function stage: d0, dt, eta's scales, then --fn-sigma for the 17 profile knots and weights.
+    from softplan_jax.smoothing import GainSpace
+
+    args = tuning_bench.parse_args([])
+    kw = tuning_bench.fn_kwargs(args, GainSpace(tuning_bench.TUNED, knots=14, segments=3))
+    assert kw["sigma"] == (0.3, 0.7, 0.3) + (0.3,) * 17 and kw["natural"] and kw["max_step"] == 0.3
+    assert tuning_bench.fn_kwargs(args, GainSpace(tuning_bench.TUNED))["sigma"] == (0.3, 0.7, 0.3)
     import tuning_seeds
 
     with pytest.raises(ValueError, match="seeds"):

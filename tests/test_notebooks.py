@@ -39,8 +39,9 @@ SMALL = {
     "quickstart.ipynb": "MAX_STEPS = 200\nN_POINTS = (10,)\n",
     # Small shapes; the notebook's two GainSpaces (d0 and dt with stable_dt; the gain function)
     # compile their own programs of rollout scores.
-    "tuning.ipynb": ("N_TRAIN = 8\nUPDATES = 2\nSIGMA = 0.4\nLR = 1.0\nMAX_STEP = 0.3\nPAIRS = 4\nSTEPS = 20\n"
-                     "N_EVAL = 16\nEVAL_STEPS = 40\nFN_UPDATES = 2\nFN_PAIRS = 4\nKNOTS = 14\n"),
+    "tuning.ipynb": ("N_TRAIN = 8\nUPDATES = 2\nSIGMA = (0.3, 0.7)\nLR = 3.75\nMAX_STEP = 0.3\nPAIRS = 4\n"
+                     "STEPS = 20\nN_EVAL = 16\nEVAL_STEPS = 40\nFN_UPDATES = 2\nFN_PAIRS = 4\nFN_SIGMA = 0.3\n"
+                     "KNOTS = 14\n"),
     "point_clouds.ipynb": "MAX_STEPS = 150\n",
 }
 

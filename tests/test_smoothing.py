@@ -25,6 +25,7 @@ from softplan_jax.smoothing import (
 )
 
 PAIRS, STEPS, SIGMA = 4, 20, 0.2
+SIGMA_EACH = (0.15, 0.4, 0.25)  # one smoothing scale per coordinate of the default GainSpace
 SETTINGS = [dict(), dict(d0=0.2, dt=0.4, eta=0.002), dict(d0=0.3, dt=0.6, eta=0.004)]
 
 
@@ -37,16 +38,20 @@ def _base(setting):
     return sp.default_gains()._replace(**{k: jnp.asarray(v, jnp.float64) for k, v in setting.items()})
 
 
+@pytest.mark.parametrize("sigma", [SIGMA, SIGMA_EACH], ids=["one-sigma", "sigma-per-coordinate"])
 @pytest.mark.parametrize("setting", SETTINGS, ids=["defaults", "mid", "large"])
-def test_gradient_matches_central_differences_of_the_objective(suite, setting):
+def test_gradient_matches_central_differences_of_the_objective(suite, setting, sigma):
     """jax.grad of smoothed_objective against central differences of smoothed_objective
     itself (the same sample of rollouts), every component within 10 %, at the default gains
-    and two other settings; and equal to the antithetic score-function formula."""
+    and two other settings, with one smoothing scale and with one per coordinate; and
+    equal to the antithetic score-function formula."""
     space = GainSpace()
     base = _base(setting)
     theta = space.encode(base)
-    sample = smoothing_sample(theta, space, base, suite, jax.random.PRNGKey(3), pairs=PAIRS, sigma=SIGMA,
+    sample = smoothing_sample(theta, space, base, suite, jax.random.PRNGKey(3), pairs=PAIRS, sigma=sigma,
                               max_steps=STEPS)
+    sig = np.asarray(sigma)
+    assert np.asarray(sample.sigma).shape == sig.shape
     grad = np.asarray(jax.grad(smoothed_objective)(theta, sample))
     assert np.all(np.isfinite(grad))
     # Scores differ between rollouts (else the gradient would be identically zero).
@@ -59,8 +64,9 @@ def test_gradient_matches_central_differences_of_the_objective(suite, setting):
         assert np.all(rel <= 0.1), (h, grad, fd, rel)
     # The value at the centre is the mean score; the gradient the antithetic formula.
     L = np.asarray(sample.scores)
-    eps = (np.asarray(sample.x[:PAIRS]) - np.asarray(theta)) / SIGMA
-    formula = (((L[:PAIRS] - L[PAIRS:]) / (2 * SIGMA))[:, None] * eps).mean(0)
+    eps = (np.asarray(sample.x[:PAIRS]) - np.asarray(theta)) / sig
+    np.testing.assert_allclose(np.asarray(sample.x[PAIRS:]), np.asarray(theta) - sig * eps, rtol=1e-12)
+    formula = (((L[:PAIRS] - L[PAIRS:]) / 2)[:, None] * eps / sig).mean(0)
     np.testing.assert_allclose(grad, formula, rtol=1e-9, atol=1e-12)
     est = estimate_objective(sample)
     assert est.value == pytest.approx(L.mean(), rel=1e-12)
@@ -150,6 +156,27 @@ def test_tune_smoothed_guards_bound_and_clip_the_steps(suite):
     assert np.any(np.abs(step) > 0.05)
     np.testing.assert_allclose(clipped.history["theta"][1], t0 + np.clip(step, -0.05, 0.05), rtol=1e-10)
     assert np.all(np.abs(np.diff(clipped.history["theta"], axis=0)) <= 0.05 + 1e-12)
+
+
+def test_tune_smoothed_natural_gradient_steps(suite):
+    """natural=True: the first update is theta_0 - lr sigma^2 grad_0, coordinate by
+    coordinate (the natural gradient of the smoothing distribution's mean), with grad_0
+    recomputed from the update's key; with one sigma for every coordinate the whole run
+    equals the plain one with the learning rate times sigma^2."""
+    space = GainSpace()
+    kw = dict(updates=2, pairs=PAIRS, max_steps=STEPS, progress=False)
+    nat = tune_smoothed(suite, space, sigma=SIGMA_EACH, learning_rate=2.0, natural=True, **kw)
+    t0 = nat.history["theta"][0]
+    first = estimate_objective(smoothing_sample(t0, space, sp.default_gains(), suite,
+                                                jax.random.fold_in(jax.random.PRNGKey(0), 0), pairs=PAIRS,
+                                                sigma=SIGMA_EACH, max_steps=STEPS))
+    step = -2.0 * np.square(SIGMA_EACH) * first.grad
+    assert np.all(step != 0)
+    np.testing.assert_allclose(nat.history["theta"][1], t0 + step, rtol=1e-10)
+    one = tune_smoothed(suite, space, sigma=SIGMA, learning_rate=2.0, natural=True, **kw)
+    plain = tune_smoothed(suite, space, sigma=SIGMA, learning_rate=2.0 * SIGMA**2, **kw)
+    np.testing.assert_allclose(one.history["theta"], plain.history["theta"], rtol=1e-10)
+    np.testing.assert_allclose(one.theta, plain.theta, rtol=1e-10)
 
 
 def test_tune_smoothed_reshuffle_uses_every_scene_once_per_epoch(suite):
@@ -249,6 +276,12 @@ def test_stable_dt_keeps_dt_below_the_euler_bound():
         (dict(average=1.5), "average"),
         (dict(sigma=0.0), "sigma"),
         (dict(sigma=float("inf")), "sigma"),
+        (dict(sigma=(0.1, 0.2)), "one per coordinate"),
+        (dict(sigma=(0.1, -0.2, 0.1)), "finite and > 0"),
+        (dict(sigma=[[0.1, 0.2, 0.3]]), "one per coordinate"),
+        (dict(sigma="0.2"), "sigma"),
+        (dict(sigma=True), "sigma"),
+        (dict(natural="yes"), "natural"),
         (dict(space=GainSpace(("nope",))), "GainSpace.names"),
         (dict(space=GainSpace((), knots=1)), "knots"),
         (dict(space=GainSpace((), segments=2)), "segments"),
