@@ -1,9 +1,11 @@
-"""What val7.py, val8.py and val9.py share: the training and validation suites, the
-validation score, the grid box's centre (the start) and the benchmark's gradient
-recipe (benchmarks/tuning.py's defaults: d0 and dt with stable_dt, sigma 0.4,
-first step 1.0, 24 updates of 16 pairs = 768 rollouts). The caller enables
-float64 before importing this module. val5.py and val6.py keep their own copies:
-each is the record of the logs beside it."""
+"""What val7.py to val11.py and snr_coords.py share: the training and validation suites,
+the validation score, the grid box's centre (the start) and the benchmark's gradient
+recipe of sessions 16-18 (d0 and dt with stable_dt, sigma 0.4, first step 1.0, 24
+updates of 16 pairs = 768 rollouts; val10.py's config Q), which tune_recipe's keywords
+change (val10.py's N37b, sigma (0.3, 0.7) along the natural gradient from 3.75, is
+benchmarks/tuning.py's recipe since session 19). The caller enables float64 before
+importing this module. val5.py and val6.py keep their own copies: each is the record
+of the logs beside it."""
 
 import math
 import os

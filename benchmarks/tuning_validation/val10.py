@@ -1,7 +1,7 @@
 # ruff: noqa: E402  (jax_enable_x64 before softplan_jax is imported)
 # Session 19: the seed spread of the benchmark's recipe (val7.py config Q: d0 and dt with stable_dt,
 # sigma 0.4, step 1.0, clip 0.3). Why it spreads (measured at three points with 512 pairs): the two
-# coordinates differ. log d0's landscape is steep and lopsided (a small d0 fails at once), and its
+# coordinates differ. log d0's landscape is steep and lopsided (a small d0 loses many scenes), and its
 # per-pair gradient noise is large; dt's logit sees a broad ridge below the Euler bound, with a
 # weak, consistent slope whose per-pair signal to noise is about 0.1 at sigma 0.4, so from the box's
 # centre dt creeps up and many runs end below dt 0.6. One sigma for both cannot suit both. Here:
