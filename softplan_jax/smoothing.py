@@ -47,16 +47,15 @@ at theta0 that gradient is the antithetic estimate above.
 :func:`estimate_objective` adds standard errors. ``tests/test_smoothing.py``
 checks the gradient against central differences of the same objective (every
 component within 10 %, three gain settings, one sigma and one per coordinate)
-and against central differences
-of J from FRESH rollouts at theta +- h (common random numbers; within three
-standard errors).
+and against central differences of J from FRESH rollouts at theta +- h (common
+random numbers; within three standard errors).
 
 :func:`tune_smoothed` runs optax on these gradients (SGD with momentum, a
 decaying step and iterate averaging by default; optionally along the natural
 gradient ``sigma^2 grad J``), a fresh draw of scenes and perturbations per
 update, with progress, the training history, and the rollout budget accounted
-for. ``benchmarks/tuning.py`` compares it with a grid, random
-search and CMA-ES at equal budgets on held-out scenes.
+for. ``benchmarks/tuning.py`` compares it with a grid, random search and CMA-ES
+at equal budgets on held-out scenes.
 """
 
 from __future__ import annotations
@@ -64,6 +63,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import jax
@@ -309,9 +309,9 @@ class SmoothingSample(NamedTuple):
 
 
 def smoothing_sample(theta0, space: GainSpace, base, scenarios: Scenario, key, *, pairs: int = 32,
-                     sigma: float = 0.2, method: str = "curve", n_points: int = 10, max_steps: int = 100,
-                     weights: ScoreWeights = ScoreWeights(), options: PlanOptions | None = None,
-                     eps=None, scene_index=None) -> SmoothingSample:
+                     sigma: float | Sequence[float] = 0.2, method: str = "curve", n_points: int = 10,
+                     max_steps: int = 100, weights: ScoreWeights = ScoreWeights(),
+                     options: PlanOptions | None = None, eps=None, scene_index=None) -> SmoothingSample:
     """Roll out ``2 * pairs`` perturbed gain settings around ``theta0`` (one vmapped batch).
 
     Args:
@@ -519,8 +519,9 @@ def _reshuffled(key, n_suite: int, length: int) -> np.ndarray:
 
 
 def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=None, *, updates: int = 24,
-                  pairs: int = 16, sigma: float = 0.2, learning_rate: float = 0.1, method: str = "curve",
-                  n_points: int = 10, max_steps: int = 100, weights: ScoreWeights = ScoreWeights(), seed: int = 0,
+                  pairs: int = 16, sigma: float | Sequence[float] = 0.2, learning_rate: float = 0.1,
+                  method: str = "curve", n_points: int = 10, max_steps: int = 100,
+                  weights: ScoreWeights = ScoreWeights(), seed: int = 0,
                   average: float = 1 / 3, optimizer=None, bounds=None, max_step: float | None = None,
                   reshuffle: bool = False, natural: bool = False, progress: bool = True) -> TuneResult:
     """Tune gains by stochastic gradient descent (optax) on the smoothed objective.
