@@ -16,25 +16,22 @@ import numpy as np
 from _recipe import CENTRE, TRAIN, plan_kw
 
 from softplan_jax.planner import make_options
-from softplan_jax.smoothing import GainSpace, smoothing_sample
+from softplan_jax.smoothing import GainSpace, estimate_objective, smoothing_sample
 
 m = sys.argv[1] if sys.argv[1] == "curve" else int(sys.argv[1])
 space = GainSpace(("d0", "dt"), stable_dt=True)
 opts = make_options(**plan_kw(m))
 n = 512
 for sigma in (0.4, (0.3, 0.7)):
-    sig = np.broadcast_to(np.asarray(sigma, float), (2,))
     for d0, dt in ((0.167, 0.283), (0.3, 0.5), (0.3, 0.75)):
         start = CENTRE._replace(d0=jnp.asarray(d0), dt=jnp.asarray(dt))
         theta = space.encode(start)
         s = smoothing_sample(theta, space, start, TRAIN, jax.random.PRNGKey(3), pairs=n, sigma=sigma, options=opts,
                              max_steps=100)
-        L = np.asarray(s.scores)
-        eps = (np.asarray(s.x[:n]) - np.asarray(theta)) / sig
-        g = ((L[:n] - L[n:]) / 2)[:, None] * eps / sig
+        est = estimate_objective(s)  # grad: the mean of g_n; grad_se: their standard deviation / sqrt(n)
+        mean, sd = est.grad, est.grad_se * np.sqrt(n)
         ok = np.asarray(s.reached) & ~np.asarray(s.collided)
-        mean, sd = g.mean(0), g.std(0, ddof=1)
-        print(f"{m} sigma {sigma} at d0 {d0} dt {dt}: J {L.mean():.3f} success {ok.mean():.3f} pairs that flip "
+        print(f"{m} sigma {sigma} at d0 {d0} dt {dt}: J {est.value:.3f} success {ok.mean():.3f} pairs that flip "
               f"{np.mean(ok[:n] != ok[n:]):.3f} | signal d0 {mean[0]:+.3f} dt {mean[1]:+.3f} | noise per pair "
               f"d0 {sd[0]:.3f} dt {sd[1]:.3f} | snr per pair d0 {mean[0] / sd[0]:+.3f} dt {mean[1] / sd[1]:+.3f}",
               flush=True)

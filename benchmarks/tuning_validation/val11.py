@@ -5,7 +5,7 @@
 # old settings (log dt, sigma 0.2, step 0.1; F0 and its ablation G0) put perturbations past the
 # Euler bound dt = 1 (dt * exp(2 * 0.2) = 1.1). FN, FN2, GN: dt with stable_dt, the natural gradient
 # (step 3.75 sigma^2 grad J, as the recipe), sigma 0.3 / 0.7 / 0.3 for d0 / dt / eta, and 0.3 (FN)
-# or 0.2 (FN2) for the profile and the segment weights; GN: the three gains alone (FN2's ablation).
+# or 0.2 (FN2) for the profile and the segment weights; GN: the three gains alone with those settings (the ablation).
 # Judged on the VALIDATION seed (2) with tuner seeds 5-9.
 #   python val11.py {curve,10,50} [CONFIGS] [SEEDS]
 import sys
