@@ -10,8 +10,8 @@ certified goal configurations of :mod:`softplan_jax.reach`:
   solver whose convergence is certified) and the sound motion bound B of the
   rest of the line (:func:`~softplan_jax.kinematics.motion_bound`) give the
   fraction ``alpha = min(1, f (c - 2 contact) / B)`` of it that no arm point
-  can cross an obstacle on, exactly as the safe step of the local planner
-  does. A motion advances until it reaches its end, a solve does not
+  can cross an obstacle on: the local planner's safe step,
+  :func:`~softplan_jax.step.safe_scale`. A motion advances until it reaches its end, a solve does not
   converge, or its substeps run out (near an obstacle the substeps shrink
   geometrically); what it reaches is proven collision-free, all the way.
 * **RRT-Connect** (Kuffner & LaValle 2000) with a tree at the start and a tree
@@ -47,6 +47,7 @@ from .closest import SolverOptions
 from .kinematics import motion_bound, tip_position
 from .reach import ReachOptions, clearances, random_configurations
 from .scenarios import Scenario
+from .step import safe_scale
 
 __all__ = ["wrap_delta", "advance", "global_search", "SearchResult"]
 
@@ -87,11 +88,7 @@ def advance(q_a, q_b, scenario: Scenario, substeps: int, options: ReachOptions, 
         k, t, _ = state
         q = q_a + t * dq
         c, _, ok = clearances(q, scenario, solver)
-        c_min = jnp.min(c, initial=jnp.inf)
-        B = motion_bound(q, q_e)[-1]
-        allowed = options.safe_fraction * jnp.maximum(c_min - floor, 0.0)
-        moving = B > 0
-        alpha = jnp.where(moving, jnp.minimum(1.0, allowed / jnp.where(moving, B, 1.0)), 1.0)
+        alpha = safe_scale(q, q_e, c, floor, options.safe_fraction)[0]
         good = ok & jnp.isfinite(alpha) & (alpha > 0)
         alpha = jnp.where(good, alpha, 0.0)
         t_new = jnp.where(alpha >= 1.0, 1.0, t + alpha * (1.0 - t))
@@ -277,11 +274,7 @@ def _densify(path, length, scenario, options: ReachOptions, solver, contact):
         q_a, q_e = path[e], path[e + 1]
         q = q_a + t * (q_e - q_a)
         c, _, ok = clearances(q, scenario, solver)
-        c_min = jnp.min(c, initial=jnp.inf)
-        B = motion_bound(q, q_e)[-1]
-        allowed = jnp.minimum(options.safe_fraction * jnp.maximum(c_min - floor, 0.0), options.step_motion)
-        moving = B > 0
-        alpha = jnp.where(moving, jnp.minimum(1.0, allowed / jnp.where(moving, B, 1.0)), 1.0)
+        alpha = safe_scale(q, q_e, c, floor, options.safe_fraction, cap=options.step_motion)[0]
         good = ok & jnp.isfinite(alpha) & (alpha > 0)
         alpha = jnp.where(good, alpha, 0.0)
         t_new = jnp.where(alpha >= 1.0, 1.0, t + alpha * (1.0 - t)).astype(dtype)

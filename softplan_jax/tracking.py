@@ -1,6 +1,7 @@
-"""Tracking a moving goal among moving curves (issue 23), collision-free by construction.
+"""Tracking a moving goal among moving curves, collision-free by construction.
 
-The planner is the same step as :mod:`softplan_jax.planner` (paper eq. 9) on the
+The planner is the same step and the same loop as static planning
+(:mod:`softplan_jax.step`, :mod:`softplan_jax.engine`: paper eq. 9) on the
 scene at the step's time: at step k (time ``t_k = k dt``, dt the gains'
 integration step) the curves are where :func:`~softplan_jax.motion.scenario_at`
 puts them and the goal is ``g(t_k)``. Beyond the static planner:
@@ -36,8 +37,8 @@ puts them and the goal is ``g(t_k)``. Beyond the static planner:
 
 Stalls start the random-walk escapes of the static planner (not while the tip
 holds the goal); a stall with no escape left does not end the rollout, since
-the scene keeps changing. Static scenes stay with :func:`~softplan_jax.plan`:
-nothing here changes it.
+the scene keeps changing. A static scene is a moving scene at rest: the engine
+plans it with the same step (:func:`~softplan_jax.plan`).
 """
 
 from __future__ import annotations
@@ -50,26 +51,22 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .batching import Progress, pad_batch
-from .closest import ClosestPoint, SolverOptions, curve_closest
-from .compilation_cache import rollout_compiler_options
-from .kinematics import motion_bound, tip_position
-from .metrics import contact_tolerance, swept_clear
-from .motion import MovingScenario, goal_at, goal_velocity, moved_cells, moved_curves, scenario_at, speed_bounds
-from .numerics import evaluate_where, safe_norm, tie
-from .obstacles import radius_and_mask, true_closest, warm_cells, warm_closest, warm_state
+from .engine import Rollout, check_engine_sizes, run
+from .motion import MovingScenario, goal_at
+from .obstacles import radius_and_mask
 from .planner import (
     Gains,
     PlanOptions,
-    apply_step,
-    batch_keys,
     check_gains,
-    field_velocity,
     make_options,
     prng_key,
+    rollout_batch,
+    rollout_jit,
+    run_batch,
     strong_gains,
 )
-from .status import Status, status_name
+from .status import status_name
+from .step import tracking_attraction as tracking_attraction  # re-exported: its old import path
 
 __all__ = ["TrackOptions", "Track", "TrackResult", "tracking_attraction", "track_rollout", "track", "track_batch"]
 
@@ -109,272 +106,18 @@ def check_track_options(options: TrackOptions) -> TrackOptions:
     return options
 
 
-class Track(NamedTuple):
-    """A tracking rollout (arrays padded to max_steps + 1 along time).
-
-    Attributes:
-      q, tip, clearance, between, step_scale, converged, fallbacks,
-        between_searched, escapes, iterations, collided, min_clearance: as
-        :class:`~softplan_jax.planner.Rollout` (clearances against the curves
-        at the step's time).
-      time: (T+1,) t_k = k dt [s].
-      goal: (T+1, 3) g(t_k).
-      error: (T+1,) |g(t_k) - tip_k| (frozen after the rollout ended).
-      status: () int: REACHED (reached and held to the end), LOST, MAX_STEPS
-        (never reached), COLLIDED, NONFINITE or TOO_FAST.
-      reached: () bool, the error fell below the goal tolerance at some step.
-      reached_step: () int, the first such step (-1: never).
-      held_steps: () int, steps from reached_step on with error <= hold_tolerance
-        before it first exceeds it (0: never reached).
-      held_to_end: () bool, held from reached_step to the last step.
-      final_error: () the error at the last step.
-    """
-
-    q: jax.Array
-    tip: jax.Array
-    goal: jax.Array
-    time: jax.Array
-    error: jax.Array
-    clearance: jax.Array
-    between: jax.Array
-    step_scale: jax.Array
-    converged: jax.Array
-    fallbacks: jax.Array
-    between_searched: jax.Array
-    status: jax.Array
-    iterations: jax.Array
-    escapes: jax.Array
-    reached: jax.Array
-    reached_step: jax.Array
-    held_steps: jax.Array
-    held_to_end: jax.Array
-    collided: jax.Array
-    min_clearance: jax.Array
-    final_error: jax.Array
+# One result type: a tracking rollout is an engine Rollout with its tracking fields
+# (goal, time, error, reached_step, held_steps, held_to_end) filled in.
+Track = Rollout
 
 
-class _Carry(NamedTuple):
-    q: jax.Array
-    q_prev: jax.Array
-    truth_prev: ClosestPoint
-    c_prev: jax.Array
-    first: jax.Array
-    status: jax.Array
-    iterations: jax.Array
-    best_error: jax.Array
-    since_best: jax.Array
-    key: jax.Array
-    escapes: jax.Array
-    walk_left: jax.Array
-    walk_velocity: jax.Array
-    warm: tuple
-
-
-def tracking_attraction(V_e, goal_rate, gains: Gains, feedforward: bool = True):
-    """The attraction's tip velocity: ``k_att V_e + dg/dt`` saturated at ``v_max``
-    (paper eq. 9's F_e with a feed-forward term; without it, or for dg/dt = 0,
-    exactly :func:`~softplan_jax.planner.attraction`)."""
-    v = gains.k_att * V_e + (goal_rate if feedforward else 0.0)
-    return v / jnp.maximum(1.0, safe_norm(v) / gains.v_max)
-
-
-def _moving_cells(cells, moving: MovingScenario, t):
-    if not cells or not moving.scene.curves.coeffs.shape[0]:
-        return cells
-    return (moved_cells(cells[0], moving.motion, t), *cells[1:])
-
-
-def track_rollout(moving: MovingScenario, gains: Gains, options: TrackOptions, max_steps: int, key=None) -> Track:
-    """Roll the tracking planner out for ``max_steps`` steps with ``lax.scan``
-    (pure; :func:`track` is the jitted entry point). See the module docstring."""
-    plan = options.plan
-    scene = moving.scene
-    radius, mask = radius_and_mask(scene)
-    q0 = scene.q0
-    dtype = q0.dtype
-    contact = contact_tolerance(plan, dtype)
-    floor = 2.0 * contact
+def track_rollout(moving: MovingScenario, gains: Gains, options: TrackOptions, max_steps: int, key=None, *,
+                  driver: str = "scan") -> Rollout:
+    """Roll the tracking planner out for ``max_steps`` steps (pure; :func:`track` is the
+    jitted entry point): :func:`softplan_jax.engine.run` on a moving scene. See the
+    module docstring; ``driver`` as :func:`~softplan_jax.planner.rollout`."""
     key = jax.random.PRNGKey(0) if key is None else key
-    dt = gains.dt
-    speed = speed_bounds(moving)
-    travel = speed * dt  # (m,) how far each obstacle can move in one step
-    lead = speed * options.anticipation  # (m,) the field's inflation (TrackOptions.anticipation)
-    m_c = scene.curves.coeffs.shape[0]
-    warm = plan.warm_start and isinstance(plan.solver, SolverOptions)
-    cells0 = warm_cells(scene, plan.solver) if warm else ()
-    walks = plan.escapes > 0
-    substeps = jnp.arange(1, options.search_substeps + 1, dtype=dtype) / (options.search_substeps + 1)
-
-    def clearance_of(truth):
-        return jnp.where(mask, truth.distance - scene.arm_radius - radius, jnp.inf)
-
-    only_polynomials = scene.points.shape[0] == 0 and not scene.parametric
-
-    def searched_clearance(q_a, q_b, t_a, moving, j):
-        """Slot j's smallest exact clearance at the search instants, arm and curves moving together."""
-
-        def at(tau):
-            q_tau = q_a + tau * (q_b - q_a)
-            if only_polynomials:  # the one curve of slot j, moved to the instant
-                one = jax.tree_util.tree_map(lambda x: x[j], (moving.scene.curves, moving.motion))
-                curve = moved_curves(jax.tree_util.tree_map(lambda x: x[None], one[0]),
-                                     jax.tree_util.tree_map(lambda x: x[None], one[1]), t_a + tau * dt)
-                d = curve_closest(q_tau, jax.tree_util.tree_map(lambda x: x[0], curve), plan.solver).distance
-                return d - scene.arm_radius - radius[j]
-            sc = scenario_at(moving, t_a + tau * dt)
-            return clearance_of(true_closest(q_tau, sc, plan.solver))[j]
-
-        return jnp.min(jax.vmap(at)(substeps))
-
-    def body(carry: _Carry, k):
-        q = carry.q
-        t = k.astype(dtype) * dt
-        sc = scenario_at(moving, t)
-        if warm:
-            cells = _moving_cells(cells0, moving, t)
-            truth, warm_next, fallbacks = warm_closest(q, sc, plan.solver, cells, carry.warm, carry.first)
-        else:
-            truth, warm_next = true_closest(q, sc, plan.solver), carry.warm
-            fallbacks = q.shape[0] * (jnp.sum(scene.curve_mask) + len(scene.parametric)).astype(jnp.int32)
-        running = carry.status == Status.RUNNING
-        c = clearance_of(truth)
-        # The motion from (q_{k-1}, t_{k-1}): proven clear where the clearance at its start, less the
-        # arm's motion bound and the obstacle's travel, stays above the contact tolerance.
-        proven = swept_clear(carry.q_prev, q, carry.truth_prev, carry.c_prev - travel, contact)
-        searched = mask & ~carry.first & running & ~proven
-
-        def search(j):
-            # Slot j's clearance at the search instants. The barrier ties the search to the slot index
-            # (a loop variable of evaluate_where): without it XLA hoists the loop-invariant solves out
-            # of the while loop and runs them at every step.
-            q_a, q_b, t_a, ms, j = jax.lax.optimization_barrier((carry.q_prev, q, t - dt, moving, j))
-            return searched_clearance(*jax.lax.stop_gradient((q_a, q_b, t_a, ms)), j)
-
-        found = evaluate_where(searched, search, 1, jnp.full(mask.shape, jnp.inf, dtype))
-        cb = jnp.minimum(jnp.minimum(carry.c_prev, c), jnp.where(searched, found, jnp.inf))
-        cb = jnp.where(carry.first | ~mask, c, cb)
-        nan_clearance = jnp.any(jnp.isnan(c)) | jnp.any(jnp.isnan(cb))
-        hit = jnp.any(c <= contact) | jnp.any(cb <= contact)
-        err = safe_norm(sc.goal - tip_position(q))
-        holding = err <= options.hold_tolerance
-        improved = err < carry.best_error - plan.stall_tolerance
-        walking = carry.walk_left > 0
-        since = jnp.where(improved | carry.first | walking | holding, 0, carry.since_best + 1)
-        escape = (since >= plan.stall_window) & (carry.escapes < plan.escapes)
-        judged = jnp.where(nan_clearance, Status.NONFINITE, jnp.where(hit, Status.COLLIDED, Status.RUNNING))
-        status = jnp.where(running, judged, carry.status)
-        stepping = (status == Status.RUNNING) & (k < max_steps)
-        key, walk_velocity, walk_left, escapes = carry.key, carry.walk_velocity, carry.walk_left, carry.escapes
-        if walks:
-            start = stepping & escape
-            key, sub = jax.random.split(key)
-            direction = jax.random.normal(sub, (3,), dtype)
-            direction = direction / jnp.maximum(safe_norm(direction), jnp.finfo(dtype).tiny)
-            walk_velocity = jnp.where(start, gains.v_max * direction, walk_velocity)
-            walk_left = jnp.where(start, plan.escape_steps, walk_left)
-            escapes = escapes + start.astype(jnp.int32)
-            since = jnp.where(start, 0, since)
-        F_e = tracking_attraction(sc.goal - tip_position(q), goal_velocity(moving, t), gains, options.feedforward)
-        F_e = jnp.where(walk_left > 0, walk_velocity, F_e)
-        # The field sees each curve inflated by its look-ahead; the safe step below gets the true clearance.
-        field = sc._replace(curves=sc.curves.__class__.tree_unflatten(
-            None, [sc.curves.coeffs, sc.curves.u_range, sc.curves.radius + lead[:m_c]]))
-        qdot, model_clearance = field_velocity(q, field, gains, truth, plan, (jnp.ones((), bool), F_e))
-        model_clearance = model_clearance + lead
-        q_full = apply_step(q, qdot, sc, gains)
-        if plan.step == "plain":
-            alpha = jnp.ones((), dtype)
-            too_fast = jnp.zeros((), bool)
-        else:
-            # Paper eq. (9)'s step, scaled so that arm motion + obstacle travel <= f (c - floor).
-            budget = plan.safe_fraction * jnp.maximum(model_clearance - floor, 0.0) - travel
-            too_fast = jnp.any(budget < 0)
-            allowed = jnp.maximum(jnp.min(budget, initial=jnp.inf), 0.0)
-            bound = motion_bound(q, q_full)[-1]
-            moving_arm = bound > 0
-            alpha = jnp.where(moving_arm, jnp.minimum(1.0, allowed / jnp.where(moving_arm, bound, 1.0)), 1.0)
-            alpha = jnp.where(jnp.isnan(jnp.min(model_clearance, initial=jnp.inf)), jnp.nan, alpha)
-        q_next = q + alpha * (q_full - q)
-        finite = jnp.all(jnp.isfinite(q_next))
-        status = jnp.where(stepping & too_fast, Status.TOO_FAST, status)
-        status = jnp.where(stepping & ~too_fast & ~finite, Status.NONFINITE, status).astype(jnp.int32)
-        moved = stepping & ~too_fast & finite
-        new = _Carry(
-            q=jnp.where(moved, q_next, q),
-            q_prev=q,
-            truth_prev=truth,
-            c_prev=c,
-            first=jnp.zeros((), bool),
-            status=status,
-            iterations=carry.iterations + moved.astype(jnp.int32),
-            best_error=jnp.minimum(err, carry.best_error),
-            since_best=since,
-            key=key,
-            escapes=escapes,
-            walk_left=jnp.where(moved, jnp.maximum(walk_left - 1, 0), walk_left).astype(jnp.int32),
-            walk_velocity=walk_velocity,
-            warm=warm_next,
-        )
-        converged = jnp.all(jnp.where(mask, truth.converged, True))
-        alpha = jnp.where(moved, alpha, 0.0).astype(dtype)
-        return new, (q, tip_position(q), sc.goal, t, err, c, cb, alpha, converged, fallbacks, searched)
-
-    from .obstacles import placeholder_closest
-
-    carry0 = _Carry(
-        q=q0,
-        q_prev=q0,
-        truth_prev=placeholder_closest(q0, scene),
-        c_prev=jnp.full(mask.shape, jnp.inf, dtype),
-        first=jnp.ones((), bool),
-        status=jnp.asarray(Status.RUNNING, jnp.int32),
-        iterations=jnp.zeros((), jnp.int32),
-        best_error=jnp.asarray(jnp.inf, dtype),
-        since_best=jnp.zeros((), jnp.int32),
-        key=key,
-        escapes=jnp.zeros((), jnp.int32),
-        walk_left=jnp.zeros((), jnp.int32),
-        walk_velocity=jnp.zeros((3,), dtype),
-        warm=warm_state(scene) if warm else (),
-    )
-    carry0 = tie(carry0, q0)
-    final, (qs, tips, goals, times, errs, cs, cbs, alphas, converged, fallbacks, searched) = jax.lax.scan(
-        body, carry0, jnp.arange(max_steps + 1)
-    )
-    # After the rollout ended the arm stands still but the scene moves on: the records stop at the
-    # last step taken (as the static planner's frozen records do).
-    steps = jnp.arange(max_steps + 1, dtype=jnp.int32)
-    alive = steps <= final.iterations
-    end = final.iterations
-
-    def freeze(x):
-        return jnp.where(alive.reshape((-1,) + (1,) * (x.ndim - 1)), x, x[end])
-
-    goals, times, errs, cs, cbs = (freeze(x) for x in (goals, times, errs, cs, cbs))
-    converged, fallbacks = freeze(converged), jnp.where(alive, fallbacks, 0)
-    searched = searched & alive[:, None]
-    # Tracking statistics over the steps taken (0..iterations).
-    within = (errs < plan.goal_tolerance) & alive
-    reached = jnp.any(within)
-    reached_step = jnp.where(reached, jnp.argmax(within), -1).astype(jnp.int32)
-    after = alive & (steps >= reached_step) & reached
-    lost_at = jnp.where(after & (errs > options.hold_tolerance), steps, max_steps + 1)
-    first_loss = jnp.min(lost_at)
-    held_to_end = reached & (first_loss > final.iterations)
-    held_steps = jnp.where(reached, jnp.minimum(first_loss, final.iterations + 1) - reached_step, 0).astype(jnp.int32)
-    status = jnp.where(
-        final.status == Status.RUNNING,
-        jnp.where(held_to_end, Status.REACHED, jnp.where(reached, Status.LOST, Status.MAX_STEPS)),
-        final.status,
-    ).astype(jnp.int32)
-    return Track(
-        q=qs, tip=tips, goal=goals, time=times, error=errs, clearance=cs, between=cbs, step_scale=alphas,
-        converged=converged, fallbacks=fallbacks, between_searched=searched, status=status,
-        iterations=final.iterations, escapes=final.escapes, reached=reached, reached_step=reached_step,
-        held_steps=held_steps, held_to_end=held_to_end, collided=status == Status.COLLIDED,
-        min_clearance=jnp.minimum(jnp.min(cs, initial=jnp.inf), jnp.min(cbs, initial=jnp.inf)),
-        final_error=errs[final.iterations],
-    )
+    return run(moving, gains, options, max_steps, key, driver=driver, step_chunk=options.plan.step_chunk)
 
 
 # ----------------------------------------------------------------------------
@@ -383,13 +126,12 @@ def track_rollout(moving: MovingScenario, gains: Gains, options: TrackOptions, m
 
 @functools.cache
 def track_program(options: TrackOptions, max_steps: int, batched: bool):
-    """The jitted tracking rollout ``(moving, gains, key) -> Track`` for these static settings
-    (vmapped over moving scenarios and keys when ``batched``), built once per setting."""
-    def single(moving, gains, key):
-        return track_rollout(moving, gains, options, max_steps, key)
-
-    fn = jax.vmap(single, in_axes=(0, None, 0)) if batched else single
-    return jax.jit(fn, compiler_options=rollout_compiler_options())
+    """The jitted tracking rollout ``(moving, gains, key) -> Rollout`` for these static settings
+    (over a stack of moving scenarios and keys when ``batched``): the programs of
+    :data:`~softplan_jax.planner.rollout_jit` / :data:`~softplan_jax.planner.rollout_batch`."""
+    if batched:
+        return lambda moving, gains, keys: rollout_batch._call(moving, gains, options, max_steps, keys, None, None)
+    return lambda moving, gains, key: rollout_jit._call(moving, gains, options, max_steps, key)
 
 
 class TrackResult(NamedTuple):
@@ -465,12 +207,11 @@ def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gai
       :class:`TrackResult`.
     """
     _check_moving(moving, batched=False)
-    if int(max_steps) < 1:
-        raise ValueError(f"max_steps must be >= 1, got {max_steps}")
     opts = make_track_options(method, n_points, **options)
     dtype = moving.scene.q0.dtype
     g = strong_gains(check_gains(gains, dtype, moving.n_segments), dtype)
-    r = track_program(opts, int(max_steps), False)(moving, g, prng_key(seed))
+    T = check_engine_sizes(max_steps)[0]
+    r = track_program(opts, T, False)(moving, g, prng_key(seed))
     return result_from_track(r, moving, float(g.dt))
 
 
@@ -502,40 +243,22 @@ def result_from_track(r: Track, moving: MovingScenario, dt: float) -> TrackResul
 
 def track_batch(movings: MovingScenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
                 max_steps: int = 600, seed=0, *, chunk: int | None = None, progress: bool = False,
-                **options) -> Track:
+                lanes: int | None = None, **options) -> Track:
     """Track a stack of moving scenarios (vmapped, jitted once, in chunks of one shape).
 
     Arguments as :func:`track` and :func:`~softplan_jax.plan_batch` (``chunk``:
     scenarios per call, the last padded; ``progress``: a line per chunk on
-    stderr). Returns a batched :class:`Track` of NumPy arrays.
+    stderr; ``lanes``: scenes stepped side by side, see
+    :func:`~softplan_jax.engine.run_lanes`). Returns a batched :class:`Track`
+    (an engine Rollout with the tracking fields) of NumPy arrays.
     """
     _check_moving(movings, batched=True)
-    if int(max_steps) < 1:
-        raise ValueError(f"max_steps must be >= 1, got {max_steps}")
-    if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1):
-        raise ValueError(f"chunk must be None or an int >= 1, got {chunk!r}")
     opts = make_track_options(method, n_points, **options)
     dtype = movings.scene.q0.dtype
     g = strong_gains(check_gains(gains, dtype, movings.n_segments), dtype)
-    batch = movings.scene.q0.shape[0]
-    size = batch if chunk is None else min(int(chunk), batch)
-    n_chunks = math.ceil(batch / size)
-    keys = batch_keys(seed, batch)
-    fn = track_program(opts, int(max_steps), True)
-    host = jax.tree_util.tree_map(np.asarray, (movings, keys))
-    bar = Progress(n_chunks, batch, 1, label="track_batch") if progress else None
-    out = None
-    for i, a in enumerate(range(0, batch, size)):
-        m, k = pad_batch(jax.tree_util.tree_map(lambda x, a=a: x[a : a + size], host), size)
-        r = jax.device_get(fn(m, g, k))
-        n = min(size, batch - a)
-        if out is None:
-            out = jax.tree_util.tree_map(lambda x: np.empty((batch, *x.shape[1:]), x.dtype), r)
-        for o, x in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(r), strict=True):
-            o[a : a + n] = x[:n]
-        if bar is not None:
-            bar.update(i + 1, a + n)
-    return out
+    r = run_batch(movings, g, opts, max_steps, seed, chunk=chunk, progress=progress, lanes=lanes, devices=1,
+                  label="track_batch")
+    return jax.device_get(r)
 
 
 def goal_trajectory(moving: MovingScenario, times):

@@ -55,7 +55,7 @@ session.enable()
 # the program of test_cli's batch command; test_gains_file plans with test_cli's and
 # test_presets' programs.
 SHARED = {
-    "planner": ["test_planner", "test_safe_step", "test_smoothing", "test_moving", "test_notebooks"],
+    "planner": ["test_planner", "test_engine", "test_safe_step", "test_smoothing", "test_moving", "test_notebooks"],
     "cli": ["test_warm_start", "test_cli", "test_presets", "test_gains_file"],
 }
 # Units in this order (largest first, so that the other worker's smaller units fill

@@ -275,10 +275,12 @@ def test_float32_smoke(random_moving):
 
 
 def test_track_batch_matches_single(random_moving):
-    batch = sp.stack_moving_scenarios(random_moving[:2])
-    out = sp.track_batch(batch, max_steps=STEPS, seed=0)
-    keys = jax.random.split(jax.random.PRNGKey(0), 2)
-    for b in range(2):
+    """Three scenes on two lanes (the first lane to finish takes the third scene) against a
+    Python loop of single tracking rollouts with the same keys."""
+    batch = sp.stack_moving_scenarios(random_moving[:3])
+    out = sp.track_batch(batch, max_steps=STEPS, seed=0, lanes=2)
+    keys = jax.random.split(jax.random.PRNGKey(0), 3)
+    for b in range(3):
         one = sp.track(random_moving[b], max_steps=STEPS, seed=keys[b])
         # A vmapped program rounds differently; the rollouts agree to rounding until a near-tie
         # amplifies it (as plan_batch's), so the first 60 steps are compared, to 1e-6: on one

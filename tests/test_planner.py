@@ -210,6 +210,8 @@ def test_plan_batch_chunks_one_shape_one_compilation(paper, capsys):
     assert sp.rollout_batch.cache_size() == before
     assert rc.q.shape == (5, 201, 3, 3) and isinstance(rc.q, np.ndarray)
     for field, got in rc._asdict().items():
+        if got is None:  # the tracking fields of a planning rollout
+            continue
         ref = np.asarray(getattr(rb, field))
         np.testing.assert_array_equal(got, np.concatenate([ref, ref[:2]]), err_msg=field)
     err = capsys.readouterr().err

@@ -1,0 +1,604 @@
+"""The rollout engine: one step loop for planning a path and for tracking a moving goal.
+
+A rollout steps from q at time t with the planner of paper eq. (9) and the safe
+step (:mod:`softplan_jax.step`), until it is done. A static scene
+(:class:`~softplan_jax.scenarios.Scenario`) and a moving one
+(:class:`~softplan_jax.motion.MovingScenario`) run the same step, carry, escape
+rule, status rule and result type; what differs is read off the scene at trace
+time:
+
+* the scene at step k: a static scene is itself; a moving one is
+  :func:`~softplan_jax.motion.scenario_at` at ``t_k = k dt``, its obstacles
+  travel at most ``S_j dt`` during a step (:func:`~softplan_jax.motion.speed_bounds`),
+  which the safe step and the between-step proof subtract;
+* the attraction: paper eq. (9)'s F_e, with the goal's velocity fed forward
+  for a moving goal (:func:`~softplan_jax.step.tracking_attraction`);
+* when to stop (``stop_at_goal``): planning ends at the goal or at a stall with
+  no escape left; tracking holds the goal to the horizon and ends early only
+  on a collision, a non-finite number or ``too_fast``.
+
+Step k looks at q_k: exact closest pairs to every obstacle (warm-started,
+:mod:`softplan_jax.warm_start`), the true clearance at q_k and during the
+motion from q_{k-1} (a search only where :func:`~softplan_jax.metrics.swept_clear`
+does not prove the motion clear), the status, then while running the step to
+q_{k+1}. Escapes: a stall (no progress by ``stall_tolerance`` over
+``stall_window`` steps) starts a random walk of ``escape_steps`` steps (the
+attraction replaced by a tip velocity of speed ``v_max`` in a random direction;
+Barraquand & Latombe 1991); the PRNG key is in the carry.
+
+Paid by the step. :func:`run` has three drivers of the same step:
+
+* ``"scan"``: one ``lax.scan`` of max_steps + 1 steps (reverse-mode
+  differentiable; what the gradient tuner differentiates);
+* ``"chunks"``: ``lax.scan`` over ``step_chunk`` steps inside a
+  ``while_loop`` that stops after the chunk in which the rollout finished;
+* ``"lanes"`` (a batch, :func:`run_lanes`): ``lanes`` scenes step side by
+  side (vmapped); when one finishes, its lane takes the next scene of the
+  batch at the next step, so a batch costs about the sum of its scenes'
+  steps, not batch size x the slowest scene.
+
+Every driver returns the same arrays, padded to max_steps + 1 along time:
+after the step where a rollout ended, the records hold its last state
+(q, tip, clearances, goal, error: frozen; in a static scene the between-step
+clearance of the non-motions after the end is the clearance) and no events
+(step scale 0, no solver fallbacks, no between-step search).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .closest import ClosestPoint, SolverOptions, curve_closest
+from .kinematics import tip_position
+from .metrics import between_steps, contact_tolerance, swept_clear
+from .motion import MovingScenario, goal_velocity, moved_cells, moved_curves, scenario_at, speed_bounds
+from .numerics import evaluate_where, safe_norm, tie
+from .obstacles import placeholder_closest, radius_and_mask, true_closest, warm_cells, warm_closest, warm_state
+from .status import Status
+from .step import attraction, next_q, tracking_attraction
+
+__all__ = ["Rollout", "Carry", "DRIVERS", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "run", "run_lanes",
+           "check_engine_sizes"]
+
+DRIVERS = ("scan", "chunks", "lanes")
+DEFAULT_STEP_CHUNK = 8  # steps between two checks of "done": at most 7 steps computed past the end
+DEFAULT_LANES = 64  # scenes stepped side by side in a batch (benchmarks/engine.py)
+
+
+class Rollout(NamedTuple):
+    """A rollout, planned or tracked (arrays padded to max_steps + 1 along time).
+
+    Attributes:
+      q: (T+1, n, 3) configurations; frozen after the rollout finished.
+      tip: (T+1, 3).
+      clearance: (T+1, m) true clearance (surface to surface) to every obstacle
+        slot (padding slots: +inf); for a moving scene, to the obstacles at
+        the step's time.
+      between: (T+1, m) smallest clearance found during the motion from the
+        previous step (entry 0: the start's clearance); an ACHIEVED clearance,
+        so an upper bound on the true minimum over the motion. Where the
+        between-step search ran (``between_searched``) it is the search's
+        result (at most the clearance at both ends); where the motion bound
+        proved the motion clear (``PlanOptions.swept_proof``) it is the smaller
+        of the two ends' clearances, and the true minimum lies between
+        ``clearance[k-1] - motion_bound(q[k-1], q[k])[-1]`` (less the
+        obstacle's travel, for a moving scene; above the contact tolerance: no
+        collision) and this value.
+      status: () int, a :class:`~softplan_jax.status.Status` code.
+      iterations: () int, planner steps taken.
+      reached, collided: () bool (tracking: reached = within the goal
+        tolerance at some step).
+      min_clearance: () minimum over time, obstacles and between-step motion.
+      final_error: () |goal - tip| at the end.
+      step_scale: (T+1,) the safe step's alpha for the step from q_k (1 for the
+        plain step; 0 where no step was taken).
+      escapes: () int, random-walk escapes started.
+      converged: (T+1,) bool, every exact closest-point solve of a real
+        obstacle slot at q_k met its Newton tolerance.
+      fallbacks: (T+1,) int32, (segment, curve) pairs of real curve slots
+        that took the full closest-point solve at q_k: with the warm start
+        (``PlanOptions.warm_start``) the pairs whose certificate failed (all
+        at k = 0); without it every pair, or 0 where no exact solve ran.
+      between_searched: (T+1, m) bool, the between-step search ran for the
+        motion to q_k and obstacle slot j.
+      goal, time, error, reached_step, held_steps, held_to_end: tracking only
+        (None for a static scene): g(t_k) (T+1, 3), t_k = k dt (T+1,),
+        |g(t_k) - tip_k| (T+1,), the first step within the goal tolerance
+        (-1: never), the steps it was held from then (error <= hold
+        tolerance) and whether it was held to the end.
+    """
+
+    q: jax.Array
+    tip: jax.Array
+    clearance: jax.Array
+    between: jax.Array
+    status: jax.Array
+    iterations: jax.Array
+    reached: jax.Array
+    collided: jax.Array
+    min_clearance: jax.Array
+    final_error: jax.Array
+    step_scale: jax.Array
+    escapes: jax.Array
+    converged: jax.Array
+    fallbacks: jax.Array
+    between_searched: jax.Array
+    goal: jax.Array | None = None
+    time: jax.Array | None = None
+    error: jax.Array | None = None
+    reached_step: jax.Array | None = None
+    held_steps: jax.Array | None = None
+    held_to_end: jax.Array | None = None
+
+
+class Carry(NamedTuple):
+    """The state a rollout carries from step to step."""
+
+    q: jax.Array  # q_k
+    q_prev: jax.Array  # q_{k-1} (q_0 at k = 0)
+    truth_prev: ClosestPoint  # exact closest pairs at q_{k-1}
+    c_prev: jax.Array  # (m,) true clearance at q_{k-1}
+    first: jax.Array
+    status: jax.Array
+    iterations: jax.Array
+    best_error: jax.Array
+    since_best: jax.Array
+    key: jax.Array  # PRNG key of the escapes
+    escapes: jax.Array  # escapes started so far
+    walk_left: jax.Array  # steps left in the current random walk (0: following the field)
+    walk_velocity: jax.Array  # (3,) tip velocity of the current walk
+    warm: tuple  # the warm start's state (obstacles.warm_state), () without it
+
+
+class _Record(NamedTuple):
+    """What one step records (the per-step arrays of a Rollout)."""
+
+    q: jax.Array
+    tip: jax.Array
+    clearance: jax.Array
+    between: jax.Array
+    step_scale: jax.Array
+    converged: jax.Array
+    fallbacks: jax.Array
+    between_searched: jax.Array
+    goal: jax.Array | None = None
+    time: jax.Array | None = None
+    error: jax.Array | None = None
+
+
+# After the end, the state records stay at their last value and the event records are empty.
+_EVENTS = ("step_scale", "fallbacks", "between_searched")
+
+
+def check_engine_sizes(max_steps, step_chunk=DEFAULT_STEP_CHUNK, lanes=None) -> tuple:
+    """Validate the engine's sizes on the host, before anything compiles: ``(max_steps,
+    step_chunk, lanes)`` as ints (``lanes`` may be None). ValueError for anything but an
+    int >= 1 (a bool, a float such as 2.5, a string)."""
+
+    def whole(name, v):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{name} must be an int >= 1, got {v!r}")
+        return int(v)
+
+    return (whole("max_steps", max_steps), whole("step_chunk", step_chunk),
+            None if lanes is None else whole("lanes", lanes))
+
+
+class _Setup(NamedTuple):
+    """Trace-time facts of one rollout (shapes, flags) and its scene-at-step function."""
+
+    moving: bool
+    scene: object  # the Scenario at rest
+    plan: object  # PlanOptions
+    track: object  # TrackOptions or None
+    stop_at_goal: bool
+
+
+def _setup(world, options, stop_at_goal):
+    moving = isinstance(world, MovingScenario)
+    plan = options.plan if moving else options
+    return _Setup(moving, world.scene if moving else world, plan, options if moving else None,
+                  (not moving) if stop_at_goal is None else bool(stop_at_goal))
+
+
+def _moving_cells(cells, moving: MovingScenario, t):
+    if not cells or not moving.scene.curves.coeffs.shape[0]:
+        return cells
+    return (moved_cells(cells[0], moving.motion, t), *cells[1:])
+
+
+def init_carry(world, options, key, stop_at_goal=None) -> Carry:
+    """The carry at step 0 (q_0 = the scene's start)."""
+    su = _setup(world, options, stop_at_goal)
+    scene, plan = su.scene, su.plan
+    _, mask = radius_and_mask(scene)
+    q0 = scene.q0
+    dtype = q0.dtype
+    warm = _warm(plan)
+    carry0 = Carry(
+        q=q0,
+        q_prev=q0,
+        truth_prev=placeholder_closest(q0, scene),
+        c_prev=jnp.full(mask.shape, jnp.inf, dtype),
+        first=jnp.ones((), bool),
+        status=jnp.asarray(Status.RUNNING, jnp.int32),
+        iterations=jnp.zeros((), jnp.int32),
+        best_error=jnp.asarray(jnp.inf, dtype),
+        since_best=jnp.zeros((), jnp.int32),
+        key=key,
+        escapes=jnp.zeros((), jnp.int32),
+        walk_left=jnp.zeros((), jnp.int32),
+        walk_velocity=jnp.zeros((3,), dtype),
+        warm=warm_state(scene) if warm else (),
+    )
+    return tie(carry0, q0)  # under vmap (a batch), the carry is batched from the start (see tie)
+
+
+def _warm(plan) -> bool:
+    exact = plan.check_collisions or plan.method == "curve"
+    return exact and plan.warm_start and isinstance(plan.solver, SolverOptions)
+
+
+def prepare(world, options, stop_at_goal=None) -> tuple:
+    """What a rollout computes once per scene, before its first step: the warm start's
+    per-curve data (:func:`~softplan_jax.obstacles.warm_cells`) and, for a moving scene,
+    its obstacles' speed bounds (:func:`~softplan_jax.motion.speed_bounds`)."""
+    su = _setup(world, options, stop_at_goal)
+    cells = warm_cells(su.scene, su.plan.solver) if _warm(su.plan) else ()
+    return cells, (speed_bounds(world) if su.moving else ())
+
+
+def make_step(world, gains, options, max_steps: int, stop_at_goal=None, prepared=None):
+    """The engine's step ``(carry, k) -> (carry, record)`` for this scene (static or
+    moving), gains and options (PlanOptions, or TrackOptions for a moving scene);
+    ``prepared``: :func:`prepare` of the scene (None: computed here)."""
+    su = _setup(world, options, stop_at_goal)
+    scene, plan, track = su.scene, su.plan, su.track
+    radius, mask = radius_and_mask(scene)
+    q0 = scene.q0
+    dtype = q0.dtype
+    contact = contact_tolerance(plan, dtype)
+    check = plan.check_collisions
+    walks = plan.escapes > 0
+    exact = check or plan.method == "curve"
+    warm = _warm(plan)
+    cells0, speed = prepare(world, options, stop_at_goal) if prepared is None else prepared
+    n_pairs = q0.shape[0] * (jnp.sum(scene.curve_mask) + len(scene.parametric)).astype(jnp.int32)
+    radius_sum = scene.arm_radius + radius
+    if su.moving:
+        dt = gains.dt
+        travel = speed * dt  # (m,) how far each obstacle can move in one step
+        lead = speed * track.anticipation  # (m,) the field's inflation (TrackOptions.anticipation)
+        m_c = scene.curves.coeffs.shape[0]
+        substeps = jnp.arange(1, track.search_substeps + 1, dtype=dtype) / (track.search_substeps + 1)
+        only_polynomials = scene.points.shape[0] == 0 and not scene.parametric
+
+    def clearance_of(truth):
+        return jnp.where(mask, truth.distance - scene.arm_radius - radius, jnp.inf)
+
+    def moving_search(q_a, q_b, t_a, w, j):
+        """Slot j's smallest exact clearance at the search instants, arm and curves moving together."""
+
+        def at(tau):
+            q_tau = q_a + tau * (q_b - q_a)
+            if only_polynomials:  # the one curve of slot j, moved to the instant
+                one = jax.tree_util.tree_map(lambda x: x[j], (w.scene.curves, w.motion))
+                curve = moved_curves(jax.tree_util.tree_map(lambda x: x[None], one[0]),
+                                     jax.tree_util.tree_map(lambda x: x[None], one[1]), t_a + tau * dt)
+                d = curve_closest(q_tau, jax.tree_util.tree_map(lambda x: x[0], curve), plan.solver).distance
+                return d - scene.arm_radius - radius[j]
+            sc = scenario_at(w, t_a + tau * dt)
+            return clearance_of(true_closest(q_tau, sc, plan.solver))[j]
+
+        return jnp.min(jax.vmap(at)(substeps))
+
+    def between(carry, q, truth, c, running, t, sc):
+        """(cb, searched): the clearance during the motion from q_{k-1} to q_k (module docstring)."""
+        if su.moving:
+            # Proven clear where the clearance at its start, less the arm's motion bound and the
+            # obstacle's travel, stays above the contact tolerance.
+            proven = swept_clear(carry.q_prev, q, carry.truth_prev, carry.c_prev - travel, contact)
+            searched = mask & ~carry.first & running & ~proven
+
+            def search(j):
+                # The barrier ties the search to the slot index (a loop variable of evaluate_where):
+                # without it XLA hoists the loop-invariant solves out of the while loop.
+                q_a, q_b, t_a, w, j = jax.lax.optimization_barrier((carry.q_prev, q, t - dt, world, j))
+                return moving_search(*jax.lax.stop_gradient((q_a, q_b, t_a, w)), j)
+
+            found = evaluate_where(searched, search, 1, jnp.full(mask.shape, jnp.inf, dtype))
+            cb = jnp.minimum(jnp.minimum(carry.c_prev, c), jnp.where(searched, found, jnp.inf))
+        elif plan.swept_proof:
+            # The search runs only where the motion bound cannot prove the motion clear.
+            proven = swept_clear(carry.q_prev, q, carry.truth_prev, carry.c_prev, contact)
+            searched = mask & ~carry.first & running & ~proven
+            cb = between_steps(carry.q_prev, q, carry.truth_prev, truth, sc, radius_sum, search=searched)
+        else:
+            searched = mask & ~carry.first & running
+            cb = between_steps(carry.q_prev, q, carry.truth_prev, truth, sc, radius_sum)
+        return cb, searched
+
+    def step(carry: Carry, k):
+        q = carry.q
+        if su.moving:
+            t = k.astype(dtype) * dt
+            sc = scenario_at(world, t)
+            cells = _moving_cells(cells0, world, t)
+        else:
+            t, sc, cells = None, scene, cells0
+        warm_next = carry.warm
+        if warm:
+            truth, warm_next, fallbacks = warm_closest(q, sc, plan.solver, cells, carry.warm, carry.first)
+        elif exact:
+            truth = true_closest(q, sc, plan.solver)
+            fallbacks = n_pairs
+        else:
+            truth = placeholder_closest(q, sc)
+            fallbacks = jnp.zeros((), jnp.int32)
+        running = carry.status == Status.RUNNING
+        if check:
+            c = clearance_of(truth)
+            cb, searched = between(carry, q, truth, c, running, t, sc)
+            cb = jnp.where(carry.first | ~mask, c, cb)
+            nan_clearance = jnp.any(jnp.isnan(c)) | jnp.any(jnp.isnan(cb))
+            hit = jnp.any(c <= contact) | jnp.any(cb <= contact)
+        else:
+            c = cb = jnp.full(mask.shape, jnp.nan, dtype)
+            searched = jnp.zeros(mask.shape, bool)
+            nan_clearance = hit = jnp.zeros((), bool)
+        V_e = sc.goal - tip_position(q)
+        err = safe_norm(V_e)
+        improved = err < carry.best_error - plan.stall_tolerance
+        walking = carry.walk_left > 0
+        settled = improved | carry.first | walking
+        if not su.stop_at_goal:
+            settled = settled | (err <= track.hold_tolerance)  # holding the goal is no stall
+        since = jnp.where(settled, 0, carry.since_best + 1)
+        stalled = since >= plan.stall_window
+        # A stall with an escape left starts a random walk instead of ending the rollout.
+        escape = stalled & (carry.escapes < plan.escapes)
+        # The status rule: a non-finite clearance, then a contact; planning also ends at the goal
+        # and at a stall with no escape left, tracking holds on to the horizon.
+        judged = Status.RUNNING
+        if su.stop_at_goal:
+            judged = jnp.where(err < plan.goal_tolerance, Status.REACHED,
+                               jnp.where(stalled & ~escape, Status.STALLED, Status.RUNNING))
+        judged = jnp.where(nan_clearance, Status.NONFINITE, jnp.where(hit, Status.COLLIDED, judged))
+        status = jnp.where(running, judged, carry.status)
+        # The step to q_{k+1}, taken only while running (and not past max_steps).
+        stepping = (status == Status.RUNNING) & (k < max_steps)
+        key, walk_velocity, walk_left, escapes = carry.key, carry.walk_velocity, carry.walk_left, carry.escapes
+        if walks:
+            start = stepping & escape
+            key, sub = jax.random.split(key)
+            direction = jax.random.normal(sub, (3,), dtype)
+            direction = direction / jnp.maximum(safe_norm(direction), jnp.finfo(dtype).tiny)
+            walk_velocity = jnp.where(start, gains.v_max * direction, walk_velocity)
+            walk_left = jnp.where(start, plan.escape_steps, walk_left)
+            escapes = escapes + start.astype(jnp.int32)
+            since = jnp.where(start, 0, since)
+        if su.moving:
+            F_e = tracking_attraction(V_e, goal_velocity(world, t), gains, track.feedforward)
+            # The field sees each curve inflated by its look-ahead; the safe step gets the true clearance.
+            field = sc._replace(curves=sc.curves.__class__.tree_unflatten(
+                None, [sc.curves.coeffs, sc.curves.u_range, sc.curves.radius + lead[:m_c]]))
+            extra = dict(travel=travel, lead=lead)
+        else:
+            F_e, field, extra = attraction(V_e, gains), sc, {}
+        # An escape's random walk replaces the attraction (paper eq. 9's F_e).
+        F_e = jnp.where(walk_left > 0, walk_velocity, F_e)
+        q_next, alpha, too_fast = next_q(q, field, gains, truth, plan, (jnp.ones((), bool), F_e), **extra)
+        finite = jnp.all(jnp.isfinite(q_next))
+        status = jnp.where(stepping & too_fast, Status.TOO_FAST, status)
+        status = jnp.where(stepping & ~too_fast & ~finite, Status.NONFINITE, status).astype(jnp.int32)
+        moved = stepping & ~too_fast & finite
+        new = Carry(
+            q=jnp.where(moved, q_next, q),
+            q_prev=q,
+            truth_prev=truth,
+            c_prev=c,
+            first=jnp.zeros((), bool),
+            status=status,
+            iterations=carry.iterations + moved.astype(jnp.int32),
+            best_error=jnp.minimum(err, carry.best_error),
+            since_best=since,
+            key=key,
+            escapes=escapes,
+            walk_left=jnp.where(moved, jnp.maximum(walk_left - 1, 0), walk_left).astype(jnp.int32),
+            walk_velocity=walk_velocity,
+            warm=warm_next,
+        )
+        converged = jnp.all(jnp.where(mask, truth.converged, True))
+        alpha = jnp.where(moved, alpha, 0.0).astype(dtype)
+        record = _Record(q, tip_position(q), c, cb, alpha, converged, fallbacks, searched)
+        if su.moving:
+            record = record._replace(goal=sc.goal, time=t, error=err)
+        return new, record
+
+    return step
+
+
+def _record_zeros(world, options, T: int, stop_at_goal=None) -> _Record:
+    """Zero records of T steps (what :func:`make_step` records, stacked), without tracing a step."""
+    su = _setup(world, options, stop_at_goal)
+    q0 = su.scene.q0
+    n, dtype = q0.shape[0], q0.dtype
+    m = radius_and_mask(su.scene)[1].shape[0]
+
+    def z(shape, dt=dtype):
+        return jnp.zeros((T, *shape), dt)
+
+    rec = _Record(z((n, 3)), z((3,)), z((m,)), z((m,)), z(()), z((), bool), z((), jnp.int32), z((m,), bool))
+    if su.moving:
+        rec = rec._replace(goal=z((3,)), time=z(()), error=z(()))
+    return rec
+
+
+def _freeze(records: _Record, end, still: bool):
+    """Records after step ``end``: the state records hold their value at ``end``, the events are
+    empty. ``still`` (a static scene): after the end nothing moves, so the clearance during the
+    "motion" to each later step is the clearance itself; in a moving scene the records stop at the
+    last step taken, the between-step clearance at its last motion's."""
+    T1 = records.q.shape[0]
+    alive = jnp.arange(T1, dtype=jnp.int32) <= end
+
+    def fix(name, x):
+        if x is None:
+            return None
+        a = alive.reshape((-1,) + (1,) * (x.ndim - 1))
+        if name in _EVENTS:
+            return jnp.where(a, x, jnp.zeros((), x.dtype))
+        last = records.clearance[end] if (still and name == "between") else x[end]
+        return jnp.where(a, x, last)
+
+    return _Record(*(fix(f, getattr(records, f)) for f in _Record._fields))
+
+
+def _finish(world, options, records: _Record, final: Carry, stop_at_goal=None) -> Rollout:
+    """The Rollout from a rollout's records (frozen after its end) and its last carry."""
+    su = _setup(world, options, stop_at_goal)
+    plan = su.plan
+    T = records.q.shape[0] - 1
+    end = final.iterations
+    r = _freeze(records, end, still=not su.moving)
+    min_clearance = jnp.minimum(jnp.min(r.clearance, initial=jnp.inf), jnp.min(r.between, initial=jnp.inf))
+    out = dict(q=r.q, tip=r.tip, clearance=r.clearance, between=r.between, iterations=final.iterations,
+               min_clearance=min_clearance, step_scale=r.step_scale, escapes=final.escapes, converged=r.converged,
+               fallbacks=r.fallbacks, between_searched=r.between_searched)
+    if su.stop_at_goal and not su.moving:
+        status = jnp.where(final.status == Status.RUNNING, Status.MAX_STEPS, final.status)
+        return Rollout(**out, status=status, reached=status == Status.REACHED, collided=status == Status.COLLIDED,
+                       final_error=safe_norm(su.scene.goal - r.tip[-1]))
+    # Tracking statistics over the steps taken (0..end).
+    steps = jnp.arange(T + 1, dtype=jnp.int32)
+    alive = steps <= end
+    within = (r.error < plan.goal_tolerance) & alive
+    reached = jnp.any(within)
+    reached_step = jnp.where(reached, jnp.argmax(within), -1).astype(jnp.int32)
+    after = alive & (steps >= reached_step) & reached
+    lost_at = jnp.where(after & (r.error > su.track.hold_tolerance), steps, T + 1)
+    first_loss = jnp.min(lost_at)
+    held_to_end = reached & (first_loss > end)
+    held_steps = jnp.where(reached, jnp.minimum(first_loss, end + 1) - reached_step, 0).astype(jnp.int32)
+    status = jnp.where(
+        final.status == Status.RUNNING,
+        jnp.where(held_to_end, Status.REACHED, jnp.where(reached, Status.LOST, Status.MAX_STEPS)),
+        final.status,
+    ).astype(jnp.int32)
+    return Rollout(**out, status=status, reached=reached, collided=status == Status.COLLIDED,
+                   final_error=r.error[end], goal=r.goal, time=r.time, error=r.error, reached_step=reached_step,
+                   held_steps=held_steps, held_to_end=held_to_end)
+
+
+def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks", step_chunk: int = DEFAULT_STEP_CHUNK,
+        stop_at_goal=None) -> Rollout:
+    """One rollout of ``world`` (a Scenario or a MovingScenario; pure, traceable).
+
+    Args:
+      world: the scene, static or moving.
+      gains: Gains or GainFunction.
+      options: PlanOptions (static scene) or TrackOptions (moving scene), static.
+      max_steps: the most planner steps (static).
+      key: PRNG key of the escapes.
+      driver: "chunks" (stops after the chunk of ``step_chunk`` steps in which
+        the rollout finished) or "scan" (all max_steps + 1 steps; reverse-mode
+        differentiable). Both give the same arrays.
+      stop_at_goal: None: planning for a Scenario, tracking for a MovingScenario.
+    """
+    step = make_step(world, gains, options, max_steps, stop_at_goal)
+    carry0 = init_carry(world, options, key, stop_at_goal)
+    T1 = max_steps + 1
+    if driver == "scan":
+        final, records = jax.lax.scan(step, carry0, jnp.arange(T1))
+    elif driver == "chunks":
+        C = min(int(step_chunk), T1)
+        n_chunks = math.ceil(T1 / C)
+        buf = tie(_record_zeros(world, options, n_chunks * C, stop_at_goal), carry0.q)
+
+        def cond(state):
+            i, carry, _ = state
+            return (i < n_chunks) & (carry.status == Status.RUNNING)
+
+        def body(state):
+            i, carry, buf = state
+            carry, part = jax.lax.scan(step, carry, i * C + jnp.arange(C))
+            buf = jax.tree_util.tree_map(lambda b, p: jax.lax.dynamic_update_slice_in_dim(b, p, i * C, 0), buf, part)
+            return i + 1, carry, buf
+
+        _, final, buf = jax.lax.while_loop(cond, body, (jnp.zeros((), jnp.int32), carry0, buf))
+        records = jax.tree_util.tree_map(lambda b: b[:T1], buf)
+    else:
+        raise ValueError(f"unknown driver {driver!r}; choose 'chunks' or 'scan' (a batch: run_lanes)")
+    return _finish(world, options, records, final, stop_at_goal)
+
+
+def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFAULT_LANES,
+              step_chunk: int = DEFAULT_STEP_CHUNK, stop_at_goal=None) -> Rollout:
+    """A batch of rollouts (``worlds``: a stacked Scenario or MovingScenario, leading
+    axis B; ``keys`` (B,) keys), ``lanes`` at a time, refilled as they finish.
+
+    Each lane steps one scene; after the step where its scene finished (or reached
+    max_steps) it loads the next scene of the batch not yet started, with that
+    scene's key, so the lanes stay busy until the batch runs out. The scenes are
+    the same rollouts as :func:`run`'s (each its own carry, key and step count),
+    vmapped over the lanes: they agree with one-at-a-time rollouts to rounding.
+    The loop stops after the ``step_chunk`` steps in which the last scene finished.
+
+    Returns a batched :class:`Rollout` (leading axis B).
+    """
+    B = jax.tree_util.tree_leaves(worlds)[0].shape[0]
+    L = min(int(lanes), B)
+    T1 = max_steps + 1
+    C = int(step_chunk)
+    prepared = jax.vmap(lambda w: prepare(w, options, stop_at_goal))(worlds)  # once per scene
+
+    def take(b):
+        """Scene b's world, prepared data, key and first carry (b: (L,) indices)."""
+        w, p, key = jax.tree_util.tree_map(lambda x: x[b], (worlds, prepared, keys))
+        return w, p, jax.vmap(lambda w, key: init_carry(w, options, key, stop_at_goal))(w, key)
+
+    def step_one(world, prep, carry, k):
+        return make_step(world, gains, options, max_steps, stop_at_goal, prep)(carry, k)
+
+    idx0 = jnp.arange(L, dtype=jnp.int32)
+    w0, p0, carry0 = take(idx0)
+    one = jax.tree_util.tree_map(lambda x: x[0], worlds)
+    out = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape), x.dtype),
+                                 _record_zeros(one, options, T1, stop_at_goal))
+    final0 = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape[1:]), x.dtype), carry0)
+    state0 = (out, final0, idx0, jnp.zeros((L,), jnp.int32), (w0, p0, carry0), jnp.asarray(L, jnp.int32))
+
+    def lane_step(state, _):
+        out, final, idx, k, (w, p, carry), nxt = state
+        active = idx < B
+        carry, rec = jax.vmap(step_one)(w, p, carry, k)
+        row = jnp.where(active, idx, B)  # B: out of range, dropped
+        out = jax.tree_util.tree_map(lambda o, r: o.at[row, k].set(r, mode="drop"), out, rec)
+        done = active & ((carry.status != Status.RUNNING) | (k >= max_steps))
+        final = jax.tree_util.tree_map(lambda f, c: f.at[jnp.where(done, idx, B)].set(c, mode="drop"), final, carry)
+        # Refill: the finished lanes take the next scenes, in lane order (none left: index B, idle).
+        idx = jnp.where(done, jnp.minimum(nxt + jnp.cumsum(done.astype(jnp.int32)) - 1, B), idx)
+        nxt = nxt + jnp.sum(done, dtype=jnp.int32)
+
+        def refill(lane):
+            fresh = take(jnp.minimum(idx, B - 1))
+            return jax.tree_util.tree_map(
+                lambda a, b: jnp.where(done.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), fresh, lane)
+
+        lane = jax.lax.cond(jnp.any(done), refill, lambda lane: lane, (w, p, carry))
+        k = jnp.where(done, 0, k + 1)
+        return (out, final, idx, k, lane, nxt), None
+
+    def cond(state):
+        return jnp.any(state[2] < B)
+
+    def body(state):
+        return jax.lax.scan(lane_step, state, None, length=C)[0]
+
+    out, final, *_ = jax.lax.while_loop(cond, body, state0)
+    return jax.vmap(lambda w, rec, fin: _finish(w, options, rec, fin, stop_at_goal))(worlds, out, final)

@@ -1,0 +1,440 @@
+"""One planner step: the gain functions and the potential field of paper eq. (9), and the safe step.
+
+One step::
+
+    qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj)          (paper eq. 9)
+    q   <- q + dt * qdot,  L_i clipped to [L_min_i, L_max_i]
+
+with ``V_e = goal - tip`` and ``V_sj = (obstacle point) - (closest arm point)``
+for obstacle j; ``J^+`` is the damped least-squares pseudo-inverse.
+
+* ``method="curve"`` (the paper's proposed method): a curve obstacle's closest
+  point comes from the exact solver of :mod:`softplan_jax.closest`.
+* ``method="points"``: every curve is replaced by ``n_points`` points evenly
+  spaced in u and handled by the N-point method (arm sampled at 10 points per
+  segment, Jacobian at the arm sample nearest the obstacle).
+Point-set obstacles always use the N-point method.
+
+The safe step (``PlanOptions.step = "safe"``, the default) scales the Euler step
+by :func:`safe_scale`'s ``alpha = min(1, (f (c - floor) - travel) / B)``, where
+``B`` is :func:`softplan_jax.kinematics.motion_bound` (a sound bound on how far
+any arm point moves during the step), ``c`` the clearance of the planner's
+obstacle model and ``travel`` how far a moving obstacle can come during the
+step (0 for a static scene): no arm point can reach an obstacle during the
+step (conservative advancement). The same rule certifies every motion of the
+global search (:mod:`softplan_jax.global_planner`). ``step = "plain"`` is the
+paper's step, unscaled (the paper tables use it).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
+from .kinematics import motion_bound, points_jacobian, tip_position
+from .metrics import contact_tolerance
+from .numerics import damped_pinv, safe_norm
+from .obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
+from .scenarios import Scenario
+
+__all__ = [
+    "Gains",
+    "GainFunction",
+    "default_gains",
+    "attraction",
+    "tracking_attraction",
+    "repulsion",
+    "repulsion_scale",
+    "PlanOptions",
+    "PAPER_STEP",
+    "check_options",
+    "field_velocity",
+    "apply_step",
+    "safe_scale",
+    "next_q",
+    "planner_step",
+]
+
+
+class Gains(NamedTuple):
+    """Gains of the gain functions and of the integration (a pytree of arrays;
+    every field is differentiable).
+
+    Attributes:
+      k_att: attraction gain [1/s]: F_e(V_e) = k_att V_e below saturation.
+      v_max: saturation speed of the attraction [m/s].
+      eta: repulsion gain.
+      d0: influence distance of the repulsion [m] (clearance beyond it: no force).
+      rep_max: smooth cap on the repulsion speed [m/s].
+      damping: damping lambda of the pseudo-inverse J^T (J J^T + lambda^2 I)^-1.
+      dt: integration step [s]: q <- q + dt * qdot.
+    """
+
+    k_att: jax.Array
+    v_max: jax.Array
+    eta: jax.Array
+    d0: jax.Array
+    rep_max: jax.Array
+    damping: jax.Array
+    dt: jax.Array
+
+
+class GainFunction(NamedTuple):
+    """Gains with the repulsion as a tunable FUNCTION of clearance and of the arm
+    segment (a pytree of arrays; beyond the paper, tuned by :mod:`softplan_jax.smoothing`).
+
+    The first seven fields are those of :class:`Gains`, with the same meaning.
+    The repulsion of paper eq. (9) for an obstacle whose closest arm point lies
+    on segment i at clearance d is :func:`repulsion`'s magnitude times::
+
+        exp(profile(d / d0) + seg_weights[i])
+
+    where ``profile`` interpolates ``rep_profile`` linearly between K knots evenly
+    spaced in ``d / d0`` over [0, 1] (clipped outside). With all zeros it is the
+    field of its :class:`Gains` exactly (:meth:`from_gains` builds that).
+
+    Attributes:
+      rep_profile: (K,) log-multipliers of the repulsion at the knots, K >= 2.
+      seg_weights: (n,) log-multipliers of the repulsion per arm segment
+        (n: the arm's segment count).
+    """
+
+    k_att: jax.Array
+    v_max: jax.Array
+    eta: jax.Array
+    d0: jax.Array
+    rep_max: jax.Array
+    damping: jax.Array
+    dt: jax.Array
+    rep_profile: jax.Array
+    seg_weights: jax.Array
+
+    @classmethod
+    def from_gains(cls, gains: Gains, knots: int, segments: int) -> GainFunction:
+        """The gain function equal to ``gains`` (zero profile and weights)."""
+        if int(knots) < 2 or int(segments) < 1:
+            raise ValueError(f"a GainFunction needs knots >= 2 and segments >= 1, got {knots}, {segments}")
+        dtype = jnp.result_type(gains.k_att)
+        return cls(*gains[:7], jnp.zeros((int(knots),), dtype), jnp.zeros((int(segments),), dtype))
+
+    def scalars(self) -> Gains:
+        """The seven scalar gains (without the profile and weights)."""
+        return Gains(*self[:7])
+
+
+def repulsion_scale(gains, clearance, segment):
+    """The multiplier of the repulsion of a :class:`GainFunction` (1 for :class:`Gains`):
+    ``exp(profile(clearance / d0) + seg_weights[segment])``; shapes broadcast."""
+    if not isinstance(gains, GainFunction):
+        return jnp.ones_like(clearance)
+    K = gains.rep_profile.shape[-1]
+    x = jnp.clip(clearance / gains.d0, 0.0, 1.0) * (K - 1)
+    lo = jnp.clip(jnp.floor(x), 0, K - 2).astype(jnp.int32)
+    t = x - lo.astype(x.dtype)
+    log_scale = (1 - t) * gains.rep_profile[lo] + t * gains.rep_profile[lo + 1] + gains.seg_weights[segment]
+    return jnp.exp(log_scale)
+
+
+def default_gains(dtype=None) -> Gains:
+    """The default gains (chosen by measurement on the paper's scenarios; see
+    the README's "Gains" section).
+
+    The tip moves at most ``v_max * dt = 0.05`` per step; the attraction is
+    linear within ``v_max / k_att = 0.25`` of the goal. The influence distance
+    ``d0 = 0.07`` is below the 0.080 between the tree goal and its nearest
+    branch, so the goal lies outside every obstacle's field (d0 = 0.1 stalls
+    the tree 0.03 short of its goal).
+    """
+    dtype = dtype or jnp.result_type(float)
+    vals = dict(k_att=2.0, v_max=0.5, eta=1e-3, d0=0.07, rep_max=1.0, damping=0.05, dt=0.1)
+    return Gains(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
+
+
+def attraction(V_e, gains: Gains):
+    """F_e(V_e): linear with gain k_att, saturated to speed v_max (paper eq. 9)."""
+    speed = gains.k_att * safe_norm(V_e)
+    return gains.k_att * V_e / jnp.maximum(1.0, speed / gains.v_max)
+
+
+def tracking_attraction(V_e, goal_rate, gains: Gains, feedforward: bool = True):
+    """The attraction's tip velocity for a moving goal: ``k_att V_e + dg/dt``
+    saturated at ``v_max`` (paper eq. 9's F_e with a feed-forward term; without
+    it a proportional law lags a goal moving at speed w by ``w / k_att``)."""
+    v = gains.k_att * V_e + (goal_rate if feedforward else 0.0)
+    return v / jnp.maximum(1.0, safe_norm(v) / gains.v_max)
+
+
+def repulsion(V_s, clearance, gains: Gains, kind: str = "khatib", scale=1.0):
+    """F_s(V_s): repulsion speed along ``V_s`` (towards the obstacle; eq. 9
+    subtracts it), as a function of the surface clearance.
+
+    * ``"khatib"``: ``eta (1/d - 1/d0) / d^2`` for d < d0, 0 beyond (Khatib
+      1986; Ataka et al. 2016), smoothly capped at ``rep_max`` (``inf``: no cap);
+    * ``"exponential"``: ``rep_max * exp(-d / d0)`` — smooth everywhere, never
+      exactly zero.
+    ``d`` is floored at ``1e-3 d0`` (contact or penetration still repels).
+    ``scale`` multiplies the uncapped magnitude (a :class:`GainFunction`'s
+    :func:`repulsion_scale`).
+    """
+    d = jnp.maximum(clearance, 1e-3 * gains.d0)
+    if kind == "khatib":
+        raw = gains.eta * (1.0 / d - 1.0 / gains.d0) / (d * d)
+        raw = scale * jnp.where(d < gains.d0, raw, 0.0)
+        # rep_max = inf: no cap (Khatib's field as printed); double-where keeps inf out of both modes.
+        uncapped = jnp.isinf(gains.rep_max)
+        cap = jnp.where(uncapped, 1.0, gains.rep_max)
+        mag = jnp.where(uncapped, raw, cap * jnp.tanh(raw / cap))
+    elif kind == "exponential":
+        mag = scale * gains.rep_max * jnp.exp(-d / gains.d0)
+    else:
+        raise ValueError(f"unknown repulsion {kind!r}; choose 'khatib' or 'exponential'")
+    return mag * V_s / jnp.maximum(safe_norm(V_s), jnp.finfo(V_s.dtype).tiny)
+
+
+class PlanOptions(NamedTuple):
+    """Static planner settings (hashable: changing one recompiles).
+
+    Attributes:
+      method: "curve" (exact closest points) or "points" (N-point model).
+      n_points: N of the N-point model of each curve (method "points").
+      points_per_segment: arm samples per segment for the N-point method (paper: 10).
+      repulsion: "khatib" or "exponential".
+      goal_tolerance: reached when |V_e| < goal_tolerance.
+      stall_window: stalled after this many steps without improving the best
+        |V_e| by more than stall_tolerance (then an escape starts while any
+        is left; else the rollout ends "stalled").
+      stall_tolerance: see stall_window. The defaults (30 steps, 0.02) call
+        creeping along an obstacle at under ~1e-3 per step a stall: it would
+        not reach the goal within the step budget (benchmarks/safe_step.py).
+      check_collisions: compute the true clearance and the between-step
+        check inside the rollout (default). False gives a planning-only
+        rollout (clearance records NaN, never "collided"), for timing the
+        planner alone; :func:`apply_collision_checks` adds the checks after.
+      contact_tolerance: a clearance at or below this counts as a collision
+        (zero-radius curves that cross meet at a single point, which a
+        solver reaches only to rounding). The rollout uses
+        ``max(contact_tolerance, 10 sqrt(eps))``: 1e-6 in float64, 3.5e-3 in float32.
+      solver: the exact closest-point solver: SolverOptions (default) or
+        GridSolverOptions (the paper's 2-D solver).
+      step: "safe" (default): the clearance-bounded step (see the module
+        docstring); "plain": the paper's step ``q + dt qdot`` (paper eq. 9).
+      safe_fraction: the safe step keeps the motion bound of every step below
+        this fraction of ``(clearance - floor)``, in (0, 1]; floor is twice the
+        contact tolerance, so the clearance never falls to the contact tolerance.
+      escapes: random-walk escapes from stalls allowed per rollout (0: none;
+        a stall then ends the rollout, as in the paper).
+      escape_steps: steps of one random walk.
+      warm_start: in a rollout, carry each (segment, curve) pair's closest
+        point from step to step, polish it and certify it the global minimum
+        (:mod:`softplan_jax.warm_start`); only pairs whose certificate fails
+        take the full solve. Same closest points as the full solver, fewer
+        solves. Applies to the default solver (SolverOptions) only; False:
+        the full solve at every step. :func:`planner_step` and the post-hoc
+        checks always use the full solve.
+      swept_proof: run the between-step search only for the (step, obstacle)
+        motions that the motion bound does not prove clear
+        (:func:`softplan_jax.metrics.swept_clear`: the clearance at the start
+        of the motion minus :func:`~softplan_jax.kinematics.motion_bound`
+        stays above the contact tolerance); the statuses are the same, the
+        search is skipped where it cannot find a collision (see
+        ``Rollout.between``). False: search every motion (the earlier
+        behaviour, for comparison).
+      step_chunk: steps between two checks of "done" by the rollout engine
+        (:mod:`softplan_jax.engine`): a rollout stops computing within this many
+        steps after it finished. Changes the cost, never the results.
+    """
+
+    method: str = "curve"
+    n_points: int = 10
+    points_per_segment: int = 10
+    repulsion: str = "khatib"
+    goal_tolerance: float = 1e-2
+    stall_window: int = 30
+    stall_tolerance: float = 0.02
+    check_collisions: bool = True
+    contact_tolerance: float = 1e-6
+    solver: SolverOptions = DEFAULT_OPTIONS
+    step: str = "safe"
+    safe_fraction: float = 0.8
+    escapes: int = 20
+    escape_steps: int = 15
+    warm_start: bool = True
+    swept_proof: bool = True
+    step_chunk: int = 8
+
+
+# The paper's step (eq. 9, unscaled, no escapes) with the stall test of the earlier
+# releases: ``make_options(method, N, **PAPER_STEP)`` plans exactly as before the safe
+# step (bit for bit on the paper scenes); the paper tables and the NumPy baseline use it.
+PAPER_STEP = {"step": "plain", "escapes": 0, "stall_window": 60, "stall_tolerance": 1e-4}
+
+
+
+
+def check_options(options: PlanOptions) -> PlanOptions:
+    if options.method not in ("curve", "points"):
+        raise ValueError(f"unknown method {options.method!r}; choose 'curve' or 'points'")
+    if options.repulsion not in ("khatib", "exponential"):
+        raise ValueError(f"unknown repulsion {options.repulsion!r}; choose 'khatib' or 'exponential'")
+    if int(options.n_points) < 1:
+        raise ValueError(f"n_points must be >= 1, got {options.n_points}")
+    if int(options.points_per_segment) < 1:
+        raise ValueError(f"points_per_segment must be >= 1, got {options.points_per_segment}")
+    if not options.goal_tolerance > 0:
+        raise ValueError(f"goal_tolerance must be > 0, got {options.goal_tolerance}")
+    if not options.contact_tolerance >= 0:
+        raise ValueError(f"contact_tolerance must be >= 0, got {options.contact_tolerance}")
+    if int(options.stall_window) < 1:
+        raise ValueError(f"stall_window must be >= 1, got {options.stall_window}")
+    if options.step not in ("safe", "plain"):
+        raise ValueError(f"unknown step {options.step!r}; choose 'safe' (clearance-bounded) or 'plain' (the paper's)")
+    if not 0 < float(options.safe_fraction) <= 1:
+        raise ValueError(f"safe_fraction must be in (0, 1], got {options.safe_fraction}")
+    if int(options.escapes) < 0:
+        raise ValueError(f"escapes must be >= 0, got {options.escapes}")
+    if int(options.escape_steps) < 1:
+        raise ValueError(f"escape_steps must be >= 1, got {options.escape_steps}")
+    if isinstance(options.step_chunk, bool) or not isinstance(options.step_chunk, (int, np.integer)) \
+            or options.step_chunk < 1:
+        raise ValueError(f"step_chunk must be an int >= 1, got {options.step_chunk!r}")
+    return options
+
+
+def field_velocity(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None):
+    """Paper eq. (9): qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj).
+
+    ``walk = (walking () bool, velocity (3,))``, if given: while walking, the
+    velocity replaces F_e (an escape's random walk).
+    Returns ``(qdot (n, 3), clearance (m,))``: the clearance of the planner's
+    own obstacle model (exact for the curve method), +inf for padding slots.
+    """
+    n = q.shape[0]
+    V_e = scenario.goal - tip_position(q)
+    cps = model_closest(q, scenario, truth, options.method, options.n_points, options.points_per_segment)
+    radius, mask = radius_and_mask(scenario)
+    # J_e (the tip: s = 1 of the last segment) and every J_sj in one pass.
+    segments = jnp.concatenate([jnp.array([n - 1], jnp.int32), cps.segment])
+    s = jnp.concatenate([jnp.ones((1,), q.dtype), cps.s])
+    J = points_jacobian(q, segments, s)
+    # Padding slots get a full-rank stand-in Jacobian [I 0] (their force is zero): with
+    # damping 0 (the plain pseudo-inverse) their placeholder point's Jacobian is singular
+    # and would give NaN * 0 = NaN (double-where: finite values and gradients).
+    active = jnp.concatenate([jnp.ones((1,), bool), mask])
+    stand_in = jnp.eye(3, 3 * n, dtype=J.dtype)
+    J = jnp.where(active[:, None, None], J, stand_in)
+    pinvs = jax.vmap(lambda J_k: damped_pinv(J_k, gains.damping))(J)  # (1 + m, 3n, 3)
+    V_s = cps.obstacle_point - cps.arm_point
+    clearance = cps.distance - scenario.arm_radius - radius
+    scale = repulsion_scale(gains, clearance, cps.segment)
+    F_s = jax.vmap(lambda v, d, k: repulsion(v, d, gains, options.repulsion, k))(V_s, clearance, scale)
+    F_s = jnp.where(mask[:, None], F_s, 0.0)
+    F_e = attraction(V_e, gains)
+    if walk is not None:
+        F_e = jnp.where(walk[0], walk[1], F_e)
+    # Paper eq. (9).
+    qdot = pinvs[0] @ F_e - jnp.einsum("kij,kj->i", pinvs[1:], F_s)
+    return qdot.reshape(n, 3), jnp.where(mask, clearance, jnp.inf)
+
+
+def apply_step(q, qdot, scenario: Scenario, gains: Gains):
+    q_next = q + gains.dt * qdot
+    return q_next.at[:, 0].set(jnp.clip(q_next[:, 0], scenario.L_min, scenario.L_max))
+
+
+def safe_scale(q, q_target, clearance, floor, fraction, travel=None, cap=None):
+    """The safe step's scale alpha in [0, 1] for the straight motion q -> q_target,
+    and whether even standing still is unsafe.
+
+    ``motion_bound(q, q + alpha (q_target - q)) <= alpha * motion_bound(q, q_target)``
+    (the bound is linear in dq for a fixed length bound, and Lbar of the full
+    motion bounds every shorter one), so::
+
+        alpha = min(1, min_j (f (c_j - floor) - travel_j) / B)
+
+    keeps every arm point, at every instant of the motion, closer to its start
+    than ``f (c_j - floor) - travel_j``: the clearance to obstacle j stays above
+    ``floor`` even when the obstacle comes ``travel_j`` closer meanwhile
+    (conservative advancement with both bodies moving). This one rule scales
+    the planner's step (static and moving scenes) and every certified motion
+    of the global search.
+
+    Args:
+      q, q_target: (n, 3) the motion's ends.
+      clearance: (m,) clearance of each obstacle at q (+inf: padding slots).
+      floor: the clearance never to reach (twice the contact tolerance).
+      fraction: ``f`` in (0, 1], the share of the clearance the motion may use.
+      travel: (m,) how far each obstacle can move during the motion (None: static).
+      cap: an upper bound on the allowed motion (None: none).
+
+    Returns:
+      ``(alpha, too_fast)``: too_fast is True where some ``f (c_j - floor) <
+      travel_j`` (no motion, not even standing still, is proven safe; always
+      False without travel). No obstacle (c = inf) gives alpha = 1; a NaN
+      clearance gives alpha = NaN (which ends a rollout as non-finite).
+    """
+    budget = fraction * jnp.maximum(clearance - floor, 0.0)
+    if travel is not None:
+        budget = budget - travel
+        too_fast = jnp.any(budget < 0)
+    else:
+        too_fast = jnp.zeros((), bool)
+    # min_j f max(c_j - floor, 0) equals f max(min_j c_j - floor, 0) exactly (monotone rounding).
+    allowed = jnp.maximum(jnp.min(budget, initial=jnp.inf), 0.0)
+    if cap is not None:
+        allowed = jnp.minimum(allowed, cap)
+    bound = motion_bound(q, q_target)[-1]
+    # Double-where: a zero bound (no motion) gives alpha = 1 and no 0/0 in either mode.
+    moving = bound > 0
+    alpha = jnp.where(moving, jnp.minimum(1.0, allowed / jnp.where(moving, bound, 1.0)), 1.0)
+    return jnp.where(jnp.isnan(jnp.min(clearance, initial=jnp.inf)), jnp.nan, alpha), too_fast
+
+
+def next_q(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None, travel=None,
+           lead=None):
+    """One planner step from q: ``(q_next, alpha, too_fast)``.
+
+    Paper eq. (9) (:func:`field_velocity`, ``walk`` as there), the Euler step
+    with the length limits (:func:`apply_step`), then for ``options.step =
+    "safe"`` the scale :func:`safe_scale` (``travel``: the obstacles' travel
+    over the step, None for a static scene); ``"plain"`` is the paper's step
+    (alpha = 1). ``lead`` (m,), if given: ``scenario``'s obstacles are inflated
+    by it for the field (a look-ahead), and the safe step adds it back to the
+    field's clearance.
+    """
+    qdot, clearance = field_velocity(q, scenario, gains, truth, options, walk)
+    if lead is not None:
+        clearance = clearance + lead
+    q_full = apply_step(q, qdot, scenario, gains)
+    if options.step == "plain":
+        return q_full, jnp.ones((), q.dtype), jnp.zeros((), bool)
+    floor = 2.0 * contact_tolerance(options, q.dtype)
+    alpha, too_fast = safe_scale(q, q_full, clearance, floor, options.safe_fraction, travel)
+    # q and q_full lie in the length box, so every point of the segment between them does too.
+    return q + alpha * (q_full - q), alpha, too_fast
+
+
+@partial(jax.jit, static_argnames=("options",))
+def planner_step(q, scenario: Scenario, gains: Gains, options: PlanOptions = PlanOptions()):
+    """One planner step (paper eq. 9) as a single jitted function.
+
+    Args:
+      q: (n, 3) configuration.
+      scenario: Scenario (one, not batched; vmap for batches).
+      gains: Gains.
+      options: PlanOptions (static).
+
+    Returns:
+      (n, 3) next configuration: ``q + dt qdot`` with lengths clipped to their
+      limits (``options.step = "plain"``), scaled down by the clearance-bounded
+      step where it could reach an obstacle (``"safe"``, the default).
+    """
+    truth = true_closest(q, scenario, options.solver) if options.method == "curve" else None
+    if truth is None:
+        # The points method never uses the exact solver: a placeholder of the right shape.
+        truth = placeholder_closest(q, scenario)
+    return next_q(q, scenario, gains, truth, options)[0]

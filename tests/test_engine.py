@@ -1,0 +1,127 @@
+"""The rollout engine (softplan_jax.engine): its drivers give the same arrays, a
+finished rollout's records are frozen, a batch's refilled lanes give every scene
+its own rollout (checked against a Python loop of single rollouts), the safe
+step's scale against its formula, and the sizes' bad input."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import softplan_jax as sp
+from softplan_jax.compilation_cache import rollout_compiler_options
+from softplan_jax.engine import check_engine_sizes
+from softplan_jax.planner import batch_keys, make_options, rollout, rollout_jit
+from softplan_jax.step import safe_scale
+
+PAD = dict(curve_slots=5, degree=2)  # test_planner's shape: its programs are shared (conftest SHARED)
+STEPS = 200
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return {name: sp.paper_scenario(name, **PAD) for name in ("sim1", "sim2", "tree")}
+
+
+@pytest.fixture(scope="module")
+def five(paper):
+    """Five scenes of one shape: the paper's three, the tree with a goal beyond reach (it stalls
+    and escapes, so its random walks depend on its key), and sim2 with the tree's goal."""
+    far = paper["tree"]._replace(goal=jnp.array([2.5, 2.5, 0.4]))
+    other = paper["sim2"]._replace(goal=paper["tree"].goal)
+    return [paper["sim1"], paper["sim2"], paper["tree"], far, other]
+
+
+def _fields(r):
+    return {f: np.asarray(v) for f, v in r._asdict().items() if v is not None}
+
+
+def test_chunks_driver_equals_scan_driver(paper):
+    """rollout_jit (the "chunks" driver: stops after the chunk in which the rollout ended) gives
+    the fixed-length scan's arrays bit for bit, whatever the chunk (5 does not divide 201)."""
+    g = sp.default_gains()
+    sc = paper["tree"]
+    opts = make_options("curve")
+    scan = jax.jit(lambda s, k: rollout(s, g, opts, STEPS, k, driver="scan"),
+                   compiler_options=rollout_compiler_options("curve"))(sc, jax.random.PRNGKey(0))
+    for chunk in (8, 5):
+        r = rollout_jit(sc, g, make_options("curve", step_chunk=chunk), STEPS, 0)
+        for f, x in _fields(scan).items():
+            np.testing.assert_array_equal(np.asarray(getattr(r, f)), x, err_msg=f"{f}, step_chunk {chunk}")
+
+
+def test_records_frozen_after_the_end(paper):
+    r = jax.device_get(rollout_jit(paper["tree"], sp.default_gains(), make_options("curve"), STEPS, 0))
+    it = int(r.iterations)
+    assert sp.status_name(r.status) == "reached" and it < STEPS - 10
+    for f in ("q", "tip", "clearance", "converged"):
+        x = getattr(r, f)
+        np.testing.assert_array_equal(x[it + 1:], np.broadcast_to(x[it], x[it + 1:].shape), err_msg=f)
+    # No motion after the end: the between-step clearance is the clearance; no events.
+    np.testing.assert_array_equal(r.between[it + 1:], np.broadcast_to(r.clearance[it], r.between[it + 1:].shape))
+    assert np.all(r.step_scale[it:] == 0) and np.all(r.step_scale[:it] > 0)
+    assert np.all(r.fallbacks[it + 1:] == 0) and not np.any(r.between_searched[it + 1:])
+    assert float(r.final_error) == float(np.linalg.norm(np.asarray(paper["tree"].goal) - r.tip[it]))
+
+
+def test_lanes_refill_matches_single_rollouts(five):
+    """Five scenes on two lanes (three refills, one idle lane at the end) against a Python loop
+    of single rollouts with the same keys: the same status, steps and escapes, and q to
+    rounding (a vmapped program rounds differently); and against five lanes (no refill)."""
+    stack = sp.stack_scenarios(five)
+    two = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, lanes=2, devices=1))
+    all5 = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, lanes=5, devices=1))
+    keys = batch_keys(0, len(five))
+    assert int(two.escapes[3]) > 0  # the scene beyond reach escapes: its key matters
+    for b, sc in enumerate(five):
+        one = jax.device_get(rollout_jit(sc, sp.default_gains(), make_options("curve"), STEPS, keys[b]))
+        for r, label in ((two, "2 lanes"), (all5, "5 lanes")):
+            assert int(r.status[b]) == int(one.status), (b, label)
+            assert int(r.iterations[b]) == int(one.iterations), (b, label)
+            assert int(r.escapes[b]) == int(one.escapes), (b, label)
+            np.testing.assert_allclose(r.q[b], one.q, atol=1e-9, err_msg=f"scene {b}, {label}")
+            np.testing.assert_allclose(r.min_clearance[b], one.min_clearance, atol=1e-9)
+    assert [sp.status_name(s) for s in two.status[:3]] == ["reached"] * 3
+
+
+def test_safe_scale_against_its_formula():
+    q = jnp.array([[1.0, 0.3, 0.2], [0.9, -0.5, 1.0]])
+    q_t = q + jnp.array([[0.05, 0.2, -0.1], [0.0, 0.3, 0.2]])
+    B = float(sp.motion_bound(q, q_t)[-1])
+    c = jnp.array([0.3, 0.05, jnp.inf])
+    floor, f = 2e-6, 0.8
+
+    def formula(budgets):
+        return min(1.0, max(min(budgets), 0.0) / B)
+
+    alpha, too_fast = safe_scale(q, q_t, c, floor, f)
+    assert float(alpha) == pytest.approx(formula([f * (0.05 - floor)]), rel=1e-14) and not bool(too_fast)
+    travel = jnp.array([0.01, 0.02, 0.0])
+    alpha, too_fast = safe_scale(q, q_t, c, floor, f, travel)
+    assert float(alpha) == pytest.approx(formula([f * (0.3 - floor) - 0.01, f * (0.05 - floor) - 0.02]), rel=1e-14)
+    assert not bool(too_fast)
+    # An obstacle that travels farther than the budget: even standing still is not proven safe.
+    alpha, too_fast = safe_scale(q, q_t, c, floor, f, jnp.array([0.0, 0.05, 0.0]))
+    assert bool(too_fast) and float(alpha) == 0.0
+    # The cap of the global search's path steps; no obstacle; no motion; NaN.
+    assert float(safe_scale(q, q_t, c, floor, f, cap=1e-3)[0]) == pytest.approx(1e-3 / B, rel=1e-14)
+    assert float(safe_scale(q, q_t, jnp.full((2,), jnp.inf), floor, f)[0]) == 1.0
+    assert float(safe_scale(q, q, c, floor, f)[0]) == 1.0
+    assert np.isnan(float(safe_scale(q, q_t, jnp.array([jnp.nan, 1.0]), floor, f)[0]))
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    (dict(lanes=0), "lanes"), (dict(lanes=2.5), "lanes"), (dict(lanes=True), "lanes"),
+    (dict(max_steps=2.5), "max_steps"), (dict(max_steps=0), "max_steps"),
+    (dict(step_chunk=0), "step_chunk"), (dict(step_chunk=1.5), "step_chunk"),
+])
+def test_bad_sizes_refused_before_compiling(paper, kwargs, field):
+    before = sp.rollout_batch.cache_size()
+    with pytest.raises(ValueError, match=field):
+        sp.plan_batch(sp.stack_scenarios(list(paper.values())), **kwargs)
+    assert sp.rollout_batch.cache_size() == before
+    if field != "lanes":
+        with pytest.raises(ValueError, match=field):
+            sp.plan(paper["tree"], **kwargs)
+    with pytest.raises(ValueError, match="lanes"):
+        check_engine_sizes(10, 8, "4")
