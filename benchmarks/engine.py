@@ -33,9 +33,7 @@ import sys
 import time
 
 import jax
-
-jax.config.update("jax_enable_x64", True)
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _common import FIGURES_DIR, RESULTS_DIR, finish_machine, fmt_s, log, machine_info, machine_lines  # noqa: E402
@@ -96,6 +94,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="small sizes, one round (a smoke run)")
     ap.add_argument("--out", default=os.path.join(RESULTS_DIR, "engine"))
     args = ap.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)
     for name in ("rounds", "batch", "track_batch"):
         if getattr(args, name) < 1:
             ap.error(f"--{name.replace('_', '-')} must be >= 1")

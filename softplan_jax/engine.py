@@ -530,7 +530,8 @@ def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks", s
             buf = jax.tree_util.tree_map(lambda b, p: jax.lax.dynamic_update_slice_in_dim(b, p, i * C, 0), buf, part)
             return i + 1, carry, buf
 
-        _, final, buf = jax.lax.while_loop(cond, body, (jnp.zeros((), jnp.int32), carry0, buf))
+        i0 = jnp.zeros((), jnp.arange(0).dtype)  # the scan driver's step index dtype
+        _, final, buf = jax.lax.while_loop(cond, body, (i0, carry0, buf))
         records = jax.tree_util.tree_map(lambda b: b[:T1], buf)
     else:
         raise ValueError(f"unknown driver {driver!r}; choose 'chunks' or 'scan' (a batch: run_lanes)")
@@ -580,17 +581,20 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFA
         row = jnp.where(active, idx, B)  # B: out of range, dropped
         out = jax.tree_util.tree_map(lambda o, r: o.at[row, k].set(r, mode="drop"), out, rec)
         done = active & ((carry.status != Status.RUNNING) | (k >= max_steps))
-        final = jax.tree_util.tree_map(lambda f, c: f.at[jnp.where(done, idx, B)].set(c, mode="drop"), final, carry)
-        # Refill: the finished lanes take the next scenes, in lane order (none left: index B, idle).
-        idx = jnp.where(done, jnp.minimum(nxt + jnp.cumsum(done.astype(jnp.int32)) - 1, B), idx)
-        nxt = nxt + jnp.sum(done, dtype=jnp.int32)
 
-        def refill(lane):
+        def refill(state):
+            # The finished scenes' last carries, then the next scenes into their lanes, in lane
+            # order (none left: index B, idle).
+            final, idx, nxt, lane = state
+            final = jax.tree_util.tree_map(lambda f, c: f.at[jnp.where(done, idx, B)].set(c, mode="drop"), final,
+                                           lane[2])
+            idx = jnp.where(done, jnp.minimum(nxt + jnp.cumsum(done.astype(jnp.int32)) - 1, B), idx)
             fresh = take(jnp.minimum(idx, B - 1))
-            return jax.tree_util.tree_map(
+            lane = jax.tree_util.tree_map(
                 lambda a, b: jnp.where(done.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), fresh, lane)
+            return final, idx, nxt + jnp.sum(done, dtype=jnp.int32), lane
 
-        lane = jax.lax.cond(jnp.any(done), refill, lambda lane: lane, (w, p, carry))
+        final, idx, nxt, lane = jax.lax.cond(jnp.any(done), refill, lambda state: state, (final, idx, nxt, (w, p, carry)))
         k = jnp.where(done, 0, k + 1)
         return (out, final, idx, k, lane, nxt), None
 

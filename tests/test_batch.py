@@ -217,7 +217,8 @@ TWO_DEVICES = textwrap.dedent(
         dq=float(np.max(np.abs(np.asarray(one.q) - np.asarray(two.q)))),
         dclear=float(np.max(np.abs(np.asarray(one.min_clearance) - np.asarray(two.min_clearance)))),
         chunked_equal=all(np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)
-                          for a, b in zip(two, again)),
+                          for a, b in zip(jax.tree_util.tree_leaves(two), jax.tree_util.tree_leaves(again),
+                                          strict=True)),
         recompiled=sp.rollout_batch.cache_size() - compiled,
         collectives=collectives,
         partitions=text.count("num_partitions=2") + text.count("mesh['batch'=2]"),

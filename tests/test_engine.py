@@ -65,23 +65,30 @@ def test_records_frozen_after_the_end(paper):
 
 
 def test_lanes_refill_matches_single_rollouts(five):
-    """Five scenes on two lanes (three refills, one idle lane at the end) against a Python loop
-    of single rollouts with the same keys: the same status, steps and escapes, and q to
-    rounding (a vmapped program rounds differently); and against five lanes (no refill)."""
+    """Five scenes on two lanes (three refills, one idle lane at the end): bit for bit the
+    rollouts of five lanes (no refill), and against a Python loop of single rollouts with the
+    same keys: the same status, steps and escapes, and q to rounding (a vmapped program rounds
+    differently). The scene beyond reach escapes at random (its key matters): there a near-tie
+    amplifies the rounding difference from about step 46 on (1e-14 to 1e-2 by the end), so
+    its q is compared over the first 40 steps; the others over the whole horizon."""
     stack = sp.stack_scenarios(five)
     two = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, lanes=2, devices=1))
     all5 = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, lanes=5, devices=1))
+    for f, x in _fields(all5).items():
+        np.testing.assert_array_equal(np.asarray(getattr(two, f)), x, err_msg=f)
     keys = batch_keys(0, len(five))
-    assert int(two.escapes[3]) > 0  # the scene beyond reach escapes: its key matters
+    assert int(two.escapes[3]) > 0
     for b, sc in enumerate(five):
         one = jax.device_get(rollout_jit(sc, sp.default_gains(), make_options("curve"), STEPS, keys[b]))
-        for r, label in ((two, "2 lanes"), (all5, "5 lanes")):
-            assert int(r.status[b]) == int(one.status), (b, label)
-            assert int(r.iterations[b]) == int(one.iterations), (b, label)
-            assert int(r.escapes[b]) == int(one.escapes), (b, label)
-            np.testing.assert_allclose(r.q[b], one.q, atol=1e-9, err_msg=f"scene {b}, {label}")
-            np.testing.assert_allclose(r.min_clearance[b], one.min_clearance, atol=1e-9)
+        assert int(two.status[b]) == int(one.status), b
+        assert int(two.iterations[b]) == int(one.iterations), b
+        assert int(two.escapes[b]) == int(one.escapes), b
+        horizon = 40 if b == 3 else STEPS + 1
+        np.testing.assert_allclose(two.q[b, :horizon], one.q[:horizon], atol=1e-9, err_msg=f"scene {b}")
     assert [sp.status_name(s) for s in two.status[:3]] == ["reached"] * 3
+    # Another key for the escaping scene changes its walks (the keys follow the scenes into their lanes).
+    other = jax.device_get(rollout_jit(five[3], sp.default_gains(), make_options("curve"), STEPS, keys[2]))
+    assert np.abs(other.q - two.q[3]).max() > 1e-2
 
 
 def test_safe_scale_against_its_formula():
