@@ -36,8 +36,16 @@ import jax
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _common import FIGURES_DIR, RESULTS_DIR, finish_machine, fmt_s, log, machine_info, machine_lines  # noqa: E402
-from _common import write_results  # noqa: E402
+from _common import (  # noqa: E402
+    FIGURES_DIR,
+    RESULTS_DIR,
+    finish_machine,
+    fmt_s,
+    log,
+    machine_info,
+    machine_lines,
+    write_results,
+)
 from kernel import load_variant  # noqa: E402
 
 import softplan_jax  # noqa: E402
