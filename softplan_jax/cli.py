@@ -157,7 +157,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--float32", action="store_true",
                      help="plan in float32 (default float64)")
     run.add_argument("--require-reached", action="store_true",
-                     help="exit with code 3 when the goal was not reached")
+                     help="exit with code 3 unless the status is 'reached' (a moving goal: reached and "
+                     "held to the end; 'lost' fails)")
 
     scen = sub.add_parser("scenarios", help="list the paper scenarios",
                           description="List the paper's scenarios (names for 'softplan run').")
@@ -589,6 +590,41 @@ def _write_figures(args, summary: dict, make_plot, write_gif) -> None:
         raise InputError(f"cannot write output: {err}") from None
 
 
+def _plan_extra(args, extra: dict) -> dict:
+    """The planner options given on the command line (``softplan run``, static or moving), added
+    to ``extra`` (the gains' own options)."""
+    extra["repulsion"] = args.repulsion
+    for key in ("step", "escapes", "goal_tolerance"):
+        if getattr(args, key) is not None:
+            extra[key] = getattr(args, key)
+    return extra
+
+
+def _write_out(args, summary: dict, record: dict) -> None:
+    """Write ``--out`` (replacing a file only with --force, and saying so)."""
+    replaced = os.path.exists(args.out)
+    try:
+        write_trajectory(args.out, record)
+    except OSError as err:
+        raise InputError(f"cannot write output: {err}") from None
+    summary["out"] = os.path.abspath(args.out)
+    if replaced:  # allowed by --force; never silently
+        print(f"softplan: overwrote {args.out} (--force)", file=sys.stderr)
+
+
+def _report(args, summary: dict, text, reached: bool) -> int:
+    """Print the summary (JSON, non-finite numbers as null, or ``text()``); the exit code."""
+    if args.json:
+        # Non-finite numbers (min clearance without obstacles is inf) become null.
+        clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()}
+        print(json.dumps(clean, indent=2))
+    else:
+        print(text())
+    if args.require_reached and not reached:
+        return EXIT_NOT_REACHED
+    return EXIT_OK
+
+
 def _cmd_run(args) -> int:
     import jax
 
@@ -613,14 +649,7 @@ def _cmd_run(args) -> int:
     try:
         scenario, label = _load(args, dtype)
         scenario, gains, extra, gain_values = _resolve_gains(args, scenario, args.method, args.n_points)
-        extra["repulsion"] = args.repulsion
-        if args.step is not None:
-            extra["step"] = args.step
-        if args.escapes is not None:
-            extra["escapes"] = args.escapes
-        if args.goal_tolerance is not None:
-            extra["goal_tolerance"] = args.goal_tolerance
-        options = make_options(args.method, args.n_points, **extra)
+        options = make_options(args.method, args.n_points, **_plan_extra(args, extra))
     except ValueError as err:
         raise InputError(str(err)) from None
     max_steps = int(args.max_steps)
@@ -692,26 +721,8 @@ def _cmd_run(args) -> int:
                    lambda plotting: plotting.animate(scenario, result, args.gif, title=title.split("\n")[0]))
 
     if args.out is not None:
-        replaced = os.path.exists(args.out)
-        try:
-            write_trajectory(args.out, trajectory_record(result, scenario, summary))
-        except OSError as err:
-            raise InputError(f"cannot write output: {err}") from None
-        summary["out"] = os.path.abspath(args.out)
-        if replaced:  # allowed by --force; never silently
-            print(f"softplan: overwrote {args.out} (--force)", file=sys.stderr)
-
-    if args.json:
-        # Non-finite numbers (min clearance without obstacles is inf) become null.
-        clean = {
-            k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()
-        }
-        print(json.dumps(clean, indent=2))
-    else:
-        print(_text_summary(summary))
-    if args.require_reached and not result.reached:
-        return EXIT_NOT_REACHED
-    return EXIT_OK
+        _write_out(args, summary, trajectory_record(result, scenario, summary))
+    return _report(args, summary, lambda: _text_summary(summary), result.reached)
 
 
 def _cmd_track(args, dtype) -> int:
@@ -732,10 +743,7 @@ def _cmd_track(args, dtype) -> int:
             preset = {}
         scenario, gains, extra, gain_values = _resolve_gains(args, moving.scene, args.method, args.n_points)
         moving = moving._replace(scene=scenario)
-        extra["repulsion"] = args.repulsion
-        for key in ("step", "escapes", "goal_tolerance"):
-            if getattr(args, key) is not None:
-                extra[key] = getattr(args, key)
+        extra = _plan_extra(args, extra)
         if args.anticipation is not None:
             preset["anticipation"] = args.anticipation
         if args.hold_tolerance is not None:
@@ -799,22 +807,13 @@ def _cmd_track(args, dtype) -> int:
     if args.out is not None:
         import numpy as np
 
-        replaced = os.path.exists(args.out)
         record = {"format": TRAJECTORY_FORMAT, "softplan_jax_version": _version(),
                   **{k: np.asarray(getattr(result, k)) for k in ("q", "tip", "clearance", "goal", "time", "error")},
                   **{k: v for k, v in summary.items() if k not in ("plot", "gif", "out", "gain_values")},
                   "gain_values": {k: (math.inf if v is None else v) for k, v in summary["gain_values"].items()}}
-        try:
-            write_trajectory(args.out, record)
-        except OSError as err:
-            raise InputError(f"cannot write output: {err}") from None
-        summary["out"] = os.path.abspath(args.out)
-        if replaced:
-            print(f"softplan: overwrote {args.out} (--force)", file=sys.stderr)
-    if args.json:
-        clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()}
-        print(json.dumps(clean, indent=2))
-    else:
+        _write_out(args, summary, record)
+
+    def text():
         rows = [
             ("scenario", f"{label} (moving obstacles; tracked)"),
             ("method", args.method + (f" (N = {args.n_points})" if args.method == "points" else "")),
@@ -834,10 +833,10 @@ def _cmd_track(args, dtype) -> int:
         ]
         rows += [(k, summary[k]) for k in ("plot", "gif", "out") if summary[k]]
         width = max(len(k) for k, _ in rows)
-        print("\n".join(f"{k:<{width}}  {v}" for k, v in rows))
-    if args.require_reached and not result.reached:
-        return EXIT_NOT_REACHED
-    return EXIT_OK
+        return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+    # --require-reached asks for success: reached and held to the end ("lost" is not).
+    return _report(args, summary, text, result.status == "reached")
 
 
 def _check_distributed_args(args) -> bool:

@@ -222,7 +222,9 @@ class CompiledRollout:
         args = self._args(scenario, gains, options, max_steps, 0)
         dynamic = (args[0], args[1], args[4])  # scenario, gains, key: options and max_steps are static
         leaves, treedef = jax.tree_util.tree_flatten(dynamic)
-        out_def = jax.tree_util.tree_structure(jax.eval_shape(lambda: self._fn(*args)))
+        # A static scene's Rollout: the tracking fields are None (no tracing needed to know it).
+        required = len(Rollout._fields) - len(Rollout._field_defaults)
+        out_def = jax.tree_util.tree_structure(Rollout(*([0] * required)))
 
         def flat(*xs):  # arrays in, arrays out: the artifact needs no pytree registrations
             s, g, k = jax.tree_util.tree_unflatten(treedef, xs)

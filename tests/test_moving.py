@@ -361,7 +361,7 @@ def test_bad_input_raises():
         sp.track(m, warp=True)
 
 
-def test_cli_plays_a_moving_preset(tmp_path, capsys):
+def test_cli_plays_a_moving_preset(tmp_path, capsys, monkeypatch):
     png, out = tmp_path / "fruit.png", tmp_path / "fruit.npz"
     code = main(["run", "tree_fruit", "--max-steps", str(STEPS), "--json", "--plot", str(png), "--out", str(out)])
     captured = capsys.readouterr()
@@ -375,6 +375,13 @@ def test_cli_plays_a_moving_preset(tmp_path, capsys):
     assert np.ptp(record["goal"], axis=0).max() > 0.01
     assert main(["run", "tree_fruit", "--anticipation", "-1"]) == 2
     assert main(["run", "tree_fruit", "--hold-tolerance", "0"]) == 2
+    # --require-reached: success only ("reached": reached and held to the end); "lost" fails.
+    assert main(["run", "tree_fruit", "--max-steps", str(STEPS), "--require-reached"]) == 0
+    import softplan_jax.tracking as tracking
+
+    held = tracking.result_from_track
+    monkeypatch.setattr(tracking, "result_from_track", lambda *a: held(*a)._replace(status="lost"))
+    assert main(["run", "tree_fruit", "--max-steps", str(STEPS), "--require-reached"]) == 3
 
 
 def test_animation_draws_the_moving_obstacles(tmp_path):
