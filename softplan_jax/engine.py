@@ -13,9 +13,11 @@ time:
   which the safe step and the between-step proof subtract;
 * the attraction: paper eq. (9)'s F_e, with the goal's velocity fed forward
   for a moving goal (:func:`~softplan_jax.step.tracking_attraction`);
-* when to stop (``stop_at_goal``): planning ends at the goal or at a stall with
-  no escape left; tracking holds the goal to the horizon and ends early only
-  on a collision, a non-finite number or ``too_fast``.
+* when to stop, set by the options: with PlanOptions (planning) a rollout
+  ends at the goal or at a stall with no escape left; with TrackOptions
+  (tracking, a static scene or a moving one) it holds the goal to the horizon
+  and ends early only on a collision, a non-finite number or ``too_fast``,
+  recording the goal, the time and the error at every step.
 
 Step k looks at q_k: exact closest pairs to every obstacle (warm-started,
 :mod:`softplan_jax.warm_start`), the true clearance at q_k and during the
@@ -107,7 +109,7 @@ class Rollout(NamedTuple):
       between_searched: (T+1, m) bool, the between-step search ran for the
         motion to q_k and obstacle slot j.
       goal, time, error, reached_step, held_steps, held_to_end: tracking only
-        (None for a static scene): g(t_k) (T+1, 3), t_k = k dt (T+1,),
+        (None for a planned rollout): g(t_k) (T+1, 3), t_k = k dt (T+1,),
         |g(t_k) - tip_k| (T+1,), the first step within the goal tolerance
         (-1: never), the steps it was held from then (error <= hold
         tolerance) and whether it was held to the end.
@@ -190,20 +192,23 @@ def check_engine_sizes(max_steps, step_chunk=DEFAULT_STEP_CHUNK, lanes=None) -> 
 
 
 class _Setup(NamedTuple):
-    """Trace-time facts of one rollout (shapes, flags) and its scene-at-step function."""
+    """Trace-time facts of one rollout: what moves and what ends it."""
 
-    moving: bool
-    scene: object  # the Scenario at rest
-    plan: object  # PlanOptions
-    track: object  # TrackOptions or None
+    moving: bool  # the scene moves (a MovingScenario)
+    scene: object  # the Scenario (at rest)
+    plan: object  # PlanOptions of the step
+    track: object  # TrackOptions (hold the goal to the horizon) or None (stop at the goal)
     stop_at_goal: bool
 
 
-def _setup(world, options, stop_at_goal):
+def _setup(world, options) -> _Setup:
+    """The mode is the options': PlanOptions plan (stop at the goal or at a stall), TrackOptions
+    track (hold the goal to the horizon), for a static scene as for a moving one."""
     moving = isinstance(world, MovingScenario)
-    plan = options.plan if moving else options
-    return _Setup(moving, world.scene if moving else world, plan, options if moving else None,
-                  (not moving) if stop_at_goal is None else bool(stop_at_goal))
+    track = options if hasattr(options, "plan") else None
+    if moving and track is None:
+        raise ValueError("a moving scene is tracked: pass TrackOptions (see make_track_options)")
+    return _Setup(moving, world.scene if moving else world, track.plan if track else options, track, track is None)
 
 
 def _moving_cells(cells, moving: MovingScenario, t):
@@ -212,9 +217,9 @@ def _moving_cells(cells, moving: MovingScenario, t):
     return (moved_cells(cells[0], moving.motion, t), *cells[1:])
 
 
-def init_carry(world, options, key, stop_at_goal=None) -> Carry:
+def init_carry(world, options, key) -> Carry:
     """The carry at step 0 (q_0 = the scene's start)."""
-    su = _setup(world, options, stop_at_goal)
+    su = _setup(world, options)
     scene, plan = su.scene, su.plan
     _, mask = radius_and_mask(scene)
     q0 = scene.q0
@@ -244,20 +249,20 @@ def _warm(plan) -> bool:
     return exact and plan.warm_start and isinstance(plan.solver, SolverOptions)
 
 
-def prepare(world, options, stop_at_goal=None) -> tuple:
+def prepare(world, options) -> tuple:
     """What a rollout computes once per scene, before its first step: the warm start's
     per-curve data (:func:`~softplan_jax.obstacles.warm_cells`) and, for a moving scene,
     its obstacles' speed bounds (:func:`~softplan_jax.motion.speed_bounds`)."""
-    su = _setup(world, options, stop_at_goal)
+    su = _setup(world, options)
     cells = warm_cells(su.scene, su.plan.solver) if _warm(su.plan) else ()
     return cells, (speed_bounds(world) if su.moving else ())
 
 
-def make_step(world, gains, options, max_steps: int, stop_at_goal=None, prepared=None):
+def make_step(world, gains, options, max_steps: int, prepared=None):
     """The engine's step ``(carry, k) -> (carry, record)`` for this scene (static or
-    moving), gains and options (PlanOptions, or TrackOptions for a moving scene);
+    moving), gains and options (PlanOptions: plan; TrackOptions: track);
     ``prepared``: :func:`prepare` of the scene (None: computed here)."""
-    su = _setup(world, options, stop_at_goal)
+    su = _setup(world, options)
     scene, plan, track = su.scene, su.plan, su.track
     radius, mask = radius_and_mask(scene)
     q0 = scene.q0
@@ -267,7 +272,7 @@ def make_step(world, gains, options, max_steps: int, stop_at_goal=None, prepared
     walks = plan.escapes > 0
     exact = check or plan.method == "curve"
     warm = _warm(plan)
-    cells0, speed = prepare(world, options, stop_at_goal) if prepared is None else prepared
+    cells0, speed = prepare(world, options) if prepared is None else prepared
     n_pairs = q0.shape[0] * (jnp.sum(scene.curve_mask) + len(scene.parametric)).astype(jnp.int32)
     radius_sum = scene.arm_radius + radius
     if su.moving:
@@ -325,12 +330,12 @@ def make_step(world, gains, options, max_steps: int, stop_at_goal=None, prepared
 
     def step(carry: Carry, k):
         q = carry.q
+        t = k.astype(dtype) * gains.dt if track else None
         if su.moving:
-            t = k.astype(dtype) * dt
             sc = scenario_at(world, t)
             cells = _moving_cells(cells0, world, t)
         else:
-            t, sc, cells = None, scene, cells0
+            sc, cells = scene, cells0
         warm_next = carry.warm
         if warm:
             truth, warm_next, fallbacks = warm_closest(q, sc, plan.solver, cells, carry.warm, carry.first)
@@ -416,16 +421,16 @@ def make_step(world, gains, options, max_steps: int, stop_at_goal=None, prepared
         converged = jnp.all(jnp.where(mask, truth.converged, True))
         alpha = jnp.where(moved, alpha, 0.0).astype(dtype)
         record = _Record(q, tip_position(q), c, cb, alpha, converged, fallbacks, searched)
-        if su.moving:
+        if track:
             record = record._replace(goal=sc.goal, time=t, error=err)
         return new, record
 
     return step
 
 
-def _record_zeros(world, options, T: int, stop_at_goal=None) -> _Record:
+def _record_zeros(world, options, T: int) -> _Record:
     """Zero records of T steps (what :func:`make_step` records, stacked), without tracing a step."""
-    su = _setup(world, options, stop_at_goal)
+    su = _setup(world, options)
     q0 = su.scene.q0
     n, dtype = q0.shape[0], q0.dtype
     m = radius_and_mask(su.scene)[1].shape[0]
@@ -434,7 +439,7 @@ def _record_zeros(world, options, T: int, stop_at_goal=None) -> _Record:
         return jnp.zeros((T, *shape), dt)
 
     rec = _Record(z((n, 3)), z((3,)), z((m,)), z((m,)), z(()), z((), bool), z((), jnp.int32), z((m,), bool))
-    if su.moving:
+    if su.track:
         rec = rec._replace(goal=z((3,)), time=z(()), error=z(()))
     return rec
 
@@ -459,9 +464,9 @@ def _freeze(records: _Record, end, still: bool):
     return _Record(*(fix(f, getattr(records, f)) for f in _Record._fields))
 
 
-def _finish(world, options, records: _Record, final: Carry, stop_at_goal=None) -> Rollout:
+def _finish(world, options, records: _Record, final: Carry) -> Rollout:
     """The Rollout from a rollout's records (frozen after its end) and its last carry."""
-    su = _setup(world, options, stop_at_goal)
+    su = _setup(world, options)
     plan = su.plan
     T = records.q.shape[0] - 1
     end = final.iterations
@@ -470,7 +475,7 @@ def _finish(world, options, records: _Record, final: Carry, stop_at_goal=None) -
     out = dict(q=r.q, tip=r.tip, clearance=r.clearance, between=r.between, iterations=final.iterations,
                min_clearance=min_clearance, step_scale=r.step_scale, escapes=final.escapes, converged=r.converged,
                fallbacks=r.fallbacks, between_searched=r.between_searched)
-    if su.stop_at_goal and not su.moving:
+    if su.stop_at_goal:
         status = jnp.where(final.status == Status.RUNNING, Status.MAX_STEPS, final.status)
         return Rollout(**out, status=status, reached=status == Status.REACHED, collided=status == Status.COLLIDED,
                        final_error=safe_norm(su.scene.goal - r.tip[-1]))
@@ -495,30 +500,30 @@ def _finish(world, options, records: _Record, final: Carry, stop_at_goal=None) -
                    held_steps=held_steps, held_to_end=held_to_end)
 
 
-def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks", step_chunk: int = DEFAULT_STEP_CHUNK,
-        stop_at_goal=None) -> Rollout:
+def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
+        step_chunk: int = DEFAULT_STEP_CHUNK) -> Rollout:
     """One rollout of ``world`` (a Scenario or a MovingScenario; pure, traceable).
 
     Args:
       world: the scene, static or moving.
       gains: Gains or GainFunction.
-      options: PlanOptions (static scene) or TrackOptions (moving scene), static.
+      options: PlanOptions (plan: stop at the goal) or TrackOptions (track: hold the goal to
+        the horizon; a moving scene needs them), static.
       max_steps: the most planner steps (static).
       key: PRNG key of the escapes.
       driver: "chunks" (stops after the chunk of ``step_chunk`` steps in which
         the rollout finished) or "scan" (all max_steps + 1 steps; reverse-mode
         differentiable). Both give the same arrays.
-      stop_at_goal: None: planning for a Scenario, tracking for a MovingScenario.
     """
-    step = make_step(world, gains, options, max_steps, stop_at_goal)
-    carry0 = init_carry(world, options, key, stop_at_goal)
+    step = make_step(world, gains, options, max_steps)
+    carry0 = init_carry(world, options, key)
     T1 = max_steps + 1
     if driver == "scan":
         final, records = jax.lax.scan(step, carry0, jnp.arange(T1))
     elif driver == "chunks":
         C = min(int(step_chunk), T1)
         n_chunks = math.ceil(T1 / C)
-        buf = tie(_record_zeros(world, options, n_chunks * C, stop_at_goal), carry0.q)
+        buf = tie(_record_zeros(world, options, n_chunks * C), carry0.q)
 
         def cond(state):
             i, carry, _ = state
@@ -535,11 +540,11 @@ def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks", s
         records = jax.tree_util.tree_map(lambda b: b[:T1], buf)
     else:
         raise ValueError(f"unknown driver {driver!r}; choose 'chunks' or 'scan' (a batch: run_lanes)")
-    return _finish(world, options, records, final, stop_at_goal)
+    return _finish(world, options, records, final)
 
 
 def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFAULT_LANES,
-              step_chunk: int = DEFAULT_STEP_CHUNK, stop_at_goal=None) -> Rollout:
+              step_chunk: int = DEFAULT_STEP_CHUNK) -> Rollout:
     """A batch of rollouts (``worlds``: a stacked Scenario or MovingScenario, leading
     axis B; ``keys`` (B,) keys), ``lanes`` at a time, refilled as they finish.
 
@@ -556,21 +561,21 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFA
     L = min(int(lanes), B)
     T1 = max_steps + 1
     C = int(step_chunk)
-    prepared = jax.vmap(lambda w: prepare(w, options, stop_at_goal))(worlds)  # once per scene
+    prepared = jax.vmap(lambda w: prepare(w, options))(worlds)  # once per scene
 
     def take(b):
         """Scene b's world, prepared data, key and first carry (b: (L,) indices)."""
         w, p, key = jax.tree_util.tree_map(lambda x: x[b], (worlds, prepared, keys))
-        return w, p, jax.vmap(lambda w, key: init_carry(w, options, key, stop_at_goal))(w, key)
+        return w, p, jax.vmap(lambda w, key: init_carry(w, options, key))(w, key)
 
     def step_one(world, prep, carry, k):
-        return make_step(world, gains, options, max_steps, stop_at_goal, prep)(carry, k)
+        return make_step(world, gains, options, max_steps, prep)(carry, k)
 
     idx0 = jnp.arange(L, dtype=jnp.int32)
     w0, p0, carry0 = take(idx0)
     one = jax.tree_util.tree_map(lambda x: x[0], worlds)
     out = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape), x.dtype),
-                                 _record_zeros(one, options, T1, stop_at_goal))
+                                 _record_zeros(one, options, T1))
     final0 = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape[1:]), x.dtype), carry0)
     state0 = (out, final0, idx0, jnp.zeros((L,), jnp.int32), (w0, p0, carry0), jnp.asarray(L, jnp.int32))
 
@@ -605,4 +610,4 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFA
         return jax.lax.scan(lane_step, state, None, length=C)[0]
 
     out, final, *_ = jax.lax.while_loop(cond, body, state0)
-    return jax.vmap(lambda w, rec, fin: _finish(w, options, rec, fin, stop_at_goal))(worlds, out, final)
+    return jax.vmap(lambda w, rec, fin: _finish(w, options, rec, fin))(worlds, out, final)

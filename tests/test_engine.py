@@ -10,7 +10,7 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.compilation_cache import rollout_compiler_options
-from softplan_jax.engine import check_engine_sizes
+from softplan_jax.engine import check_engine_sizes, run
 from softplan_jax.planner import batch_keys, make_options, rollout, rollout_jit
 from softplan_jax.step import safe_scale
 
@@ -132,3 +132,22 @@ def test_bad_sizes_refused_before_compiling(paper, kwargs, field):
             sp.plan(paper["tree"], **kwargs)
     with pytest.raises(ValueError, match="lanes"):
         check_engine_sizes(10, 8, "4")
+
+
+def test_tracking_a_static_scene_plans_it_then_holds(paper):
+    """The mode is the options': TrackOptions on a static scene hold the goal to the horizon. Up to
+    the step where planning ends at the goal, the two rollouts are the same step bit for bit (the
+    static attraction, no motion); tracking then holds the goal (status reached, held to the end)."""
+    from softplan_jax.tracking import make_track_options
+
+    sc, g = paper["tree"], sp.default_gains()
+    planned = jax.device_get(rollout_jit(sc, g, make_options("curve"), STEPS, 0))
+    tracked = jax.device_get(rollout_jit(sc, g, make_track_options("curve"), STEPS, 0))
+    it = int(planned.iterations)
+    np.testing.assert_array_equal(tracked.q[: it + 1], planned.q[: it + 1])
+    assert sp.status_name(tracked.status) == "reached" and bool(tracked.held_to_end)
+    assert int(tracked.reached_step) == it and int(tracked.iterations) == STEPS
+    np.testing.assert_allclose(tracked.time, np.arange(STEPS + 1) * float(g.dt), rtol=1e-15)
+    assert np.all(tracked.error[it:] <= 0.02)
+    with pytest.raises(ValueError, match="TrackOptions"):
+        run(sp.moving_scenario("tree_sway"), g, make_options("curve"), 5, jax.random.PRNGKey(0))
