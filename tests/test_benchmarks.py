@@ -598,3 +598,21 @@ def test_throughput_rejects_bad_arguments():
         with pytest.raises(SystemExit) as e:
             throughput.parse_args(argv)
         assert e.value.code == 2, argv
+
+
+def test_baselines_compare_tells_steps_taken_from_the_tail(tmp_path, capsys):
+    """benchmarks/baselines.py compare: equal arrays counted; a difference after a rollout's end
+    (its iterations) is told apart from one within the steps taken."""
+    import baselines
+
+    q = np.zeros((2, 6, 1))
+    a = {"g/iterations": np.array([2, 5]), "g/q": q, "g/status": np.array([1, 4])}
+    b = {"g/iterations": np.array([2, 5]), "g/q": q.copy(), "g/status": np.array([1, 4])}
+    b["g/q"][0, 4] = 1.0  # scene 0 after its end (step 2)
+    b["g/q"][1, 3] = 0.5  # scene 1 within its steps
+    np.savez(tmp_path / "a.npz", **a)
+    np.savez(tmp_path / "b.npz", **b)
+    assert baselines.main(["compare", str(tmp_path / "a.npz"), str(tmp_path / "b.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "2 of 3 arrays bit-identical" in out
+    assert "g/q: 1 of 2 rollouts differ within the steps taken; max |diff| 1" in out
