@@ -64,10 +64,9 @@ from .obstacles import placeholder_closest, radius_and_mask, true_closest, warm_
 from .status import Status
 from .step import attraction, next_q, tracking_attraction
 
-__all__ = ["Rollout", "Carry", "DRIVERS", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "run", "run_lanes",
+__all__ = ["Rollout", "Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "run", "run_lanes",
            "check_engine_sizes"]
 
-DRIVERS = ("scan", "chunks", "lanes")
 DEFAULT_STEP_CHUNK = 8  # steps between two checks of "done": at most 7 steps computed past the end
 DEFAULT_LANES = 64  # scenes stepped side by side in a batch (benchmarks/engine.py)
 
