@@ -32,8 +32,8 @@ def save(path: str, fallback: bool) -> int:
 
     jax.config.update("jax_enable_x64", True)
     import softplan_jax as sp
-    from softplan_jax.planner import make_options, rollout_jit
-    from softplan_jax.tracking import make_track_options, track_program
+    from softplan_jax.planning.planner import make_options, rollout_jit
+    from softplan_jax.planning.tracking import make_track_options, track_program
 
     out, t0 = {}, time.perf_counter()
 
@@ -42,7 +42,7 @@ def save(path: str, fallback: bool) -> int:
             if v is not None and f != "moving":
                 out[f"{prefix}/{f}"] = np.asarray(v)
 
-    paper_gains = sp.Gains(**{k: np.float64(v) for k, v in sp.preset("paper").gains.items()})
+    paper_gains = sp.Gains(**{k: np.float64(v) for k, v in sp.planning.preset("paper").gains.items()})
     for name in ("sim1", "sim2", "tree"):
         sc = sp.paper_scenario(name)
         for method, N in (("curve", 10), ("points", 10), ("points", 100)):
@@ -58,7 +58,7 @@ def save(path: str, fallback: bool) -> int:
         fn = track_program(make_track_options("curve"), 400, False)
         put(f"moving/{name}", jax.device_get(fn(sp.moving_scenario(name), sp.default_gains(),
                                                 jax.random.PRNGKey(0))))
-    put("moving/batch", sp.track_batch(sp.random_moving_scenarios(1, 32), max_steps=300))
+    put("moving/batch", sp.track_batch(sp.moving.random_moving_scenarios(1, 32), max_steps=300))
     print(f"moving scenes: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
     if fallback:
         for i, p in enumerate(sp.plan_fallback(sp.random_scenarios(1, 48), max_steps=300)):

@@ -33,7 +33,7 @@ point in the library). On a CPU, ``--host-devices K`` (or
 devices so that the shards run on K cores. (Sharded runs on 2 host devices used
 to hang: jaxlib's batched LAPACK solve waited on XLA's intra-op thread pool that
 the devices' programs occupied; the library's 3x3 solves no longer call LAPACK,
-see ``softplan_jax.numerics.solve_small``.)
+see ``softplan_jax.base.numerics.solve_small``.)
 
 Writes ``benchmarks/results/batch_sweep.{md,json}`` and the figure
 ``benchmarks/results/figures/sweep_collision_vs_cost.png`` (collision rate
@@ -179,9 +179,9 @@ def main(argv=None) -> dict:
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
     import softplan_jax as sp
-    from softplan_jax.batching import pad_batch, round_chunk
-    from softplan_jax.metrics import apply_collision_checks
-    from softplan_jax.planner import Status, make_options, rollout
+    from softplan_jax.planning.batching import pad_batch, round_chunk
+    from softplan_jax.geometry.clearance import apply_collision_checks
+    from softplan_jax.planning.planner import Status, make_options, rollout
 
     t_start = time.perf_counter()
     dtype = jnp.float32 if args.float32 else jnp.float64
@@ -256,7 +256,7 @@ def main(argv=None) -> dict:
         )
         log(f"{label}: compiling the planning-only batch rollout ...")
         first_j = jax.tree_util.tree_map(jnp.asarray, first)
-        _, plan_compile = compile_timed(sp.rollout_batch, first_j, gains, opts, T)
+        _, plan_compile = compile_timed(sp.planning.rollout_batch, first_j, gains, opts, T)
         r_shapes = jax.eval_shape(lambda s, o=opts: jax.vmap(lambda s1: rollout(s1, gains, o, T))(s), first_j)
         # 1. Plan: plan_batch, chunk by chunk (compiled above: no compilation inside the timing).
         t0 = time.perf_counter()

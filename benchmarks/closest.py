@@ -71,13 +71,13 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import closest_cases as cc  # noqa: E402
 
 import softplan_jax as sp  # noqa: E402
-from softplan_jax.closest import (  # noqa: E402
+from softplan_jax.geometry.closest import (  # noqa: E402
     SolverOptions,
     curve_closest,
     points_closest,
 )
-from softplan_jax.closest_grid import GridSolverOptions  # noqa: E402
-from softplan_jax.curves import PolynomialCurve, curve_points  # noqa: E402
+from softplan_jax.geometry.closest_grid import GridSolverOptions  # noqa: E402
+from softplan_jax.geometry.curves import PolynomialCurve, curve_points  # noqa: E402
 
 TOL = cc.TOL  # the suite's bar, 1e-9
 CHUNK = 64  # cases per library call (as tests/test_closest.py): one compiled shape per n
@@ -390,7 +390,7 @@ def run_pairwise(qs, coeffs, u_ranges, fn):
         idx = list(range(start, min(start + CHUNK, B)))
         idx += [idx[-1]] * (CHUNK - len(idx))
         curves = [sp.PolynomialCurve(np.asarray(coeffs[k]), np.asarray(u_ranges[k])) for k in idx]
-        stacked, _ = sp.stack_curves(curves, degree=3)
+        stacked, _ = sp.geometry.stack_curves(curves, degree=3)
         res = fn(jnp.asarray(qs[idx]), stacked)
         res = {f: np.asarray(getattr(res, f)) for f in res._fields}
         out += [{f: v[j] for f, v in res.items()} for j in range(CHUNK)]
@@ -680,7 +680,7 @@ def _solver_source() -> dict:
     """
     import subprocess
 
-    import softplan_jax.closest as closest_module
+    import softplan_jax.geometry.closest as closest_module
 
     src = inspect.getsource(closest_module)
     info = dict(file="softplan_jax/closest.py", sha256=hashlib.sha256(src.encode()).hexdigest()[:12])

@@ -86,7 +86,7 @@ def worker(args) -> dict:
     import jax.numpy as jnp
 
     import softplan_jax as sp
-    from softplan_jax.batching import round_chunk
+    from softplan_jax.planning.batching import round_chunk
 
     devices = jax.local_devices()
     assert len(devices) == args.worker, (devices, args.worker)
@@ -100,13 +100,13 @@ def worker(args) -> dict:
     size = round_chunk(args.chunk, args.n, len(devices))
     first = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x)[:size]), suite)
     if size > args.n:  # a suite smaller than one chunk: pad it the way plan_batch does
-        from softplan_jax.batching import pad_batch
+        from softplan_jax.planning.batching import pad_batch
 
         first = pad_batch(first, size)
     t0 = time.perf_counter()
-    sp.rollout_batch.lower(first, gains, opts, T).compile()
+    sp.planning.rollout_batch.lower(first, gains, opts, T).compile()
     compile_s = time.perf_counter() - t0
-    compiles = sp.rollout_batch.cache_size()
+    compiles = sp.planning.rollout_batch.cache_size()
     t0 = time.perf_counter()
     r = sp.plan_batch(suite, gains=gains, max_steps=T, chunk=args.chunk, progress=True)
     r = jax.tree_util.tree_map(np.asarray, r)
@@ -126,12 +126,12 @@ def worker(args) -> dict:
         chunks=-(-args.n // size),
         generation_s=gen_s,
         compile_s=compile_s,
-        recompiled_in_run=sp.rollout_batch.cache_size() - compiles,
+        recompiled_in_run=sp.planning.rollout_batch.cache_size() - compiles,
         run_s=run_s,
         scenario_steps_per_s=args.n * scan_steps / run_s,
         rollout_bytes=int(sum(x.nbytes for x in jax.tree_util.tree_leaves(r))),
         peak_rss_bytes=int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024,
-        status_counts={sp.status_name(int(k)): int((status == k).sum()) for k in np.unique(status)},
+        status_counts={sp.planning.status_name(int(k)): int((status == k).sum()) for k in np.unique(status)},
         loadavg_start=load_start,
         loadavg_end=_loadavg(),
         xla_flags=os.environ.get("XLA_FLAGS", ""),

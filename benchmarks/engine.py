@@ -1,6 +1,6 @@
 """Paid by the step: what one rollout engine that stops when the work is done buys.
 
-The rollout engine (:mod:`softplan_jax.engine`) stops a single rollout within
+The rollout engine (:mod:`softplan_jax.planning.engine`) stops a single rollout within
 ``step_chunk`` steps of its end, and a batch refills the lane of a finished
 scene with the next scene, so cost follows the steps taken. This script times
 the package against a previous version of it (``--base``: the ``softplan_jax``

@@ -15,7 +15,7 @@ Two parts, one process:
 2. **Profile** (every variant; ``--no-profile`` skips it): where a curve step's time
    goes. The tree rollout's trajectory q_0..q_T is replayed through separately
    jitted scans of the pieces of the warm-started closest points
-   (:mod:`softplan_jax.warm_start`): the segment frames, the polish
+   (:mod:`softplan_jax.geometry.warm_start`): the segment frames, the polish
    (``POLISH_ITERATIONS`` Newton steps per pair), polish + certificate, the
    whole warm closest point (plus fallback and the derivative-carrying tail);
    the rest of the planner step is the rollout's step minus that. Also the

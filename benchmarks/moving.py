@@ -88,8 +88,8 @@ def main(argv=None):
     from stats import paired_table, pct_interval, wilson
 
     import softplan_jax as sp
-    from softplan_jax.planner import make_options, rollout_batch, rollout_jit
-    from softplan_jax.tracking import make_track_options, track_program
+    from softplan_jax.planning.planner import make_options, rollout_batch, rollout_jit
+    from softplan_jax.planning.tracking import make_track_options, track_program
 
     quick = args.quick
     n = args.n or (16 if quick else 1024)
@@ -108,7 +108,7 @@ def main(argv=None):
         fig_dir = os.path.join(out_dir, "figures") if quick else FIGURES_DIR
     machine = machine_info("float64")
     t0 = time.perf_counter()
-    suite = sp.random_moving_scenarios(args.seed, n)
+    suite = sp.moving.random_moving_scenarios(args.seed, n)
     log(f"moving: {n} scenes built in {time.perf_counter() - t0:.1f} s")
     gains = sp.default_gains()
     dt = float(gains.dt)
@@ -127,7 +127,7 @@ def main(argv=None):
             if s != "non_finite" or np.any(st == sp.Status.NONFINITE)))
 
     def status_of(label):
-        return np.array([sp.status_name(s) for s in np.asarray(runs[label].status)])
+        return np.array([sp.planning.status_name(s) for s in np.asarray(runs[label].status)])
 
     table = {}
     for label, _ in models:
@@ -165,7 +165,7 @@ def main(argv=None):
     brute = np.array(brute)
 
     # 2b. The rollouts' closest points against the full solve at the same (q_k, t_k).
-    full = jax.jit(jax.vmap(lambda q, m, t: sp.true_closest(q, sp.scenario_at(m, t), sp.SolverOptions()).distance,
+    full = jax.jit(jax.vmap(lambda q, m, t: sp.geometry.true_closest(q, sp.moving.scenario_at(m, t), sp.geometry.SolverOptions()).distance,
                             in_axes=(0, None, 0)))
     worst_exact, pairs_checked, misses = 0.0, 0, 0
     for b in range(n_exact):

@@ -717,7 +717,7 @@ def closest_point_to_points(q, points, k=10):
 
 
 # ----------------------------------------------------------------------------
-# Moving curves (issue 23): the rigid motion of softplan_jax.motion, written
+# Moving curves (issue 23): the rigid motion of softplan_jax.scenarios.motion, written
 # independently (the rotation as scipy.linalg.expm of the axis' cross-product
 # matrix, the curve sampled in NumPy), and a brute force over space AND time.
 

@@ -57,7 +57,7 @@ from _common import (  # noqa: E402
 )
 
 import softplan_jax as sp  # noqa: E402
-from softplan_jax.planner import PAPER_STEP, make_options, result_from_rollout, rollout_jit, status_name  # noqa: E402
+from softplan_jax.planning.planner import PAPER_STEP, make_options, result_from_rollout, rollout_jit, status_name  # noqa: E402
 from softplan_jax.scenarios import PAPER_RESULTS, PAPER_SCENARIOS  # noqa: E402
 
 METHODS = ("curve", 1, 10, 50, 100)
@@ -504,7 +504,7 @@ def main(argv=None) -> dict:
         methods=[str(m) for m in methods],
         scenarios=list(SCENARIOS),
         gains={k: float(v) for k, v in gains._asdict().items()},
-        q0=np.asarray(sp.default_start(dtype=jnp.float64)).round(6).tolist(),
+        q0=np.asarray(sp.scenarios.default_start(dtype=jnp.float64)).round(6).tolist(),
         goal_tolerance=make_options().goal_tolerance,
         out=args.out,
         machine=machine,

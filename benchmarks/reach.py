@@ -85,11 +85,11 @@ def main(argv=None):
         fig_dir = os.path.join(out_dir, "figures") if args.quick else FIGURES_DIR
     machine = machine_info("float64")
     scenes = sp.random_scenarios(args.seed, n)
-    reach_opts = sp.ReachOptions()
+    reach_opts = sp.search.ReachOptions()
 
     # 1. Reachability of every scene.
     t0 = time.perf_counter()
-    decided = sp.reachability(scenes, options=reach_opts)
+    decided = sp.search.reachability(scenes, options=reach_opts)
     t_reach_all = time.perf_counter() - t0
     ik_ok = np.asarray(decided.reachable)
     log(f"reach: IK certified {int(ik_ok.sum())}/{n} goals reachable ({t_reach_all:.1f} s incl. compile)")
@@ -110,7 +110,7 @@ def main(argv=None):
         f"{len(glob)} by the global search")
 
     # 3. Independent checks of every global path.
-    dense = jax.jit(lambda qs, s: sp.dense_trajectory_clearance(qs, s, substeps=args.dense, arm_samples=40,
+    dense = jax.jit(lambda qs, s: sp.geometry.dense_trajectory_clearance(qs, s, substeps=args.dense, arm_samples=40,
                                                                 curve_samples=300))
     dense_min, proof_fail = [], 0
     for i, b in enumerate(glob):
@@ -123,7 +123,7 @@ def main(argv=None):
         dense_min.append(float(jnp.min(dense(q, s))))
         c_a = np.asarray(r.clearance[r.global_start:-1]).min(axis=1)
         qa, qb = np.asarray(r.q[r.global_start:-1]), np.asarray(r.q[r.global_start + 1:])
-        B = np.asarray(jax.vmap(lambda a, b_: sp.motion_bound(a, b_)[-1])(jnp.asarray(qa), jnp.asarray(qb)))
+        B = np.asarray(jax.vmap(lambda a, b_: sp.geometry.motion_bound(a, b_)[-1])(jnp.asarray(qa), jnp.asarray(qb)))
         proof_fail += int(np.sum(c_a - B <= 1e-6))
         if (i + 1) % 10 == 0:
             log(f"reach: dense check {i + 1}/{len(glob)} global paths")
@@ -139,7 +139,7 @@ def main(argv=None):
     sp.plan_fallback(warm, max_steps=args.max_steps)
     compile_fb = time.perf_counter() - t0
     t0 = time.perf_counter()
-    sp.reachability(warm)
+    sp.search.reachability(warm)
     compile_ik = time.perf_counter() - t0
     t_local, t_fb, t_ik = [], [], []
     for b in range(n_time):
@@ -154,7 +154,7 @@ def main(argv=None):
         sp.plan_fallback(s, max_steps=args.max_steps)
         t_fb.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
-        sp.reachability(s)
+        sp.search.reachability(s)
         t_ik.append(time.perf_counter() - t0)
         if (b + 1) % 64 == 0 or b + 1 == n_time:
             log(f"reach: timed {b + 1}/{n_time} scenes one by one")

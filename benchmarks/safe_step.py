@@ -45,7 +45,7 @@ VARIANTS = ("plain", "safe", "default")
 
 def variant_options(variant: str) -> dict:
     """PlanOptions fields of a variant (imported lazily: this module imports no jax)."""
-    from softplan_jax.planner import PAPER_STEP
+    from softplan_jax.planning.planner import PAPER_STEP
 
     return {
         "plain": dict(PAPER_STEP),  # the earlier default: the paper's step, no escapes, stall test 60 / 1e-4
@@ -98,8 +98,8 @@ def main(argv=None) -> dict:
     from _common import RESULTS_DIR, finish_machine, log, machine_info, machine_lines
 
     import softplan_jax as sp
-    from softplan_jax.metrics import apply_collision_checks
-    from softplan_jax.planner import make_options, rollout_batch, status_name
+    from softplan_jax.geometry.clearance import apply_collision_checks
+    from softplan_jax.planning.planner import make_options, rollout_batch, status_name
 
     dtype = jnp.float32 if args.float32 else jnp.float64
     dname = "float32" if args.float32 else "float64"

@@ -20,10 +20,10 @@ during the motion between steps, against the real curves. Phases:
    at the edge of the grid. The whole grid gives the d0 x dt sensitivity heat
    maps and tables (training seed).
 2. **Gradient tuning** on the same training seed (its first ``grad_scenes``
-   scenes): :func:`softplan_jax.tuning.tune_gains` (optax adam on log d0,
+   scenes): :func:`softplan_jax.tuning.pathwise.tune_gains` (optax adam on log d0,
    log eta, log dt, from the default gains, the learning rate decaying from
    ``lr`` to ``lr_final`` along a cosine) of the differentiable surrogate
-   :func:`softplan_jax.tuning.rollout_loss`: mean and final tip error
+   :func:`softplan_jax.tuning.pathwise.rollout_loss`: mean and final tip error
    (success) plus a softplus penalty on the true clearance below a margin
    (clearance). Gradient pathologies, handled: the gains are tuned in log
    space (they stay positive, steps are relative); the gradient is clipped by
@@ -144,7 +144,7 @@ class Runner:
 
     @staticmethod
     def options(method, check: bool = True):
-        from softplan_jax.planner import make_options
+        from softplan_jax.planning.planner import make_options
 
         return make_options("curve" if method == "curve" else "points", 10 if method == "curve" else method,
                             check_collisions=check)
@@ -160,7 +160,7 @@ class Runner:
     def ensure_compiled(self, suite, gains, method, max_steps: int, check: bool = True, log=None) -> float:
         """Compile the program for this shape ahead of time (jax keeps it for the
         later calls); returns the compile seconds (0 if already compiled)."""
-        from softplan_jax.planner import rollout_batch
+        from softplan_jax.planning.planner import rollout_batch
 
         jax = self.jax
         _, idx = self.batches(suite)[0]
@@ -179,7 +179,7 @@ class Runner:
         """Checked rollouts of every scene of ``suite``. Chunk c0's escapes use
         ``seed * 100003 + c0``. -> dict(status names, iterations, min_clearance,
         seconds per scene-step of each chunk, run seconds, compile seconds)."""
-        from softplan_jax.planner import rollout_batch, status_name
+        from softplan_jax.planning.planner import rollout_batch, status_name
 
         jax = self.jax
         n = suite.q0.shape[0]
@@ -233,7 +233,7 @@ def main(argv=None) -> dict:
     from _common import FIGURES_DIR, RESULTS_DIR, log, machine_info
 
     import softplan_jax as sp
-    from softplan_jax.tuning import LossWeights, tune_gains
+    from softplan_jax.tuning.pathwise import LossWeights, tune_gains
 
     t_all = time.perf_counter()
     machine = machine_info("float64")
@@ -425,7 +425,7 @@ def cost_per_step(args, runner, suite, gains, stamp) -> dict:
     robin over the methods (so the machine's load falls on all alike)."""
     import jax
 
-    from softplan_jax.planner import rollout_batch
+    from softplan_jax.planning.planner import rollout_batch
 
     batches = runner.batches(suite)[: args.timing_chunks]
     for m in args.method_list:

@@ -65,10 +65,10 @@ from _common import (  # noqa: E402
 )
 
 import softplan_jax as sp  # noqa: E402
-from softplan_jax.compilation_cache import rollout_compiler_options  # noqa: E402
-from softplan_jax.obstacles import radius_and_mask  # noqa: E402
-from softplan_jax.planner import make_options, rollout, rollout_jit  # noqa: E402
-from softplan_jax.tuning import rollout_loss  # noqa: E402
+from softplan_jax.base.compilation_cache import rollout_compiler_options  # noqa: E402
+from softplan_jax.geometry.obstacles import radius_and_mask  # noqa: E402
+from softplan_jax.planning.planner import make_options, rollout, rollout_jit  # noqa: E402
+from softplan_jax.tuning.pathwise import rollout_loss  # noqa: E402
 
 
 def median_run(fn, *args, repeats):
@@ -106,7 +106,7 @@ def batch_of(scenario, size, seed=0):
     """``size`` copies of the scenario with goals moved by up to 2 cm (one padded shape)."""
     rng = np.random.default_rng(seed)
     goals = np.asarray(scenario.goal) + rng.uniform(-0.02, 0.02, (size, 3))
-    return sp.stack_scenarios([scenario._replace(goal=jnp.asarray(g, scenario.goal.dtype)) for g in goals])
+    return sp.scenarios.stack_scenarios([scenario._replace(goal=jnp.asarray(g, scenario.goal.dtype)) for g in goals])
 
 
 def measure(dtype, steps, batch_size, repeats):

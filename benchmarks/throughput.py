@@ -73,16 +73,16 @@ def worker(args) -> dict:
         for b in args.size_list:
             suite = sp.random_scenarios(0, b)
             t0 = time.perf_counter()
-            sp.rollout_batch.lower(suite, g, opts, args.steps, devices=k).compile()
+            sp.planning.rollout_batch.lower(suite, g, opts, args.steps, devices=k).compile()
             compile_s = time.perf_counter() - t0
-            jax.block_until_ready(sp.rollout_batch(suite, g, opts, args.steps, devices=k))  # compiles nothing
+            jax.block_until_ready(sp.planning.rollout_batch(suite, g, opts, args.steps, devices=k))  # compiles nothing
             calls[(method, b)] = (suite, opts, compile_s)
             log(f"  [{k} device(s)] {method} B={b}: compiled in {compile_s:.1f} s")
     times = {key: [] for key in calls}
     for r in range(args.rounds):
         for (method, b), (suite, opts, _) in calls.items():
             t0 = time.perf_counter()
-            jax.block_until_ready(sp.rollout_batch(suite, g, opts, args.steps, devices=k).q)
+            jax.block_until_ready(sp.planning.rollout_batch(suite, g, opts, args.steps, devices=k).q)
             times[(method, b)].append(time.perf_counter() - t0)
         log(f"  [{k} device(s)] round {r + 1}/{args.rounds}")
     rows = []

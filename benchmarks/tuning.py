@@ -18,12 +18,12 @@ checks in the scan). Per obstacle model (curve, N = 10, N = 50):
    derivative-free optimiser for a few continuous parameters with noisy
    evaluations; log d0, log dt, log eta from the grid box's geometric centre, sigma0 0.5,
    population ``--cma-popsize``): each candidate is scored by the mean
-   :func:`softplan_jax.smoothing.rollout_score` (the gradient's score) on a
+   :func:`softplan_jax.tuning.smoothing.rollout_score` (the gradient's score) on a
    minibatch of ``--pairs`` training scenes shared by the generation;
    B_grid / ``--fraction`` rollouts; its final mean is the choice. ``cma-g``:
    the same on the gradient's parameter space, with the gradient's per-coordinate
    scales (``CMA_stds`` proportional to ``--sigma``, geometric mean 1): the control for it.
-4. **gradient**: :func:`softplan_jax.smoothing.tune_smoothed` (its defaults:
+4. **gradient**: :func:`softplan_jax.tuning.smoothing.tune_smoothed` (its defaults:
    SGD with momentum 0.5, step ``--lr`` decaying to a tenth, the mean of the
    last third of the iterates) from the same centre, B_grid / ``--fraction``
    rollouts (updates x 2 x pairs), on ``--grad-names`` (default d0 and dt; eta
@@ -36,7 +36,7 @@ checks in the scan). Per obstacle model (curve, N = 10, N = 50):
    instead or as well; validation chose the clip).
 5. **gain function** (beyond the grid's reach; with the ablation
    ``gradient+``: the same extra updates on the three gains alone): the 20-parameter
-   :class:`~softplan_jax.planner.GainFunction` space (log d0, dt, eta; a
+   :class:`~softplan_jax.planning.planner.GainFunction` space (log d0, dt, eta; a
    14-knot repulsion profile over d / d0; 3 segment weights),
    ``tune_smoothed`` from the gradient's result for ``--fn-updates`` more
    updates of ``--fn-pairs`` pairs: dt as in the gradient's space
@@ -194,7 +194,7 @@ def draw_in_box(args, rng) -> dict:
 
 
 def grad_kwargs(args) -> dict:
-    """The gradient's step settings for :func:`softplan_jax.smoothing.tune_smoothed`
+    """The gradient's step settings for :func:`softplan_jax.tuning.smoothing.tune_smoothed`
     (shared by tuning.py and tuning_seeds.py): sigma (one, or one per tuned gain), the
     natural gradient, first step, and the guards (``--box``: the grid's box on the tuned
     gains; ``--max-step``)."""
@@ -205,7 +205,7 @@ def grad_kwargs(args) -> dict:
 
 
 def fn_kwargs(args, space) -> dict:
-    """The gain-function stage's settings for :func:`softplan_jax.smoothing.tune_smoothed` on
+    """The gain-function stage's settings for :func:`softplan_jax.tuning.smoothing.tune_smoothed` on
     ``space`` (the 20-parameter function, or its ablation on the three gains): sigma
     ``--fn-gain-sigma`` for d0, dt, eta and ``--fn-sigma`` for the profile and segment weights,
     the natural gradient (``--fn-natural``), first step ``--fn-lr``, the clip ``--max-step``."""
@@ -230,8 +230,8 @@ def main(argv=None) -> dict:
     from _common import FIGURES_DIR, RESULTS_DIR, log, machine_info
 
     import softplan_jax as sp
-    from softplan_jax.planner import make_options
-    from softplan_jax.smoothing import GainSpace, ScoreWeights, score_batch, tune_smoothed
+    from softplan_jax.planning.planner import make_options
+    from softplan_jax.tuning.smoothing import GainSpace, ScoreWeights, score_batch, tune_smoothed
 
     t_all = time.perf_counter()
     machine = machine_info("float64")
@@ -260,7 +260,7 @@ def main(argv=None) -> dict:
         tip = np.asarray(r.tip)
         return dict(reached=np.asarray(r.reached), collided=np.asarray(r.collided),
                     iterations=np.asarray(r.iterations),
-                    status=[sp.status_name(s) for s in np.asarray(r.status)],
+                    status=[sp.planning.status_name(s) for s in np.asarray(r.status)],
                     path=np.linalg.norm(np.diff(tip, axis=1), axis=-1).sum(1))
 
     results: dict = dict(machine=machine, args={k: v for k, v in vars(args).items() if k != "grid"}, methods={})
@@ -571,7 +571,7 @@ def figures(results: dict, args, fig_dir: str, sp) -> None:
     # tuned repulsion functions
     import jax.numpy as jnp
 
-    from softplan_jax.planner import GainFunction, repulsion, repulsion_scale
+    from softplan_jax.planning.planner import GainFunction, repulsion, repulsion_scale
 
     fig, axes = plt.subplots(1, len(labs), figsize=(4 * len(labs), 3.2), squeeze=False)
     for ax, lab in zip(axes[0], labs, strict=True):

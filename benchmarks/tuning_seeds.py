@@ -49,7 +49,7 @@ def main(argv=None) -> dict:
     from _common import RESULTS_DIR, log, machine_info
 
     import softplan_jax as sp
-    from softplan_jax.smoothing import GainSpace, tune_smoothed
+    from softplan_jax.tuning.smoothing import GainSpace, tune_smoothed
 
     t_all = time.perf_counter()
     out = (args.out + "_seeds") if args.out else os.path.join(RESULTS_DIR, "quick" if own.quick else "", "tuning_seeds")

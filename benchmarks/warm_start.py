@@ -6,7 +6,7 @@ Three parts, one process:
    :func:`softplan_jax.plan_batch` and the default options (warm start on,
    collision checks on, so each step's clearance record is the warm start's
    distance); at every step k <= iterations of every scene the full solver's
-   distances (:func:`softplan_jax.obstacles.true_closest`, warm start off) at
+   distances (:func:`softplan_jax.geometry.obstacles.true_closest`, warm start off) at
    the same q_k. A miss: warm distance > full distance + 1e-9. Also the
    fallback rate: (segment, curve) pairs that took the full solve, per
    pair-step of real curves (steps k >= 1; step 0 solves every pair in full).
@@ -48,8 +48,8 @@ from _common import (  # noqa: E402
 )
 
 import softplan_jax as sp  # noqa: E402
-from softplan_jax import obstacles  # noqa: E402
-from softplan_jax.planner import make_options, rollout  # noqa: E402
+from softplan_jax.geometry import obstacles  # noqa: E402
+from softplan_jax.planning.planner import make_options, rollout  # noqa: E402
 
 MISS = 1e-9
 

@@ -8,8 +8,8 @@ round), min and median. Each variant's results are compared with the default
 (XLA's own options): q bitwise, statuses.
 
 The variant that the package uses is
-``softplan_jax.compilation_cache.CPU_COMPILER_OPTIONS``
-(:func:`~softplan_jax.compilation_cache.rollout_compiler_options`).
+``softplan_jax.base.compilation_cache.CPU_COMPILER_OPTIONS``
+(:func:`~softplan_jax.base.compilation_cache.rollout_compiler_options`).
 
     python benchmarks/xla_options.py            # ~4 min on 2 CPUs
     python benchmarks/xla_options.py --method points   # the 10-point model's rollouts
@@ -35,7 +35,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _common import RESULTS_DIR, finish_machine, fmt_s, log, machine_info, machine_lines, write_results  # noqa: E402
 
 import softplan_jax as sp  # noqa: E402
-from softplan_jax.planner import make_options, rollout  # noqa: E402
+from softplan_jax.planning.planner import make_options, rollout  # noqa: E402
 
 VARIANTS = {
     "XLA defaults": None,

@@ -32,7 +32,7 @@ def assert_finite(x, err_msg=""):
 
 
 def unpack_stacked(result):
-    """Return (curve, mask) from sp.stack_curves's result.
+    """Return (curve, mask) from sp.geometry.stack_curves's result.
 
     The contract says stack_curves returns a PolynomialCurve with stacked
     fields and a bool mask; accept either a ``(curve, mask)`` pair or a curve

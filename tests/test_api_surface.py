@@ -20,43 +20,27 @@ from session import REPO, subprocess_env
 import softplan_jax as sp
 
 PUBLIC = [
-    # kinematics (paper section 2.1)
-    "segment_transform", "segment_frames", "segment_point", "tip_position", "point_jacobian",
-    "tip_jacobian", "backbone_points", "motion_bound",
-    # obstacle curves and point clouds
-    "PolynomialCurve", "ParametricCurve", "line_segment", "stack_curves", "curve_points",
-    "fit_polynomial_curve", "CurveFit", "CloudFit", "FitWarning", "fit_curve", "fit_curves",
-    "curve_distance", "load_cloud", "save_fit_scenario",
-    # closest points (paper section 2.3)
-    "ClosestPoint", "SolverOptions", "GridSolverOptions", "closest_point", "closest_point_to_points", "point_distance",
-    # scenarios
-    "Scenario", "default_start", "make_scenario", "stack_scenarios", "scenario_warnings",
-    "paper_scenario", "random_scenarios", "load_scenario", "save_scenario", "scenario_from_dict",
-    "scenario_to_dict",
-    # planner (paper eq. 9)
-    "Gains", "GainFunction", "default_gains", "attraction", "repulsion", "PlanOptions", "make_options", "PAPER_STEP",
-    "planner_step", "Status", "STATUS_NAMES", "status_name", "Rollout", "rollout", "rollout_jit",
-    "rollout_batch", "PlanResult", "result_from_rollout", "plan", "plan_batch",
-    # reachability and the global fallback
-    "ReachOptions", "Reachability", "REACH_REASONS", "reachability", "plan_fallback",
-    # moving obstacles and moving goals
-    "CurveMotion", "GoalPath", "MovingScenario", "curve_motion", "goal_path", "make_moving_scenario",
-    "stack_moving_scenarios", "scenario_at", "goal_at", "speed_bounds", "MOVING_SCENARIOS", "moving_scenario",
-    "random_moving_scenarios", "TrackOptions", "Track", "TrackResult", "track", "track_batch",
-    # gain presets
-    "Preset", "PRESETS", "preset", "apply_preset",
-    # gains files
-    "save_gains", "load_gains", "gains_to_dict", "gains_from_dict",
-    # metrics
-    "true_closest", "dense_trajectory_clearance", "apply_collision_checks",
-    # tuning
-    "LossWeights", "TuningResult", "rollout_loss", "batch_loss", "tune_gains",
-    # tuning on the smoothed objective
-    "GainSpace", "ScoreWeights", "rollout_score", "score_batch", "SmoothingSample", "smoothing_sample",
-    "smoothed_objective", "ObjectiveEstimate", "estimate_objective", "TuneResult", "tune_smoothed",
-    "enable_compilation_cache", "compilation_cache_dir",
+    # scenes
+    "Scenario", "make_scenario", "paper_scenario", "random_scenarios", "load_scenario", "save_scenario",
+    # obstacles and the arm
+    "PolynomialCurve", "ParametricCurve", "line_segment", "segment_point", "tip_position", "point_jacobian",
+    "closest_point", "closest_point_to_points",
+    # planning (paper eq. 9)
+    "Gains", "GainFunction", "default_gains", "PAPER_STEP", "PlanOptions", "make_options", "PlanResult", "Status",
+    "plan", "plan_batch", "plan_fallback",
+    # moving goals and obstacles
+    "moving_scenario", "make_moving_scenario", "track", "track_batch",
+    # gains
+    "apply_preset", "save_gains", "load_gains", "enable_compilation_cache",
     "__version__",
 ]
+
+# The sub-namespaces (one per layer) and a name each that must be found there.
+NAMESPACES = {
+    "geometry": "motion_bound", "scenarios": "stack_scenarios", "clouds": "fit_curves", "planning": "rollout_jit",
+    "search": "reachability", "tuning": "tune_smoothed", "moving": "MovingScenario", "plotting": "plot_snapshots",
+    "cli": "main",
+}
 
 # The DESIGN.md contract: these names must never disappear.
 CONTRACT = ["segment_point", "tip_position", "point_jacobian", "PolynomialCurve", "ParametricCurve",
@@ -154,7 +138,7 @@ def test_no_module_imports_private_names_of_another():
 
 
 def test_the_checker_finds_private_imports():
-    src = ("from .kinematics import _frames\nfrom softplan_jax.closest import _x as y\n"
+    src = ("from .kinematics import _frames\nfrom softplan_jax.geometry.closest import _x as y\n"
            "import softplan_jax as sp\nsp.planner._f()\n")
     assert [ln for ln, _ in _private_imports_src(src, "x")] == [1, 2, 4]
     assert _private_imports_src("from .kinematics import frames\nsp.planner.f()\n", "x") == []
@@ -179,3 +163,156 @@ def test_every_subpackage_is_installed():
     found = {"softplan_jax"} | {info.name for info in pkgutil.walk_packages([PACKAGE_DIR], prefix="softplan_jax.")
                                 if info.ispkg}
     assert listed == found, f"pyproject.toml packages {sorted(listed)} != packages in the tree {sorted(found)}"
+
+
+@pytest.mark.parametrize("space", sorted(NAMESPACES))
+def test_sub_namespaces(space):
+    """Each layer is a sub-namespace of the top level, with an ``__all__`` of its own."""
+    mod = getattr(sp, space)
+    assert NAMESPACES[space] in mod.__all__
+    assert callable(getattr(mod, NAMESPACES[space])) or isinstance(getattr(mod, NAMESPACES[space]), type)
+
+
+def test_moved_names_still_work_with_a_deprecation_warning():
+    """Every name that was at the top level before the sub-namespaces still is, with a
+    DeprecationWarning that names its new place, and is the very same object."""
+    assert len(sp._MOVED) + len(PUBLIC) >= 110  # the 112 names of the flat package, less two now under their layer
+    for name, where in sp._MOVED.items():
+        with pytest.warns(DeprecationWarning, match=f"softplan_jax.{where}.{name}"):
+            old = getattr(sp, name)
+        assert old is getattr(importlib.import_module(f"softplan_jax.{where}"), name)
+        assert name not in sp.__all__
+
+
+def test_old_module_paths_still_import_with_a_deprecation_warning():
+    """The flat modules' paths (softplan_jax.planner, .closest, ...) forward to the new modules."""
+    from softplan_jax import _compat
+
+    code = ("import warnings, importlib; warnings.simplefilter('error', DeprecationWarning)\n"
+            "import softplan_jax\n"
+            "for old in %r:\n"
+            "    try:\n"
+            "        importlib.import_module('softplan_jax.' + old)\n"
+            "    except DeprecationWarning as w:\n"
+            "        assert 'moved to' in str(w), w\n"
+            "    else:\n"
+            "        raise SystemExit('no warning for ' + old)\n"
+            "warnings.simplefilter('ignore')\n"
+            "from softplan_jax.planner import plan, make_options, rollout_jit, PAPER_STEP\n"
+            "from softplan_jax.fitting import fit_curve\n"
+            "from softplan_jax.motion import MovingScenario\n"
+            "import softplan_jax.closest as c, softplan_jax.geometry.closest as g\n"
+            "assert c.closest_point is g.closest_point and plan is softplan_jax.plan\n"
+            "print('ok')\n") % (sorted(_compat.OLD_MODULES),)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=subprocess_env(),
+                         cwd=REPO, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stdout + out.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# The house: folders by layer, every import pointing down, no loops, no module much over 500 lines.
+
+# Layers from the top floor down; a module may import from its own layer or any layer below.
+LAYERS = ["cli", "plotting", "tuning", "search", "planning", "clouds", "scenarios", "geometry", "base"]
+TOP_LEVEL = {"softplan_jax", "softplan_jax._compat", "softplan_jax.moving"}  # the faces, above every layer
+MAX_LINES = 500
+
+
+def _import_graph():
+    """module -> the package modules it imports (read from the source, every import, lazy ones too)."""
+    modules = {}
+    for dirpath, _, files in os.walk(PACKAGE_DIR):
+        for f in files:
+            if f.endswith(".py"):
+                path = os.path.join(dirpath, f)
+                rel = os.path.relpath(path, os.path.dirname(PACKAGE_DIR))[:-3].replace(os.sep, ".")
+                modules[rel.removesuffix(".__init__")] = path
+    graph = {}
+    for name, path in modules.items():
+        is_pkg = path.endswith("__init__.py")
+        with open(path, encoding="utf-8") as fh:
+            tree = ast.parse(fh.read(), path)
+        out = set()
+        for node in ast.walk(tree):
+            targets = []
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = name.split(".") if is_pkg else name.split(".")[:-1]
+                    base = base[: len(base) - (node.level - 1)]
+                    mod = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    mod = node.module or ""
+                targets = [mod] + [f"{mod}.{a.name}" for a in node.names]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            out |= {t for t in targets if t in modules and t != name}
+        graph[name] = out
+    return modules, graph
+
+
+def _layer(module):
+    parts = module.split(".")
+    return None if module in TOP_LEVEL or len(parts) < 2 else parts[1]
+
+
+def _cycles(graph):
+    """The strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = set()
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.add(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_loops():
+    _, graph = _import_graph()
+    assert _cycles(graph) == []
+
+
+def test_the_loop_finder_finds_loops():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_every_import_points_down_a_layer():
+    modules, graph = _import_graph()
+    assert {_layer(m) for m in modules} - {None} == set(LAYERS), "a folder of the package is not in LAYERS"
+    up = []
+    for m, targets in graph.items():
+        if _layer(m) is None:
+            continue
+        for t in targets:
+            lt = _layer(t)
+            if lt is None or LAYERS.index(lt) < LAYERS.index(_layer(m)):
+                up.append(f"{m} -> {t}")
+    assert up == [], "imports that point up a layer:\n" + "\n".join(sorted(up))
+
+
+def test_no_module_is_much_over_500_lines():
+    modules, _ = _import_graph()
+    sizes = {m: sum(1 for _ in open(p, encoding="utf-8")) for m, p in modules.items()}
+    big = {m: n for m, n in sizes.items() if n > MAX_LINES}
+    assert big == {}, f"modules over {MAX_LINES} lines: {big}"

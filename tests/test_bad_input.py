@@ -22,14 +22,14 @@ def good_curve():
 
 # every public function that takes a configuration q, as q -> result
 Q_CONSUMERS = {
-    "segment_point": lambda q: sp.segment_point(q, 0, 0.5),
-    "point_jacobian": lambda q: sp.point_jacobian(q, 0, 0.5),
+    "segment_point": lambda q: sp.geometry.segment_point(q, 0, 0.5),
+    "point_jacobian": lambda q: sp.geometry.point_jacobian(q, 0, 0.5),
     "tip_position": sp.tip_position,
-    "tip_jacobian": sp.tip_jacobian,
-    "segment_frames": sp.segment_frames,
-    "backbone_points": sp.backbone_points,
+    "tip_jacobian": sp.geometry.tip_jacobian,
+    "segment_frames": sp.geometry.segment_frames,
+    "backbone_points": sp.geometry.backbone_points,
     "closest_point": lambda q: sp.closest_point(q, good_curve()),
-    "closest_point_to_points": lambda q: sp.closest_point_to_points(q, jnp.asarray(GOOD_POINTS)),
+    "closest_point_to_points": lambda q: sp.geometry.closest_point_to_points(q, jnp.asarray(GOOD_POINTS)),
 }
 
 
@@ -93,9 +93,9 @@ def test_q_wrong_shape_under_jit():
 
 
 def test_segment_transform_wrong_shape():
-    raises_value_error(lambda: sp.segment_transform(jnp.ones((2, 3))), r"shape|\(3,\)")
-    raises_value_error(lambda: sp.segment_transform(jnp.asarray([0.0, 0.1, 0.2])), r"length|\bL")
-    raises_value_error(lambda: sp.segment_transform(jnp.asarray([1.0, np.nan, 0.2])), r"nan|finite")
+    raises_value_error(lambda: sp.geometry.segment_transform(jnp.ones((2, 3))), r"shape|\(3,\)")
+    raises_value_error(lambda: sp.geometry.segment_transform(jnp.asarray([0.0, 0.1, 0.2])), r"length|\bL")
+    raises_value_error(lambda: sp.geometry.segment_transform(jnp.asarray([1.0, np.nan, 0.2])), r"nan|finite")
 
 
 # --------------------------------------------------------------------------
@@ -103,7 +103,7 @@ def test_segment_transform_wrong_shape():
 # --------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("fn", [sp.segment_point, sp.point_jacobian])
+@pytest.mark.parametrize("fn", [sp.geometry.segment_point, sp.geometry.point_jacobian])
 @pytest.mark.parametrize("i", [2, 3, 17, -1, -3])
 def test_unknown_segment_index(fn, i):
     # GOOD_Q has 2 segments, indices 0 and 1 (0-based, no Python wrap-around)
@@ -190,7 +190,7 @@ def test_line_segment_bad_endpoints():
 
 def test_empty_point_set():
     raises_value_error(
-        lambda: sp.closest_point_to_points(jnp.asarray(GOOD_Q), jnp.zeros((0, 3))),
+        lambda: sp.geometry.closest_point_to_points(jnp.asarray(GOOD_Q), jnp.zeros((0, 3))),
         r"points|empty|at least",
     )
 
@@ -198,7 +198,7 @@ def test_empty_point_set():
 @pytest.mark.parametrize("shape", [(4, 2), (3,), (2, 3, 1), (4, 4), (1, 3, 3)])
 def test_points_wrong_shape(shape):
     raises_value_error(
-        lambda: sp.closest_point_to_points(jnp.asarray(GOOD_Q), jnp.ones(shape)),
+        lambda: sp.geometry.closest_point_to_points(jnp.asarray(GOOD_Q), jnp.ones(shape)),
         r"points",
         r"shape|\(N, ?3\)",
     )
@@ -208,18 +208,18 @@ def test_points_non_finite():
     p = GOOD_POINTS.copy()
     p[0, 2] = np.inf
     raises_value_error(
-        lambda: sp.closest_point_to_points(jnp.asarray(GOOD_Q), jnp.asarray(p)), r"nan|inf|finite"
+        lambda: sp.geometry.closest_point_to_points(jnp.asarray(GOOD_Q), jnp.asarray(p)), r"nan|inf|finite"
     )
 
 
 def test_fit_polynomial_curve_bad_points():
-    raises_value_error(lambda: sp.fit_polynomial_curve(jnp.zeros((0, 3)), 2), r"points|empty|at least")
-    raises_value_error(lambda: sp.fit_polynomial_curve(jnp.ones((10, 2)), 2), r"shape|\(N, ?3\)")
+    raises_value_error(lambda: sp.clouds.fit_polynomial_curve(jnp.zeros((0, 3)), 2), r"points|empty|at least")
+    raises_value_error(lambda: sp.clouds.fit_polynomial_curve(jnp.ones((10, 2)), 2), r"shape|\(N, ?3\)")
     # too few points for the degree, and all-identical points
     raises_value_error(
-        lambda: sp.fit_polynomial_curve(jnp.ones((2, 3)) * jnp.arange(2.0)[:, None], 3), r"point|degree"
+        lambda: sp.clouds.fit_polynomial_curve(jnp.ones((2, 3)) * jnp.arange(2.0)[:, None], 3), r"point|degree"
     )
-    raises_value_error(lambda: sp.fit_polynomial_curve(jnp.ones((6, 3)), 2), r"identical|distinct|same|zero")
+    raises_value_error(lambda: sp.clouds.fit_polynomial_curve(jnp.ones((6, 3)), 2), r"identical|distinct|same|zero")
 
 
 def test_good_inputs_are_accepted():
@@ -227,7 +227,7 @@ def test_good_inputs_are_accepted():
     q = jnp.asarray(GOOD_Q)
     for name in ("segment_point", "tip_position", "segment_frames", "backbone_points"):
         Q_CONSUMERS[name](q)  # eager: value checks run
-    sp.segment_point(q, 1, 0.5)
+    sp.geometry.segment_point(q, 1, 0.5)
     sp.ParametricCurve(lambda u: jnp.stack([u, 2 * u, 1.0 + 0 * u]), (0.0, 1.0))
     sp.line_segment(jnp.zeros(3), jnp.ones(3))
     # the closest-point entry points: shapes accepted (abstract evaluation,

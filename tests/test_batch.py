@@ -1,7 +1,7 @@
 """Batches: the LAPACK-free small solve, plan_batch in chunks with progress,
 and plan_batch sharded over 2 host devices.
 
-* :func:`softplan_jax.numerics.solve_small` (the planner's and the swept
+* :func:`softplan_jax.base.numerics.solve_small` (the planner's and the swept
   check's 3x3 solves): backward stable against NumPy's LAPACK solve over
   condition numbers up to 1e12, pivots, differentiable; no LAPACK custom call
   left in a lowered rollout or collision check. (jaxlib's batched LAPACK
@@ -32,9 +32,9 @@ import pytest
 from session import subprocess_env
 
 import softplan_jax as sp
-from softplan_jax.metrics import apply_collision_checks
-from softplan_jax.numerics import evaluate_where, solve_small, tie
-from softplan_jax.planner import make_options, rollout_jit
+from softplan_jax.geometry.clearance import apply_collision_checks
+from softplan_jax.base.numerics import evaluate_where, solve_small, tie
+from softplan_jax.planning.planner import make_options, rollout_jit
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PAD = dict(curve_slots=5, degree=2)
@@ -147,7 +147,7 @@ def test_no_lapack_call_in_rollouts_and_checks():
     sc = sp.paper_scenario("tree", **PAD)
     gains = sp.default_gains()
     texts = [rollout_jit.lower(sc, gains, make_options("curve"), 20).as_text()]
-    r = jax.eval_shape(lambda s: sp.rollout(s, gains, make_options("curve", check_collisions=False), 20), sc)
+    r = jax.eval_shape(lambda s: sp.planning.rollout(s, gains, make_options("curve", check_collisions=False), 20), sc)
     r = jax.tree_util.tree_map(lambda x: jnp.zeros(x.shape, x.dtype), r)
     texts.append(jax.jit(lambda r, s: apply_collision_checks(r, s, make_options("curve"))).lower(r, sc).as_text())
     for text in texts:
@@ -180,7 +180,7 @@ def test_no_lapack_call_in_rollouts_and_checks():
     ],
 )
 def test_plan_batch_bad_arguments(kwargs, match):
-    batch = sp.stack_scenarios([sp.paper_scenario("sim1", **PAD)] * 2)
+    batch = sp.scenarios.stack_scenarios([sp.paper_scenario("sim1", **PAD)] * 2)
     with pytest.raises(ValueError, match=match):
         sp.plan_batch(batch, max_steps=5, **kwargs)
 
@@ -198,15 +198,15 @@ TWO_DEVICES = textwrap.dedent(
 
     assert len(jax.local_devices()) == 2, jax.local_devices()
     PAD = dict(curve_slots=5, degree=2)
-    batch = sp.stack_scenarios([sp.paper_scenario(n, **PAD) for n in ("sim1", "sim2", "tree")])
+    batch = sp.scenarios.stack_scenarios([sp.paper_scenario(n, **PAD) for n in ("sim1", "sim2", "tree")])
     one = sp.plan_batch(batch, max_steps=200, devices=1)
     two = sp.plan_batch(batch, max_steps=200)  # every local device: 3 scenarios padded to 4
-    compiled = sp.rollout_batch.cache_size()
+    compiled = sp.planning.rollout_batch.cache_size()
     # The chunked path over the mesh (one chunk of 4, shown with progress): the same program.
     again = sp.plan_batch(batch, max_steps=200, chunk=4, progress=True)
     # No cross-device communication in the partitioned program (jit's automatic partitioning
     # of the same vmapped rollout all-reduces the warm start's while-loop predicate instead).
-    text = sp.rollout_batch.lower(batch, sp.default_gains(), sp.make_options("curve"), 200).compile().as_text()
+    text = sp.planning.rollout_batch.lower(batch, sp.default_gains(), sp.make_options("curve"), 200).compile().as_text()
     collectives = [op for op in ("all-reduce", "all-gather", "all-to-all", "collective-permute", "reduce-scatter")
                    if op + "(" in text or op + "-start(" in text]
     out = dict(
@@ -219,7 +219,7 @@ TWO_DEVICES = textwrap.dedent(
         chunked_equal=all(np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True)
                           for a, b in zip(jax.tree_util.tree_leaves(two), jax.tree_util.tree_leaves(again),
                                           strict=True)),
-        recompiled=sp.rollout_batch.cache_size() - compiled,
+        recompiled=sp.planning.rollout_batch.cache_size() - compiled,
         collectives=collectives,
         partitions=text.count("num_partitions=2") + text.count("mesh['batch'=2]"),
     )
@@ -256,7 +256,7 @@ def test_two_host_devices_match_one():
 
 
 def test_batch_keys_per_scenario():
-    from softplan_jax.planner import batch_keys
+    from softplan_jax.planning.planner import batch_keys
 
     keys = jax.random.split(jax.random.PRNGKey(4), 5)
     np.testing.assert_array_equal(np.asarray(batch_keys(4, 5)), np.asarray(keys))
@@ -265,7 +265,7 @@ def test_batch_keys_per_scenario():
     typed = jax.random.split(jax.random.key(4), 3)
     assert batch_keys(typed, 3) is typed
     assert batch_keys(jax.random.key(4), 3).shape == (3,)
-    batch = sp.stack_scenarios([sp.paper_scenario("sim1", **PAD)] * 2)
+    batch = sp.scenarios.stack_scenarios([sp.paper_scenario("sim1", **PAD)] * 2)
     with pytest.raises(ValueError, match="3 keys for a batch of 2"):
         sp.plan_batch(batch, max_steps=5, seed=jax.random.split(jax.random.PRNGKey(0), 3))
 
@@ -373,14 +373,14 @@ def test_batch_command_on_two_processes_is_the_sharded_run(tmp_path):
 def test_global_mesh_in_one_process():
     """devices="global" without jax.distributed is every local device: no mesh for one
     device, and a plan_batch equal to devices=None's."""
-    from softplan_jax.batching import batch_mesh, is_global
+    from softplan_jax.planning.batching import batch_mesh, is_global
 
     mesh = batch_mesh("global")
     assert mesh is None if len(jax.devices()) == 1 else mesh.size == len(jax.devices())
     assert not is_global(mesh)
     with pytest.raises(ValueError, match='"global"'):
         batch_mesh("everywhere")
-    batch = sp.stack_scenarios([sp.paper_scenario("sim1", **PAD)] * 2)
+    batch = sp.scenarios.stack_scenarios([sp.paper_scenario("sim1", **PAD)] * 2)
     a = sp.plan_batch(batch, max_steps=5, devices="global")
     b = sp.plan_batch(batch, max_steps=5)
     np.testing.assert_array_equal(np.asarray(a.q), np.asarray(b.q))

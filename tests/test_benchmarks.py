@@ -86,7 +86,7 @@ def test_paper_tables_quick(paper_run):
         (s, m) for s in ("sim1", "sim2", "tree") for m in ("Proposed (curve)", "1 point")
     }
     for r in rows:
-        assert r["status"] in sp.STATUS_NAMES.values()
+        assert r["status"] in sp.planning.STATUS_NAMES.values()
         assert 0 < r["iterations"] <= report["max_steps"]
         assert r["per_iteration_s"] > 0 and r["rollout_median_s"] > 0
         assert r["collided"] == (r["status"] == "collided")
@@ -175,7 +175,7 @@ def test_random_scenarios_shapes_and_make_scenario_equality():
     for k in range(n):
         curves = [sp.PolynomialCurve(host.curves.coeffs[k, j], host.curves.u_range[k, j]) for j in range(counts[k])]
         rebuilt.append(sp.make_scenario(host.goal[k], curves, curve_slots=8, degree=2))
-    assert _leaves_equal(suite, sp.stack_scenarios(rebuilt))
+    assert _leaves_equal(suite, sp.scenarios.stack_scenarios(rebuilt))
     # other padded shapes, counts, degrees and dtypes
     small = sp.random_scenarios(2, 5, obstacles=(2, 3), degrees=(1,), curve_slots=4, degree=2, dtype=jnp.float32)
     assert small.curves.coeffs.shape == (5, 4, 3, 3) and small.curves.coeffs.dtype == jnp.float32
@@ -436,7 +436,7 @@ def test_tuning_benchmark_rejects_bad_arguments():
     assert kw["bounds"] == dict(d0=(0.07, 0.4), dt=(0.1, 0.8)) and kw["max_step"] is None
     assert kw["sigma"] == 0.4 and kw["natural"] is False
     # The gain-function stage: d0, dt, eta's scales, then --fn-sigma for the 17 profile knots and weights.
-    from softplan_jax.smoothing import GainSpace
+    from softplan_jax.tuning.smoothing import GainSpace
 
     args = tuning_bench.parse_args([])
     kw = tuning_bench.fn_kwargs(args, GainSpace(tuning_bench.TUNED, knots=14, segments=3))

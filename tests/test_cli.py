@@ -25,7 +25,7 @@ from session import subprocess_env
 
 import softplan_jax as sp
 from softplan_jax.cli import main
-from softplan_jax.planner import PlanResult
+from softplan_jax.planning.planner import PlanResult
 
 STEPS = "80"
 SUMMARY_FIELDS = {
@@ -73,7 +73,7 @@ def test_run_json_summary(capsys):
     s = json.loads(out)
     assert set(s) == SUMMARY_FIELDS
     assert s["scenario"] == "sim1" and s["method"] == "curve" and s["dtype"] == "float64"
-    assert s["status"] in sp.STATUS_NAMES.values()
+    assert s["status"] in sp.planning.STATUS_NAMES.values()
     assert isinstance(s["iterations"], int) and 0 < s["iterations"] <= 80
     assert s["max_steps"] == 80
     assert isinstance(s["reached"], bool) and isinstance(s["collided"], bool)

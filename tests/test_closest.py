@@ -31,7 +31,7 @@ import pytest
 from helpers import assert_allclose, assert_finite, closest_per_obstacle, unpack_stacked
 
 import softplan_jax as sp
-from softplan_jax.closest import SolverOptions
+from softplan_jax.geometry.closest import SolverOptions
 
 TOL = cc.TOL  # 1e-9
 
@@ -212,7 +212,7 @@ def run_pairwise(qs, coeffs, u_ranges, dtype=jnp.float64, fn=_pairwise):
         curves = [
             sp.PolynomialCurve(jnp.asarray(coeffs[k], dtype), jnp.asarray(u_ranges[k], dtype)) for k in idx
         ]
-        stacked, mask = unpack_stacked(sp.stack_curves(curves, degree=3))
+        stacked, mask = unpack_stacked(sp.geometry.stack_curves(curves, degree=3))
         assert mask.all() and stacked.coeffs.shape == (CHUNK, 3, 4)
         res = fn(jnp.asarray(qs[idx], dtype), stacked)
         outs.append(_to_numpy(res) if hasattr(res, "_fields") else np.asarray(res))
@@ -340,7 +340,7 @@ HARD_CASES = [
     for c in json.load(open(os.path.join(os.path.dirname(__file__), "data", "hard_closest_cases.json")))
 ]
 
-GRID = sp.GridSolverOptions()
+GRID = sp.geometry.GridSolverOptions()
 _pairwise_grid = jax.jit(jax.vmap(lambda q, c: sp.closest_point(q, c, GRID)))
 
 
@@ -438,7 +438,7 @@ def test_vmap_over_stacked_curves_for_one_q():
         cc.PAPER_OBSTACLES[k] for k in ("sim1", "sim2", "branch1", "branch2", "branch3", "branch4", "trunk")
     ]
     curves = [sp.PolynomialCurve(jnp.asarray(cf), jnp.asarray(ur)) for cf, ur in curves_np]
-    stacked, mask = unpack_stacked(sp.stack_curves(curves, size=9, degree=3))
+    stacked, mask = unpack_stacked(sp.geometry.stack_curves(curves, size=9, degree=3))
     assert mask.tolist() == [True] * 7 + [False] * 2
     res = closest_per_obstacle(jnp.asarray(q), stacked)
     for k, (cf, ur) in enumerate(curves_np):
@@ -551,7 +551,7 @@ def test_distance_gradient_finite_everywhere():
 # --------------------------------------------------------------------------
 
 
-_points_batched = jax.jit(jax.vmap(sp.closest_point_to_points))
+_points_batched = jax.jit(jax.vmap(sp.geometry.closest_point_to_points))
 POINT_BATCH = 8
 
 
@@ -597,10 +597,10 @@ def test_closest_point_to_points_uses_ten_samples_per_segment():
 
 def test_curve_points_feed_n_point_method():
     c = sp.PolynomialCurve(jnp.asarray(cc.PAPER_OBSTACLES["sim1"][0]), jnp.asarray((-2.0, 2.0)))
-    pts = np.asarray(sp.curve_points(c, 5))
+    pts = np.asarray(sp.geometry.curve_points(c, 5))
     assert_allclose(pts[:, 1], [-2, -1, 0, 1, 2], atol=1e-15)
     q = np.array([[1.0, 0.5, 0.0], [1.0, -0.3, 1.0], [1.0, 0.2, 2.0]])
-    r = sp.closest_point_to_points(jnp.asarray(q), jnp.asarray(pts))  # eager, once
+    r = sp.geometry.closest_point_to_points(jnp.asarray(q), jnp.asarray(pts))  # eager, once
     o = oracle.closest_point_to_points(q, pts)
     assert abs(float(r.distance) - o.distance) < 1e-12
     # and the N-point distance can never be below the true curve distance
@@ -611,7 +611,7 @@ def test_curve_points_feed_n_point_method():
 
 
 def test_point_distance_matches_dense_sampling():
-    """sp.point_distance (closed-form point-to-arc) against the oracle's arm
+    """sp.geometry.point_distance (closed-form point-to-arc) against the oracle's arm
     sampled at 20,001 points per segment plus a golden-section polish."""
     rng = np.random.default_rng(11)
     from scipy.optimize import minimize_scalar
@@ -622,7 +622,7 @@ def test_point_distance_matches_dense_sampling():
             q = cc.random_q(rng, n)
             pts = rng.normal(size=(6, 3)) * rng.choice([0.3, 1.0, 3.0])
             pts[0] = oracle.segment_point(q, n - 1, 0.5) + 1e-4 * rng.normal(size=3)  # nearly on the arm
-            lib = np.asarray(sp.point_distance(jnp.asarray(q), jnp.asarray(pts)))
+            lib = np.asarray(sp.geometry.point_distance(jnp.asarray(q), jnp.asarray(pts)))
             for k, p in enumerate(pts):
                 best = np.inf
                 for i in range(n):
@@ -639,10 +639,10 @@ def test_point_distance_matches_dense_sampling():
 def test_newton_kernel_matches_autodiff(theta):
     """closest.pair_terms (paper eqs. 13-18, the one Newton kernel) against
     jax.grad / jax.hessian of |F_Ri(s) - F_o(u)|^2 / 2, at and near theta = 0."""
-    from softplan_jax.closest import Segment, pair_terms
+    from softplan_jax.geometry.closest import Segment, pair_terms
 
     q = jnp.array([[0.9, 0.4, 0.3], [1.1, theta, -0.7]])
-    R, P = sp.segment_frames(q)
+    R, P = sp.geometry.segment_frames(q)
     seg = Segment.from_frame(q[1], R[1], P[1])
     curve = sp.PolynomialCurve(jnp.array([[0.2, 0.5, -0.3], [0.1, -0.4, 0.6], [1.5, 0.2, 0.1]]), (0.0, 1.0))
 
@@ -657,7 +657,7 @@ def test_newton_kernel_matches_autodiff(theta):
 
 
 def test_atan_over_x_both_branches():
-    from softplan_jax.numerics import atan_over_x
+    from softplan_jax.base.numerics import atan_over_x
 
     w = jnp.array([0.0, 1e-12, 0.019, 0.021, 0.5, -3.0])
     ref = np.where(np.asarray(w) == 0, 1.0, np.arctan(np.asarray(w)) / np.where(np.asarray(w) == 0, 1, np.asarray(w)))
@@ -667,9 +667,9 @@ def test_atan_over_x_both_branches():
 
 @jax.jit
 def _arc_distances(q, pts):
-    from softplan_jax.closest import Segment, arc_distance2, project_to_arc
+    from softplan_jax.geometry.closest import Segment, arc_distance2, project_to_arc
 
-    R, P = sp.segment_frames(q)
+    R, P = sp.geometry.segment_frames(q)
     seg = Segment.from_frame(q[0], R[0], P[0])
     return (jax.vmap(lambda p: arc_distance2(seg, p))(pts), jax.vmap(lambda p: project_to_arc(seg, p)[1])(pts))
 
@@ -711,10 +711,10 @@ def test_arc_distance_matches_dense_sampling(theta):
 
 
 def test_arc_distance_gradient_finite_at_theta_zero_and_the_centre():
-    from softplan_jax.closest import Segment, arc_distance2
+    from softplan_jax.geometry.closest import Segment, arc_distance2
 
     def f(q, p):
-        R, P = sp.segment_frames(q)
+        R, P = sp.geometry.segment_frames(q)
         return arc_distance2(Segment.from_frame(q[0], R[0], P[0]), p)
 
     for p in ([0.1, 0.2, 0.3], [0.0, 0.0, 0.5], [0.0, 0.0, 0.0]):

@@ -124,11 +124,11 @@ def test_stack_curves_padding_and_mask():
     ]
     curves = [sp.PolynomialCurve(jnp.asarray(cf), ur, radius=r) for cf, ur, r in curves_np]
 
-    stacked, mask = unpack_stacked(sp.stack_curves(curves))
+    stacked, mask = unpack_stacked(sp.geometry.stack_curves(curves))
     assert stacked.coeffs.shape == (3, 3, 4)
     assert mask.dtype == np.bool_ and mask.tolist() == [True, True, True]
 
-    stacked, mask = unpack_stacked(sp.stack_curves(curves, size=5, degree=5))
+    stacked, mask = unpack_stacked(sp.geometry.stack_curves(curves, size=5, degree=5))
     assert stacked.coeffs.shape == (5, 3, 6)
     assert np.asarray(stacked.u_range).shape == (5, 2)
     assert np.asarray(stacked.radius).shape == (5,)
@@ -153,7 +153,7 @@ def test_stack_curves_padding_and_mask():
             assert_allclose(d2[k], want, atol=1e-13)
     # closest points over a padded batch stay finite in the padding slots
     # (shapes shared with test_closest's per-obstacle test: one compilation)
-    stacked, mask = unpack_stacked(sp.stack_curves(curves, size=9, degree=3))
+    stacked, mask = unpack_stacked(sp.geometry.stack_curves(curves, size=9, degree=3))
     q = jnp.asarray([[1.0, 0.4, 0.2], [1.0, 0.0, 1.0], [0.5, 0.0, 0.0]])
     res = closest_per_obstacle(q, stacked)
     for f in ("distance", "s", "u", "arm_point", "obstacle_point"):
@@ -163,9 +163,9 @@ def test_stack_curves_padding_and_mask():
 def test_stack_curves_rejects_too_small_size_or_degree():
     curves = [sp.PolynomialCurve(jnp.ones((3, 3)), (0.0, 1.0)) for _ in range(3)]
     with pytest.raises(ValueError):
-        sp.stack_curves(curves, size=2)
+        sp.geometry.stack_curves(curves, size=2)
     with pytest.raises(ValueError):
-        sp.stack_curves(curves, degree=1)
+        sp.geometry.stack_curves(curves, degree=1)
 
 
 @pytest.mark.parametrize("n_points", [1, 2, 5, 33])
@@ -173,13 +173,13 @@ def test_curve_points(n_points):
     coeffs = np.array([[1.0, 0.5, -0.2], [0.0, 1.0, 0.0], [2.0, 0.0, 0.3]])
     u_range = (-1.5, 2.5)
     c = sp.PolynomialCurve(jnp.asarray(coeffs), u_range)
-    pts = np.asarray(sp.curve_points(c, n_points))
+    pts = np.asarray(sp.geometry.curve_points(c, n_points))
     assert pts.shape == (n_points, 3)
     us = np.array([0.5]) if n_points == 1 else np.linspace(-1.5, 2.5, n_points)
     want = np.stack([P.polyval(us, coeffs[k]) for k in range(3)], 1)
     assert_allclose(pts, want, atol=1e-14)
     h = sp.ParametricCurve(_helix, (0.0, 6.0))
-    hp = np.asarray(sp.curve_points(h, n_points))
+    hp = np.asarray(sp.geometry.curve_points(h, n_points))
     us = np.array([3.0]) if n_points == 1 else np.linspace(0, 6, n_points)
     assert_allclose(hp, np.stack([np.cos(us), np.sin(us), 0.2 * us], 1), atol=1e-14)
 
@@ -202,7 +202,7 @@ def test_fit_recovers_a_line_with_uneven_samples():
     a, b = np.array([0.2, -1.0, 0.5]), np.array([1.5, 0.3, 2.0])
     t = np.sort(np.concatenate([[0.0, 1.0], rng.uniform(0, 1, 30)]))
     pts = a + t[:, None] * (b - a)
-    c = sp.fit_polynomial_curve(jnp.asarray(pts), 3)
+    c = sp.clouds.fit_polynomial_curve(jnp.asarray(pts), 3)
     assert c.coeffs.shape == (3, 4)
     assert_allclose(c.u_range, [0.0, 1.0], atol=0)
     assert_allclose(c.coeffs, np.stack([a, b - a, 0 * a, 0 * a], 1), atol=1e-12)
@@ -223,7 +223,7 @@ def test_fit_recovers_a_cubic_given_in_chord_parameter():
         u = _chord_parameter(pts)
         G = np.stack([P.polyfit(u, pts[:, k], 3) for k in range(3)])
         assert np.abs(np.stack([P.polyval(u, G[k]) for k in range(3)], 1) - pts).max() < 1e-10
-        c = sp.fit_polynomial_curve(jnp.asarray(pts), 3)
+        c = sp.clouds.fit_polynomial_curve(jnp.asarray(pts), 3)
         assert c.coeffs.shape == (3, 4)
         assert_allclose(c.coeffs, G, atol=1e-8 * max(1.0, np.abs(G).max()))
         assert_allclose(c.point(jnp.float64(0.0)), pts[0], atol=1e-9)
@@ -238,7 +238,7 @@ def test_fit_matches_least_squares_on_chord_parameter():
     t = np.linspace(0, 1, 200)
     pts = np.stack([P.polyval(t, coeffs[k]) for k in range(3)], 1)
     for degree in (2, 3, 4):
-        c = sp.fit_polynomial_curve(jnp.asarray(pts), degree)
+        c = sp.clouds.fit_polynomial_curve(jnp.asarray(pts), degree)
         u = _chord_parameter(pts)
         V = np.vander(u, degree + 1, increasing=True)
         want = np.linalg.lstsq(V, pts, rcond=None)[0].T

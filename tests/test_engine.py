@@ -1,4 +1,4 @@
-"""The rollout engine (softplan_jax.engine): its drivers give the same arrays, a
+"""The rollout engine (softplan_jax.planning.engine): its drivers give the same arrays, a
 finished rollout's records are frozen, a batch's refilled lanes give every scene
 its own rollout (checked against a Python loop of single rollouts), the safe
 step's scale against its formula, and the sizes' bad input."""
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.compilation_cache import rollout_compiler_options
-from softplan_jax.engine import check_engine_sizes, run
-from softplan_jax.planner import batch_keys, make_options, rollout, rollout_jit
-from softplan_jax.step import safe_scale
+from softplan_jax.base.compilation_cache import rollout_compiler_options
+from softplan_jax.planning.engine import check_engine_sizes, run
+from softplan_jax.planning.planner import batch_keys, make_options, rollout, rollout_jit
+from softplan_jax.planning.step import safe_scale
 
 PAD = dict(curve_slots=5, degree=2)  # test_planner's shape: its programs are shared (conftest SHARED)
 STEPS = 200
@@ -53,7 +53,7 @@ def test_chunks_driver_equals_scan_driver(paper):
 def test_records_frozen_after_the_end(paper):
     r = jax.device_get(rollout_jit(paper["tree"], sp.default_gains(), make_options("curve"), STEPS, 0))
     it = int(r.iterations)
-    assert sp.status_name(r.status) == "reached" and it < STEPS - 10
+    assert sp.planning.status_name(r.status) == "reached" and it < STEPS - 10
     for f in ("q", "tip", "clearance", "converged"):
         x = getattr(r, f)
         np.testing.assert_array_equal(x[it + 1:], np.broadcast_to(x[it], x[it + 1:].shape), err_msg=f)
@@ -71,7 +71,7 @@ def test_lanes_refill_matches_single_rollouts(five):
     differently). The scene beyond reach escapes at random (its key matters): there a near-tie
     amplifies the rounding difference from about step 46 on (1e-14 to 1e-2 by the end), so
     its q is compared over the first 40 steps; the others over the whole horizon."""
-    stack = sp.stack_scenarios(five)
+    stack = sp.scenarios.stack_scenarios(five)
     two = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, lanes=2, devices=1))
     all5 = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, lanes=5, devices=1))
     for f, x in _fields(all5).items():
@@ -85,7 +85,7 @@ def test_lanes_refill_matches_single_rollouts(five):
         assert int(two.escapes[b]) == int(one.escapes), b
         horizon = 40 if b == 3 else STEPS + 1
         np.testing.assert_allclose(two.q[b, :horizon], one.q[:horizon], atol=1e-9, err_msg=f"scene {b}")
-    assert [sp.status_name(s) for s in two.status[:3]] == ["reached"] * 3
+    assert [sp.planning.status_name(s) for s in two.status[:3]] == ["reached"] * 3
     # Another key for the escaping scene changes its walks (the keys follow the scenes into their lanes).
     other = jax.device_get(rollout_jit(five[3], sp.default_gains(), make_options("curve"), STEPS, keys[2]))
     assert np.abs(other.q - two.q[3]).max() > 1e-2
@@ -94,7 +94,7 @@ def test_lanes_refill_matches_single_rollouts(five):
 def test_safe_scale_against_its_formula():
     q = jnp.array([[1.0, 0.3, 0.2], [0.9, -0.5, 1.0]])
     q_t = q + jnp.array([[0.05, 0.2, -0.1], [0.0, 0.3, 0.2]])
-    B = float(sp.motion_bound(q, q_t)[-1])
+    B = float(sp.geometry.motion_bound(q, q_t)[-1])
     c = jnp.array([0.3, 0.05, jnp.inf])
     floor, f = 2e-6, 0.8
 
@@ -123,10 +123,10 @@ def test_safe_scale_against_its_formula():
     (dict(step_chunk=0), "step_chunk"), (dict(step_chunk=1.5), "step_chunk"),
 ])
 def test_bad_sizes_refused_before_compiling(paper, kwargs, field):
-    before = sp.rollout_batch.cache_size()
+    before = sp.planning.rollout_batch.cache_size()
     with pytest.raises(ValueError, match=field):
-        sp.plan_batch(sp.stack_scenarios(list(paper.values())), **kwargs)
-    assert sp.rollout_batch.cache_size() == before
+        sp.plan_batch(sp.scenarios.stack_scenarios(list(paper.values())), **kwargs)
+    assert sp.planning.rollout_batch.cache_size() == before
     if field != "lanes":
         with pytest.raises(ValueError, match=field):
             sp.plan(paper["tree"], **kwargs)
@@ -138,14 +138,14 @@ def test_tracking_a_static_scene_plans_it_then_holds(paper):
     """The mode is the options': TrackOptions on a static scene hold the goal to the horizon. Up to
     the step where planning ends at the goal, the two rollouts are the same step bit for bit (the
     static attraction, no motion); tracking then holds the goal (status reached, held to the end)."""
-    from softplan_jax.tracking import make_track_options
+    from softplan_jax.planning.tracking import make_track_options
 
     sc, g = paper["tree"], sp.default_gains()
     planned = jax.device_get(rollout_jit(sc, g, make_options("curve"), STEPS, 0))
     tracked = jax.device_get(rollout_jit(sc, g, make_track_options("curve"), STEPS, 0))
     it = int(planned.iterations)
     np.testing.assert_array_equal(tracked.q[: it + 1], planned.q[: it + 1])
-    assert sp.status_name(tracked.status) == "reached" and bool(tracked.held_to_end)
+    assert sp.planning.status_name(tracked.status) == "reached" and bool(tracked.held_to_end)
     assert int(tracked.reached_step) == it and int(tracked.iterations) == STEPS
     np.testing.assert_allclose(tracked.time, np.arange(STEPS + 1) * float(g.dt), rtol=1e-15)
     assert np.all(tracked.error[it:] <= 0.02)

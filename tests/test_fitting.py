@@ -81,22 +81,22 @@ def test_issue_example_shuffled_fit_matches_the_ordered_fit():
     rng = np.random.default_rng(0)
     u = np.linspace(-1, 1, 400)
     pts = quadratic(u) + SIGMA * rng.normal(size=(400, 3))
-    ordered = sp.fit_polynomial_curve(jnp.asarray(pts), 2)
+    ordered = sp.clouds.fit_polynomial_curve(jnp.asarray(pts), 2)
     ordered_max = brute_distance(pts, [ordered]).max()
     assert ordered_max < 0.03  # the issue: 0.018 in order
     shuffled = pts[rng.permutation(400)]
     # The ordered-only fit on shuffled points is wrong, and now says so.
-    with pytest.warns(sp.FitWarning, match="ordered"):
-        bad = sp.fit_polynomial_curve(jnp.asarray(shuffled), 2)
+    with pytest.warns(sp.clouds.FitWarning, match="ordered"):
+        bad = sp.clouds.fit_polynomial_curve(jnp.asarray(shuffled), 2)
     assert brute_distance(shuffled, [bad]).max() > 0.5  # the issue's 1.57
-    fit = sp.fit_curve(shuffled)
+    fit = sp.clouds.fit_curve(shuffled)
     assert fit.degree == 2  # chosen by BIC
     assert fit.max_residual <= 1.05 * ordered_max
     assert fit.max_residual == pytest.approx(brute_distance(shuffled, [fit.curve]).max(), abs=1e-6)
     truth = quadratic(np.linspace(-1, 1, 4000))
     assert max(two_way(fit, [truth])) < 3 * SIGMA
     # ordered=False delegates to fit_curve
-    c = sp.fit_polynomial_curve(jnp.asarray(shuffled), 2, ordered=False)
+    c = sp.clouds.fit_polynomial_curve(jnp.asarray(shuffled), 2, ordered=False)
     np.testing.assert_allclose(c.coeffs, fit.curve.coeffs, atol=1e-9)
 
 
@@ -109,8 +109,8 @@ def test_fit_curves_recovers_the_true_curves(name):
     parts, n_curves = CLOUDS[name]
     pts, truth = cloud(parts)
     with warnings.catch_warnings():
-        warnings.simplefilter("error", sp.FitWarning)  # a good fit must not warn
-        fit = sp.fit_curves(pts)
+        warnings.simplefilter("error", sp.clouds.FitWarning)  # a good fit must not warn
+        fit = sp.clouds.fit_curves(pts)
     assert len(fit.fits) == n_curves, [f.degree for f in fit.fits]
     true_to_fit, fit_to_true = two_way(fit, truth)
     # every part of every true curve is near a fitted curve, and no fitted piece is extraneous
@@ -132,7 +132,7 @@ def test_fit_curves_recovers_the_true_curves(name):
 
 def test_single_fit_of_a_non_polynomial_curve():
     pts, truth = cloud([(helix, 0, 2 * np.pi, 600)], seed=3)
-    fit = sp.fit_curve(pts)
+    fit = sp.clouds.fit_curve(pts)
     assert 3 <= fit.degree <= 8
     assert max(two_way(fit, truth)) < 4 * SIGMA
 
@@ -147,7 +147,7 @@ def test_curve_distance_matches_dense_sampling():
         coeffs = rng.normal(size=(3, degree + 1))
         curve = sp.PolynomialCurve(coeffs, (-1.0, 1.5))
         pts = rng.normal(size=(200, 3)) * 2
-        dist, u = sp.curve_distance(curve, pts)
+        dist, u = sp.clouds.curve_distance(curve, pts)
         brute = brute_distance(pts, [curve], n=200000)
         assert np.all(dist <= brute + 1e-12)  # a global minimum
         np.testing.assert_allclose(dist, brute, atol=1e-5)
@@ -164,20 +164,20 @@ def test_outliers_warn_and_max_residual_raises():
     pts, _ = cloud([(quadratic, -1, 1, 400)])
     outliers = np.array([[3.0, 3.0, 3.0], [-2.0, 1.0, 0.0]])
     dirty = np.concatenate([pts, outliers])
-    with pytest.warns(sp.FitWarning, match="poor fit"):
-        fit = sp.fit_curves(dirty)
+    with pytest.warns(sp.clouds.FitWarning, match="poor fit"):
+        fit = sp.clouds.fit_curves(dirty)
     assert fit.max_residual > 1.0
     with pytest.raises(ValueError, match="max_residual"):
-        sp.fit_curves(dirty, max_residual=0.05, warn=False)
+        sp.clouds.fit_curves(dirty, max_residual=0.05, warn=False)
     with pytest.raises(ValueError, match="max_residual"):
-        sp.fit_curve(pts, degree=1, max_residual=0.05, warn=False)  # a line through a parabola
-    fit = sp.fit_curve(pts, max_residual=0.05)  # the right degree passes
+        sp.clouds.fit_curve(pts, degree=1, max_residual=0.05, warn=False)  # a line through a parabola
+    fit = sp.clouds.fit_curve(pts, max_residual=0.05)  # the right degree passes
     assert fit.max_residual < 0.05
 
 
 def test_inflate_covers_every_raw_point():
     pts, _ = cloud(CLOUDS["trunk + 2 branches"][0], seed=2)
-    fit = sp.fit_curves(pts, inflate=True, radius=0.01)
+    fit = sp.clouds.fit_curves(pts, inflate=True, radius=0.01)
     for f in fit.fits:
         assert float(f.curve.radius) == pytest.approx(0.01 + f.max_residual)
     # every raw point lies inside (or on) some inflated tube: brute force
@@ -190,10 +190,10 @@ def test_inflate_covers_every_raw_point():
 
 def test_float32_smoke():
     pts, truth = cloud([(quadratic, -1, 1, 300)])
-    fit = sp.fit_curves(pts.astype(np.float32))
+    fit = sp.clouds.fit_curves(pts.astype(np.float32))
     assert fit.curves[0].coeffs.dtype == jnp.float32
     assert max(two_way(fit, truth)) < 4 * SIGMA
-    q = sp.default_start().astype(jnp.float32)
+    q = sp.scenarios.default_start().astype(jnp.float32)
     cp = sp.closest_point(q, fit.curves[0])
     assert cp.distance.dtype == jnp.float32 and np.isfinite(float(cp.distance))
 
@@ -216,7 +216,7 @@ def test_float32_smoke():
     ],
 )
 def test_bad_clouds_raise_clear_errors(points, match):
-    for fn in (sp.fit_curve, sp.fit_curves):
+    for fn in (sp.clouds.fit_curve, sp.clouds.fit_curves):
         with pytest.raises(ValueError, match=match):
             fn(points)
 
@@ -224,14 +224,14 @@ def test_bad_clouds_raise_clear_errors(points, match):
 def test_too_few_points_for_the_degree():
     pts = np.random.default_rng(0).normal(size=(7, 3))
     with pytest.raises(ValueError, match="degree 3 needs at least 8"):
-        sp.fit_curve(pts, degree=3)
+        sp.clouds.fit_curve(pts, degree=3)
     with pytest.raises(ValueError, match="at least 4"):
-        sp.fit_curves(pts[:3])
+        sp.clouds.fit_curves(pts[:3])
     for bad in (0, -1, 2.5, True):
         with pytest.raises(ValueError, match="degree"):
-            sp.fit_curve(pts, degree=bad)
+            sp.clouds.fit_curve(pts, degree=bad)
     with pytest.raises(ValueError, match="max_residual"):
-        sp.fit_curve(pts, max_residual=-1.0)
+        sp.clouds.fit_curve(pts, max_residual=-1.0)
 
 
 def test_load_cloud_formats_and_errors(tmp_path):
@@ -240,7 +240,7 @@ def test_load_cloud_formats_and_errors(tmp_path):
     np.savetxt(tmp_path / "c.csv", pts, delimiter=",", header="x,y,z", comments="")
     np.savetxt(tmp_path / "c.xyz", pts, header="scanned branch")  # '# scanned branch' comment line
     for name in ("c.npy", "c.csv", "c.xyz"):
-        np.testing.assert_allclose(sp.load_cloud(tmp_path / name), pts, rtol=1e-15)
+        np.testing.assert_allclose(sp.clouds.load_cloud(tmp_path / name), pts, rtol=1e-15)
     (tmp_path / "empty.csv").write_text("")
     (tmp_path / "wide.xyz").write_text("1 2 3 4\n5 6 7 8\n")
     (tmp_path / "ragged.csv").write_text("1,2,3\n4,5\n")
@@ -260,7 +260,7 @@ def test_load_cloud_formats_and_errors(tmp_path):
     }
     for name, match in cases.items():
         with pytest.raises(ValueError, match=match):
-            sp.load_cloud(tmp_path / name)
+            sp.clouds.load_cloud(tmp_path / name)
 
 
 # ----------------------------------------------------------------------------
@@ -269,9 +269,9 @@ def test_load_cloud_formats_and_errors(tmp_path):
 
 def test_fit_scenario_json_round_trip(tmp_path):
     pts, _ = cloud(CLOUDS["crossing wires"][0])
-    fit = sp.fit_curves(pts)
+    fit = sp.clouds.fit_curves(pts)
     path = tmp_path / "wires.json"
-    sp.save_fit_scenario(fit, path, goal=[0.5, 0.5, 2.0], metadata={"source": "test"})
+    sp.clouds.save_fit_scenario(fit, path, goal=[0.5, 0.5, 2.0], metadata={"source": "test"})
     data = json.loads(path.read_text())
     assert data["metadata"]["fit"]["max_residual"] == pytest.approx(fit.max_residual)
     assert data["metadata"]["source"] == "test"
@@ -281,7 +281,7 @@ def test_fit_scenario_json_round_trip(tmp_path):
     for k, f in enumerate(fit.fits):
         np.testing.assert_allclose(scen.curves.coeffs[k, :, : f.degree + 1], f.curve.coeffs, atol=1e-12)
     with pytest.raises(ValueError, match="exists"):
-        sp.save_fit_scenario(fit, path, goal=[0.5, 0.5, 2.0])
+        sp.clouds.save_fit_scenario(fit, path, goal=[0.5, 0.5, 2.0])
     # metadata must be an object; anything inside it is accepted
     data["metadata"] = [1, 2]
     bad = tmp_path / "bad.json"

@@ -1,4 +1,4 @@
-"""Gains files (softplan_jax.gains_file, format ``softplan-gains/1``) and the CLI's
+"""Gains files (softplan_jax.tuning.gains_file, format ``softplan-gains/1``) and the CLI's
 ``--gains FILE``.
 
 Compilation dominates the cost, so the planning here reuses programs other tests
@@ -53,7 +53,7 @@ def _assert_same_gains(a, b):
 
 
 def _valid(**gains_extra):
-    d = sp.gains_to_dict(sp.default_gains(), "points", 10, metadata={"note": "test"})
+    d = sp.tuning.gains_to_dict(sp.default_gains(), "points", 10, metadata={"note": "test"})
     d["gains"].update(gains_extra)
     return d
 
@@ -65,13 +65,13 @@ def _valid(**gains_extra):
 @pytest.mark.parametrize("which", ["default", "paper", "function"])
 def test_round_trip_dict_and_file(tmp_path, which):
     gains = {"default": sp.default_gains, "paper": _paper_gains, "function": _gain_function}[which]()
-    d = sp.gains_to_dict(gains, "curve", 10)
+    d = sp.tuning.gains_to_dict(gains, "curve", 10)
     text = json.dumps(d, allow_nan=False)  # strict JSON: inf is written as null
     assert d["format"] == "softplan-gains/1" and d["method"] == "curve" and d["n_points"] == 10
     assert ("rep_profile" in d["gains"]) == (which == "function") == ("seg_weights" in d["gains"])
     if which == "paper":
         assert d["gains"]["rep_max"] is None and d["gains"]["damping"] == 0.0
-    _assert_same_gains(sp.gains_from_dict(json.loads(text)), gains)
+    _assert_same_gains(sp.tuning.gains_from_dict(json.loads(text)), gains)
 
     path = tmp_path / "gains.json"
     sp.save_gains(gains, path, method="points", n_points=50, metadata={"tuned_by": "hand", "scenes": [1, 2]})
@@ -109,7 +109,7 @@ def test_save_refuses_to_overwrite(tmp_path):
 def test_gains_to_dict_rejects_bad_arguments(kwargs, match):
     args = dict(gains=sp.default_gains(), method="curve", n_points=10) | kwargs
     with pytest.raises(ValueError, match=match):
-        sp.gains_to_dict(**args)
+        sp.tuning.gains_to_dict(**args)
 
 
 # ----------------------------------------------------------------------------
@@ -136,7 +136,7 @@ def _with(d, *path_and_value):
 
 
 def _gf_dict():
-    return sp.gains_to_dict(_gain_function(), "curve", 10)
+    return sp.tuning.gains_to_dict(_gain_function(), "curve", 10)
 
 
 BAD_DICTS = [
@@ -186,7 +186,7 @@ def test_malformed_content_names_the_field(tmp_path, case):
     make, match = next((m, f) for c, m, f in BAD_DICTS if c == case)
     data = make()
     with pytest.raises(ValueError, match=f"^gains file {_re(match)}"):
-        sp.gains_from_dict(data)
+        sp.tuning.gains_from_dict(data)
     path = tmp_path / "bad.json"
     path.write_text(json.dumps(data))  # nan / inf as the non-standard NaN / Infinity literals
     with pytest.raises(ValueError, match=f"^{_re(str(path))}: gains file {_re(match)}"):
@@ -230,7 +230,7 @@ def test_file_for_another_obstacle_model(tmp_path):
     with pytest.raises(ValueError, match=_re("tuned for method 'points' (N=10), not 'points' (N=50)")):
         sp.load_gains(points, n_points=50)  # method from the file
     with pytest.raises(ValueError, match="these gains were tuned for method 'curve'"):
-        sp.gains_from_dict(json.loads(curve.read_text()), method="points")
+        sp.tuning.gains_from_dict(json.loads(curve.read_text()), method="points")
     # N is compared for the N-point model only; matching models load.
     sp.load_gains(curve, method="curve", n_points=50)
     sp.load_gains(curve, n_points=50)
@@ -289,7 +289,7 @@ def test_cli_run_with_gains_file(tmp_path, capsys):
     assert code == 0, err
     s = json.loads(out)
     assert s["gains"] == str(default_file) and s["gains_file"] == os.path.abspath(default_file)
-    assert s["gain_values"] == sp.gains_to_dict(sp.default_gains())["gains"]
+    assert s["gain_values"] == sp.tuning.gains_to_dict(sp.default_gains())["gains"]
     assert s["step"] == "safe"  # the default preset's step options
     code, out, err = run_main(capsys, "run", "sim1", "--max-steps", 80, "--json")
     assert code == 0, err
@@ -321,7 +321,7 @@ def test_cli_batch_with_gains_file(tmp_path, capsys):
     assert code == 0, err
     s = json.loads(out)
     assert s["gains"] == str(path) and s["gains_file"] == os.path.abspath(path)
-    assert s["gain_values"] == sp.gains_to_dict(sp.default_gains())["gains"]
+    assert s["gain_values"] == sp.tuning.gains_to_dict(sp.default_gains())["gains"]
     code, out, err = run_main(capsys, *argv)
     assert code == 0, err
     ref = json.loads(out)

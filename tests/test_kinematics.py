@@ -83,21 +83,21 @@ def _j(x):
 
 # jitted entry points (segment index and s traced) so that repeated calls for finite
 # differences do not re-dispatch op by op; eager calls are exercised separately.
-_point = jax.jit(sp.segment_point)
-_pjac = jax.jit(sp.point_jacobian)
-_jacrev = jax.jit(jax.jacrev(sp.segment_point))
-_hess_q = jax.jit(jax.hessian(sp.segment_point))
-_d1s = jax.jit(jax.jacfwd(sp.segment_point, argnums=2))
-_d2s = jax.jit(jax.jacfwd(jax.jacfwd(sp.segment_point, argnums=2), argnums=2))
-_mixed = jax.jit(jax.jacfwd(sp.point_jacobian, argnums=2))
+_point = jax.jit(sp.geometry.segment_point)
+_pjac = jax.jit(sp.geometry.point_jacobian)
+_jacrev = jax.jit(jax.jacrev(sp.geometry.segment_point))
+_hess_q = jax.jit(jax.hessian(sp.geometry.segment_point))
+_d1s = jax.jit(jax.jacfwd(sp.geometry.segment_point, argnums=2))
+_d2s = jax.jit(jax.jacfwd(jax.jacfwd(sp.geometry.segment_point, argnums=2), argnums=2))
+_mixed = jax.jit(jax.jacfwd(sp.geometry.point_jacobian, argnums=2))
 _tip = jax.jit(sp.tip_position)
-_tjac = jax.jit(sp.tip_jacobian)
-_backbone = jax.jit(sp.backbone_points, static_argnums=1)
-_frames = jax.jit(sp.segment_frames)
+_tjac = jax.jit(sp.geometry.tip_jacobian)
+_backbone = jax.jit(sp.geometry.backbone_points, static_argnums=1)
+_frames = jax.jit(sp.geometry.segment_frames)
 
 
 def _sq(q, i, s):
-    return jnp.sum(sp.segment_point(q, i, s) ** 2)
+    return jnp.sum(sp.geometry.segment_point(q, i, s) ** 2)
 
 
 _grad_sq = jax.jit(jax.grad(_sq))
@@ -196,7 +196,7 @@ def test_segment_transform_matches_paper():
     rows = [random_q(rng, 1)[0] for _ in range(30)]
     rows += [random_q(rng, 1, th)[0] for th in SPECIAL_THETAS]
     for row in rows:
-        R, P = sp.segment_transform(_j(row))
+        R, P = sp.geometry.segment_transform(_j(row))
         Ro, Po = oracle.segment_transform(row)
         assert R.shape == (3, 3) and P.shape == (3,)
         assert_allclose(R, Ro, atol=1e-14, err_msg=f"R for q_i={row!r}")
@@ -204,7 +204,7 @@ def test_segment_transform_matches_paper():
 
 
 def test_segment_transform_theta_zero_exact():
-    R, P = sp.segment_transform(_j([1.7, 0.0, 0.4]))
+    R, P = sp.geometry.segment_transform(_j([1.7, 0.0, 0.4]))
     assert_allclose(P, [0.0, 0.0, 1.7], atol=0, rtol=0)
     c, s = np.cos(0.4), np.sin(0.4)
     assert_allclose(R, [[c, -s, 0], [s, c, 0], [0, 0, 1]], atol=1e-16)
@@ -248,15 +248,15 @@ def test_eager_calls():
     rng = np.random.default_rng(13)
     q = random_q(rng, 2, [0.0, 0.8])
     qj = _j(q)
-    assert_allclose(sp.segment_point(qj, 1, 0.5), oracle.segment_point(q, 1, 0.5), atol=1e-14)
+    assert_allclose(sp.geometry.segment_point(qj, 1, 0.5), oracle.segment_point(q, 1, 0.5), atol=1e-14)
     assert_allclose(sp.tip_position(qj), oracle.tip_position(q), atol=1e-14)
-    assert_allclose(sp.point_jacobian(qj, 0, 0.5), oracle.point_jacobian(q, 0, 0.5), atol=1e-13)
-    assert_allclose(sp.tip_jacobian(qj), oracle.tip_jacobian(q), atol=1e-13)
-    Rb, Pb = sp.segment_frames(qj)
+    assert_allclose(sp.geometry.point_jacobian(qj, 0, 0.5), oracle.point_jacobian(q, 0, 0.5), atol=1e-13)
+    assert_allclose(sp.geometry.tip_jacobian(qj), oracle.tip_jacobian(q), atol=1e-13)
+    Rb, Pb = sp.geometry.segment_frames(qj)
     Rbo, Pbo = oracle.segment_frames(q)
     assert_allclose(Rb, Rbo, atol=1e-14)
     assert_allclose(Pb, Pbo, atol=1e-14)
-    assert_allclose(sp.backbone_points(qj), oracle.backbone_points(q), atol=1e-14)
+    assert_allclose(sp.geometry.backbone_points(qj), oracle.backbone_points(q), atol=1e-14)
 
 
 def test_concrete_q_closed_over_inside_jit():
@@ -265,17 +265,17 @@ def test_concrete_q_closed_over_inside_jit():
     qn = np.asarray(q)
     assert_allclose(jax.jit(lambda: sp.tip_position(q))(), oracle.tip_position(qn), atol=1e-14)
     assert_allclose(
-        jax.jit(lambda s: sp.segment_point(q, 1, s))(0.5), oracle.segment_point(qn, 1, 0.5), atol=1e-14
+        jax.jit(lambda s: sp.geometry.segment_point(q, 1, s))(0.5), oracle.segment_point(qn, 1, 0.5), atol=1e-14
     )
     assert_allclose(
-        jax.jit(lambda s: sp.point_jacobian(q, 0, s))(0.5), oracle.point_jacobian(qn, 0, 0.5), atol=1e-13
+        jax.jit(lambda s: sp.geometry.point_jacobian(q, 0, s))(0.5), oracle.point_jacobian(qn, 0, 0.5), atol=1e-13
     )
 
 
 def test_segment_point_traced_s_and_jit():
     rng = np.random.default_rng(11)
     q = random_q(rng, 3, [0.0, 1.1, -2.0])
-    f = jax.jit(sp.segment_point, static_argnums=1)
+    f = jax.jit(sp.geometry.segment_point, static_argnums=1)
     for i in range(3):
         ss = np.linspace(0, 1, 5)
         got = jax.vmap(lambda s, i=i: f(_j(q), i, s))(_j(ss))
@@ -287,10 +287,10 @@ def test_float32_smoke():
     for th in (0.0, 1e-12, 0.5, -3.0):
         q = random_q(rng, 3, th)
         q32 = jnp.asarray(q, dtype=jnp.float32)
-        p = sp.segment_point(q32, 2, 0.3)
+        p = sp.geometry.segment_point(q32, 2, 0.3)
         assert p.dtype == jnp.float32
         assert_allclose(p, oracle.segment_point(q.astype(np.float32).astype(np.float64), 2, 0.3), atol=2e-5)
-        J = sp.point_jacobian(q32, 2, 0.3)
+        J = sp.geometry.point_jacobian(q32, 2, 0.3)
         assert J.dtype == jnp.float32
         assert_allclose(J, oracle.point_jacobian(q, 2, 0.3), atol=1e-4)
 
@@ -367,7 +367,7 @@ def test_tip_jacobian_straight_arm_is_rank_two_in_bending():
     # a straight arm: the Jacobian is finite, its L-columns are all e_z, and
     # it equals the oracle (rank-deficient Jacobians are the planner's problem)
     q = np.array([[1.0, 0.0, 0.3], [1.0, 0.0, -0.2], [1.0, 0.0, 1.0]])
-    J = np.asarray(sp.tip_jacobian(_j(q)))
+    J = np.asarray(sp.geometry.tip_jacobian(_j(q)))
     assert_finite(J)
     for c in (0, 3, 6):
         assert_allclose(J[:, c], [0, 0, 1], atol=1e-15)

@@ -1,4 +1,4 @@
-"""Moving obstacles and moving goals (issue 23): softplan_jax.motion and softplan_jax.tracking.
+"""Moving obstacles and moving goals (issue 23): softplan_jax.scenarios.motion and softplan_jax.planning.tracking.
 
 References, all independent of the library's code paths: the rigid motion
 and its speed by NumPy/SciPy (``scipy.linalg.expm`` of the axis' cross-product
@@ -23,7 +23,7 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.cli import main
-from softplan_jax.motion import curve_radius_bound, goal_velocity, moved_curves
+from softplan_jax.scenarios.motion import curve_radius_bound, goal_velocity, moved_curves
 from softplan_jax.scenarios import load_moving_scenario, load_scenario, moving_to_dict, save_moving_scenario
 
 STEPS = 200
@@ -73,7 +73,7 @@ def _tree_curves(scene):
 @pytest.fixture(scope="module")
 def random_moving():
     """Six random moving scenes padded to the tree's shape (single rollouts share one program)."""
-    suite = sp.random_moving_scenarios(5, 6, obstacles=(1, 5), curve_slots=5)
+    suite = sp.moving.random_moving_scenarios(5, 6, obstacles=(1, 5), curve_slots=5)
     return [jax.tree_util.tree_map(lambda x, b=b: x[b], suite) for b in range(6)]
 
 
@@ -102,7 +102,7 @@ def test_speed_bound_holds_and_is_tight(random_moving):
     within a factor 3 of the largest sampled speed (it adds the drift, shift and sway speeds
     and bounds the distance from the pivot, not from the axis)."""
     for moving in random_moving[:3]:
-        S = np.asarray(sp.speed_bounds(moving))
+        S = np.asarray(sp.moving.speed_bounds(moving))
         scene = moving.scene
         u = np.linspace(0.0, 1.0, 101)
         ts = np.linspace(0.0, 8.0, 161)
@@ -138,7 +138,7 @@ def test_closest_point_on_a_moving_curve_is_exact():
     for _ in range(6):
         q = np.stack([np.ones(3), rng.uniform(0.0, 1.8, 3), rng.uniform(-np.pi, np.pi, 3)], axis=1)
         t = float(rng.uniform(0.0, 10.0))
-        got = sp.true_closest(jnp.asarray(q), sp.scenario_at(m, jnp.asarray(t)), sp.SolverOptions())
+        got = sp.geometry.true_closest(jnp.asarray(q), sp.moving.scenario_at(m, jnp.asarray(t)), sp.geometry.SolverOptions())
         for j in (0, 1):
             c, ur = np.asarray(scene.curves.coeffs[j]), np.asarray(scene.curves.u_range[j])
             R, offset = _np_pose(_slot(m, j), t)
@@ -158,9 +158,9 @@ def test_closest_point_on_a_moving_curve_is_exact():
 
 def test_goal_path_interpolates_and_its_velocity_is_the_slope():
     scene = sp.paper_scenario("tree", **PAD)
-    path = sp.goal_path([0.0, 1.0, 3.0], [[1.0, 0.7, 1.45], [1.2, 0.7, 1.45], [1.2, 0.9, 1.25]])
+    path = sp.moving.goal_path([0.0, 1.0, 3.0], [[1.0, 0.7, 1.45], [1.2, 0.7, 1.45], [1.2, 0.9, 1.25]])
     m = sp.make_moving_scenario(scene, goal=path)
-    at = lambda t: np.asarray(sp.goal_at(m, jnp.asarray(t)))  # noqa: E731
+    at = lambda t: np.asarray(sp.moving.goal_at(m, jnp.asarray(t)))  # noqa: E731
     np.testing.assert_allclose(at(1.0), [1.2, 0.7, 1.45], atol=1e-15)
     np.testing.assert_allclose(at(2.0), [1.2, 0.8, 1.35], atol=1e-15)
     np.testing.assert_allclose(at(-1.0), at(0.0), atol=0)
@@ -177,7 +177,7 @@ def test_a_goal_on_a_branch_moves_with_it():
     for t in np.linspace(0.0, 6.0, 13):
         branch = moved_curves(m.scene.curves, m.motion, jnp.asarray(t))
         point = np.asarray(branch.coeffs[1]) @ np.ones(c.shape[1])
-        g = np.asarray(sp.goal_at(m, jnp.asarray(t)))
+        g = np.asarray(sp.moving.goal_at(m, jnp.asarray(t)))
         assert abs(np.linalg.norm(g - point) - 0.12) < 1e-13
         if t > 0:
             assert np.linalg.norm(g - np.asarray(m.goal_path.points[0])) > 0  # it does move
@@ -229,7 +229,7 @@ def test_random_moving_scenes_have_no_contact_by_brute_force(random_moving):
 def test_warm_started_closest_points_stay_exact_on_moving_curves(random_moving):
     """The rollout's clearances (warm start, certificate, moved grid) against the full solve at the
     same (q_k, t_k): 0 differences above 1e-9."""
-    full = jax.jit(lambda q, m, t: sp.true_closest(q, sp.scenario_at(m, t), sp.SolverOptions()).distance)
+    full = jax.jit(lambda q, m, t: sp.geometry.true_closest(q, sp.moving.scenario_at(m, t), sp.geometry.SolverOptions()).distance)
     worst = 0.0
     for moving in random_moving[:3]:
         r = sp.track(moving, max_steps=STEPS)
@@ -245,7 +245,7 @@ def _unavoidable():
     can keep it provably clear."""
     wire = sp.line_segment([-0.3, 1.65, 0.74], [-0.3, -1.35, 0.74])
     scene = sp.make_scenario(jnp.asarray([1.2, 0.9, 1.4]), [wire], **PAD)
-    return sp.make_moving_scenario(scene, [sp.curve_motion(shift=(1.0, 0.0, 0.0), omega=0.5)])
+    return sp.make_moving_scenario(scene, [sp.moving.curve_motion(shift=(1.0, 0.0, 0.0), omega=0.5)])
 
 
 def test_an_obstacle_too_fast_to_avoid_ends_too_fast_not_collided():
@@ -255,7 +255,7 @@ def test_an_obstacle_too_fast_to_avoid_ends_too_fast_not_collided():
     assert r.iterations < STEPS
     assert r.min_clearance > 0 and _brute_min_clearance(r) > 0
     # The planner's own check: standing still would not be provably safe either.
-    S = float(sp.speed_bounds(m)[0])
+    S = float(sp.moving.speed_bounds(m)[0])
     assert S * float(sp.default_gains().dt) > 0.8 * (r.clearance[-1].min() - 2e-6)
 
 
@@ -277,7 +277,7 @@ def test_float32_smoke(random_moving):
 def test_track_batch_matches_single(random_moving):
     """Three scenes on two lanes (the first lane to finish takes the third scene) against a
     Python loop of single tracking rollouts with the same keys."""
-    batch = sp.stack_moving_scenarios(random_moving[:3])
+    batch = sp.moving.stack_moving_scenarios(random_moving[:3])
     out = sp.track_batch(batch, max_steps=STEPS, seed=0, lanes=2)
     keys = jax.random.split(jax.random.PRNGKey(0), 3)
     for b in range(3):
@@ -296,7 +296,7 @@ def test_track_batch_matches_single(random_moving):
 
 
 def test_json_round_trip_and_static_loader_refuses(tmp_path):
-    for name in sp.MOVING_SCENARIOS:
+    for name in sp.moving.MOVING_SCENARIOS:
         m = sp.moving_scenario(name)
         path = tmp_path / f"{name}.json"
         save_moving_scenario(m, path, name=name)
@@ -335,19 +335,19 @@ def test_bad_moving_files_name_the_field(tmp_path, capsys, edit, field):
 def test_bad_input_raises():
     scene = sp.paper_scenario("tree", **PAD)
     with pytest.raises(ValueError, match="non-finite"):
-        sp.curve_motion(pivot=[0.0, np.nan, 0.0])
+        sp.moving.curve_motion(pivot=[0.0, np.nan, 0.0])
     with pytest.raises(ValueError, match="omega"):
-        sp.curve_motion(omega=-1.0)
+        sp.moving.curve_motion(omega=-1.0)
     with pytest.raises(ValueError, match="axis"):
-        sp.curve_motion(amplitude=0.1)
+        sp.moving.curve_motion(amplitude=0.1)
     with pytest.raises(ValueError, match="increasing"):
-        sp.goal_path([0.0, 1.0, 1.0], np.zeros((3, 3)))
+        sp.moving.goal_path([0.0, 1.0, 1.0], np.zeros((3, 3)))
     with pytest.raises(ValueError, match="shape"):
-        sp.goal_path([0.0, 1.0], np.zeros((3, 3)))
+        sp.moving.goal_path([0.0, 1.0], np.zeros((3, 3)))
     with pytest.raises(ValueError, match="curve 9"):
-        sp.make_moving_scenario(scene, {9: sp.curve_motion()})
+        sp.make_moving_scenario(scene, {9: sp.moving.curve_motion()})
     with pytest.raises(ValueError, match="attached"):
-        sp.make_moving_scenario(scene, goal=sp.goal_path([0.0], [[1.0, 1.0, 1.0]], attach=5))
+        sp.make_moving_scenario(scene, goal=sp.moving.goal_path([0.0], [[1.0, 1.0, 1.0]], attach=5))
     with pytest.raises(ValueError, match="MovingScenario"):
         sp.track(scene)
     m = sp.make_moving_scenario(scene)
@@ -377,7 +377,7 @@ def test_cli_plays_a_moving_preset(tmp_path, capsys, monkeypatch):
     assert main(["run", "tree_fruit", "--hold-tolerance", "0"]) == 2
     # --require-reached: success only ("reached": reached and held to the end); "lost" fails.
     assert main(["run", "tree_fruit", "--max-steps", str(STEPS), "--require-reached"]) == 0
-    import softplan_jax.tracking as tracking
+    import softplan_jax.planning.tracking as tracking
 
     held = tracking.result_from_track
     monkeypatch.setattr(tracking, "result_from_track", lambda *a: held(*a)._replace(status="lost"))

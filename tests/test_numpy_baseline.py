@@ -60,7 +60,7 @@ def _configurations():
     """The straight default start (parallel to the tree's trunk: a continuum of
     minima) and seeded random bent arms, each with one straight segment."""
     rng = np.random.default_rng(1234)
-    qs = [np.asarray(sp.default_start(dtype=jnp.float64))]
+    qs = [np.asarray(sp.scenarios.default_start(dtype=jnp.float64))]
     for k in range(3):
         q = np.stack([rng.uniform(0.7, 1.3, 3), rng.uniform(-2.0, 2.0, 3), rng.uniform(-np.pi, np.pi, 3)], 1)
         q[(k + 1) % 3, 1] = 0.0

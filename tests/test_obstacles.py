@@ -1,4 +1,4 @@
-"""softplan_jax.obstacles: the slot layout of a scene, against brute-force references.
+"""softplan_jax.geometry.obstacles: the slot layout of a scene, against brute-force references.
 
 One small mixed scene (a padded polynomial curve group, a padded point-set
 group, a parametric curve); one jitted function of it shared by every test.
@@ -15,8 +15,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 import softplan_jax as sp
-from softplan_jax import obstacles
-from softplan_jax.closest import DEFAULT_OPTIONS
+from softplan_jax.geometry import obstacles
+from softplan_jax.geometry.closest import DEFAULT_OPTIONS
 
 N_POINTS = 7
 
@@ -49,7 +49,7 @@ def _layout():
 
 
 def _arm(q, k):
-    return np.concatenate([np.zeros((1, 3)), np.asarray(sp.backbone_points(q, k))])
+    return np.concatenate([np.zeros((1, 3)), np.asarray(sp.geometry.backbone_points(q, k))])
 
 
 def _min_dist(a, b):
@@ -86,7 +86,7 @@ def test_true_closest_against_dense_sampling():
 def test_model_closest_is_the_n_point_model():
     sc, (curve, pts, helix) = _scene()
     truth, model_pts, model_crv, _, _ = _layout()
-    arm = np.asarray(sp.backbone_points(sc.q0, 10))
+    arm = np.asarray(sp.geometry.backbone_points(sc.q0, 10))
     for slot, obs in ((0, sp.curves.curve_points(curve, N_POINTS)), (2, pts),
                       (4, sp.curves.curve_points(helix, N_POINTS))):
         obs = np.asarray(obs)

@@ -9,8 +9,8 @@ import oracle
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.compilation_cache import rollout_compiler_options
-from softplan_jax.planner import make_options, rollout_jit
+from softplan_jax.base.compilation_cache import rollout_compiler_options
+from softplan_jax.planning.planner import make_options, rollout_jit
 
 # All paper scenarios padded to one shape: one compilation serves the three.
 PAD = dict(curve_slots=5, degree=2)
@@ -36,14 +36,14 @@ def test_paper_scenarios_reach_without_collision(paper, paper_plans, name):
     assert r.q.shape == (r.iterations + 1, 3, 3) and r.tip.shape == (r.iterations + 1, 3)
     np.testing.assert_allclose(r.tip[-1], np.asarray(sp.tip_position(r.q[-1])), atol=1e-12)
     # Independent check: brute-force clearance over the interpolated motion.
-    dense = np.asarray(sp.dense_trajectory_clearance(jnp.asarray(r.q), paper[name], substeps=4, arm_samples=40,
+    dense = np.asarray(sp.geometry.dense_trajectory_clearance(jnp.asarray(r.q), paper[name], substeps=4, arm_samples=40,
                                                      curve_samples=1000))
     assert np.isfinite(dense[:, np.asarray(paper[name].curve_mask)]).all()
     assert dense.min() > 0, dense.min()
     # The recorded clearance is the exact one: never above the brute-force value
     # at the steps themselves, and close to it (dense sampling error only).
     step_dense = np.asarray(
-        sp.dense_trajectory_clearance(jnp.asarray(np.stack([r.q, r.q], 1).reshape(-1, 3, 3)), paper[name],
+        sp.geometry.dense_trajectory_clearance(jnp.asarray(np.stack([r.q, r.q], 1).reshape(-1, 3, 3)), paper[name],
                                       substeps=1, arm_samples=100, curve_samples=2000)
     )[::2]
     rec = r.clearance
@@ -63,7 +63,7 @@ def test_scan_equals_python_loop(paper):
     q = sc.q0
     for k in range(steps):
         np.testing.assert_allclose(np.asarray(r.q[k]), np.asarray(q), rtol=0, atol=1e-12, err_msg=f"step {k}")
-        q = sp.planner_step(q, sc, gains, opts)
+        q = sp.planning.planner_step(q, sc, gains, opts)
     np.testing.assert_allclose(np.asarray(r.q[steps]), np.asarray(q), rtol=0, atol=1e-12)
     # Frozen after the end: every later record repeats the last state.
     np.testing.assert_array_equal(np.asarray(r.q[steps:]), np.broadcast_to(np.asarray(r.q[steps]), r.q[steps:].shape))
@@ -72,7 +72,7 @@ def test_scan_equals_python_loop(paper):
     r = rollout_jit(sc, gains, opts_p, 200)
     q = sc.q0
     for _ in range(10):
-        q = sp.planner_step(q, sc, gains, opts_p)
+        q = sp.planning.planner_step(q, sc, gains, opts_p)
     np.testing.assert_allclose(np.asarray(r.q[10]), np.asarray(q), rtol=0, atol=1e-12)
 
 
@@ -80,7 +80,7 @@ def test_collision_between_steps_is_detected():
     """A short wire placed exactly where the tip passes between steps k and
     k+1 of a free rollout: both sampled configurations are clear, the motion
     between them is not."""
-    q0 = sp.default_start()
+    q0 = sp.scenarios.default_start()
     goal = jnp.array([1.2, -0.6, 1.4])
     far = sp.line_segment([-5.0, -5.0, 0.0], [-5.0, -4.0, 0.0])
     gains = sp.default_gains()._replace(eta=jnp.asarray(1e-12), v_max=jnp.asarray(1.0))
@@ -90,7 +90,7 @@ def test_collision_between_steps_is_detected():
     q_mid = 0.5 * (free.q[k] + free.q[k + 1])
     p_mid = np.asarray(sp.tip_position(q_mid))
     motion = free.tip[k + 1] - free.tip[k]
-    tangent = np.asarray(sp.point_jacobian(q_mid, 2, 1.0)[:, 0])  # dP/dL_1 ~ along the arm
+    tangent = np.asarray(sp.geometry.point_jacobian(q_mid, 2, 1.0)[:, 0])  # dP/dL_1 ~ along the arm
     axis = np.cross(motion, tangent)
     axis /= np.linalg.norm(axis)
     wire = sp.line_segment(p_mid - 0.1 * axis, p_mid + 0.1 * axis)
@@ -102,7 +102,7 @@ def test_collision_between_steps_is_detected():
     assert np.all(r.clearance[: k + 2] > 0.01), r.clearance[: k + 2]
     # ... and the brute-force check of the motion confirms the crossing.
     # (t = 1/2 is a sub-step and the tip, s = 1, a sample: the brute force sees p_mid itself.)
-    dense = np.asarray(sp.dense_trajectory_clearance(jnp.asarray(r.q[k : k + 2]), sc, substeps=20,
+    dense = np.asarray(sp.geometry.dense_trajectory_clearance(jnp.asarray(r.q[k : k + 2]), sc, substeps=20,
                                                      arm_samples=50))
     assert dense.min() < 2e-3
 
@@ -186,7 +186,7 @@ def test_same_padded_shape_does_not_recompile(paper):
 
 
 def test_plan_batch_matches_single(paper):
-    batch = sp.stack_scenarios(list(paper.values()))
+    batch = sp.scenarios.stack_scenarios(list(paper.values()))
     rb = sp.plan_batch(batch, max_steps=200)
     for b, (name, sc) in enumerate(paper.items()):
         single = rollout_jit(sc, sp.default_gains(), make_options("curve"), 200)
@@ -201,13 +201,13 @@ def test_plan_batch_chunks_one_shape_one_compilation(paper, capsys):
     of 3, and they give that batch's rollouts bit for bit (the same program on the
     same inputs; no escape starts, so the per-scenario keys do not matter)."""
     scenes = list(paper.values())
-    rb = sp.plan_batch(sp.stack_scenarios(scenes), max_steps=200, devices=1)
+    rb = sp.plan_batch(sp.scenarios.stack_scenarios(scenes), max_steps=200, devices=1)
     assert np.all(np.asarray(rb.escapes) == 0) and np.all(np.asarray(rb.reached))
-    before = sp.rollout_batch.cache_size()
+    before = sp.planning.rollout_batch.cache_size()
     # 5 scenarios in chunks of 3: sim1 sim2 tree | sim1 sim2 + a padding copy of sim2.
-    five = sp.stack_scenarios(scenes + scenes[:2])
+    five = sp.scenarios.stack_scenarios(scenes + scenes[:2])
     rc = sp.plan_batch(five, max_steps=200, chunk=3, devices=1, progress=True)
-    assert sp.rollout_batch.cache_size() == before
+    assert sp.planning.rollout_batch.cache_size() == before
     assert rc.q.shape == (5, 201, 3, 3) and isinstance(rc.q, np.ndarray)
     for field, got in rc._asdict().items():
         if got is None:  # the tracking fields of a planning rollout
@@ -220,7 +220,7 @@ def test_plan_batch_chunks_one_shape_one_compilation(paper, capsys):
     # Off by default.
     sp.plan_batch(five, max_steps=200, chunk=3, devices=1)
     assert capsys.readouterr().err == ""
-    assert sp.rollout_batch.cache_size() == before
+    assert sp.planning.rollout_batch.cache_size() == before
 
 
 def test_mixed_obstacles_both_methods():
@@ -240,7 +240,7 @@ def test_mixed_obstacles_both_methods():
             assert r.reached and not r.collided, (r.status, r.min_clearance)
             assert r.min_clearance > 0
             # The motion up to the goal (the frozen steps after it do not move).
-            dense = np.asarray(sp.dense_trajectory_clearance(jnp.asarray(r.q[: r.iterations + 1]), sc, substeps=4,
+            dense = np.asarray(sp.geometry.dense_trajectory_clearance(jnp.asarray(r.q[: r.iterations + 1]), sc, substeps=4,
                                                              arm_samples=40, curve_samples=1000))
             assert dense.min() > 0, dense.min()
 
@@ -249,7 +249,7 @@ def test_gradient_through_rollout_matches_finite_differences(paper):
     """jax.grad through whole rollouts (the batch loss of notebooks/tuning.ipynb, the same
     compiled program: the notebook's test run and this test share it through the persistent
     cache) against central finite differences of the same loss."""
-    batch = sp.stack_scenarios([paper["sim1"], paper["tree"]])
+    batch = sp.scenarios.stack_scenarios([paper["sim1"], paper["tree"]])
     opts = sp.PlanOptions(method="curve")
     # A wider influence distance than the default, so that the repulsion acts
     # within the short horizon (the arm passes 0.3-0.4 from a tree branch early).
@@ -258,7 +258,7 @@ def test_gradient_through_rollout_matches_finite_differences(paper):
     steps = 10  # no rollout ends within 10 steps: the loss is smooth in the gains
     # One compilation for the loss and its gradient (the finite differences use its value),
     # with the package's XLA options as the notebook and tune_gains compile it.
-    loss_and_grad = jax.jit(jax.value_and_grad(sp.batch_loss), static_argnames=("options", "max_steps"),
+    loss_and_grad = jax.jit(jax.value_and_grad(sp.tuning.pathwise.batch_loss), static_argnames=("options", "max_steps"),
                             compiler_options=rollout_compiler_options("curve"))
     _, grad = loss_and_grad(g, batch, opts, steps)
     for k in ("k_att", "v_max", "eta", "d0", "dt"):
@@ -301,9 +301,9 @@ def test_plan_rejects_bad_gains(paper):
 def test_post_hoc_collision_checks_equal_in_scan_checks():
     """apply_collision_checks on a planning-only rollout == the checked rollout,
     on a scene that collides (weak repulsion, a wire across the path) and one that does not."""
-    from softplan_jax.metrics import apply_collision_checks
+    from softplan_jax.geometry.clearance import apply_collision_checks
 
-    q0 = sp.default_start()
+    q0 = sp.scenarios.default_start()
     wire = sp.line_segment([0.9, -1.5, 1.2], [0.9, 1.5, 1.9])
     for eta in (1e-12, 1e-3):
         sc = sp.make_scenario([1.4, 0.2, 0.9], [wire], q0, curve_slots=5, degree=2)
@@ -357,7 +357,7 @@ def test_swept_proof_skips_only_motions_that_cannot_collide():
     end clearance) is at least the search's value. The skipped motions nearest the contact
     tolerance are checked by brute force too. Not vacuous: most motions are skipped, some
     are searched, some rollouts collide."""
-    from softplan_jax.metrics import apply_collision_checks, contact_tolerance
+    from softplan_jax.geometry.clearance import apply_collision_checks, contact_tolerance
 
     always = make_options("curve", check_collisions=False, swept_proof=False, **sp.PAPER_STEP)
     post = jax.jit(apply_collision_checks, static_argnums=2)
@@ -376,7 +376,7 @@ def test_swept_proof_skips_only_motions_that_cannot_collide():
         did = np.asarray(r.between_searched)[1 : it + 1][:, mask]
         assert not np.asarray(r.between_searched)[it + 1 :].any() and not np.asarray(r.between_searched)[0].any()
         assert np.asarray(ref.between_searched)[1 : it + 1][:, mask].all()
-        bound = np.array([float(sp.motion_bound(r.q[k], r.q[k + 1])[-1]) for k in range(it)])
+        bound = np.array([float(sp.geometry.motion_bound(r.q[k], r.q[k + 1])[-1]) for k in range(it)])
         lower = c[:-1] - bound[:, None]
         # Every search result is achieved during the motion: never below the proof's bound.
         assert np.all(cb_ref >= lower - 1e-9), label
@@ -393,7 +393,7 @@ def test_swept_proof_skips_only_motions_that_cannot_collide():
             k, j = np.unravel_index(flat, skip.shape)
             if not skip[k, j]:
                 continue
-            dense = np.asarray(sp.dense_trajectory_clearance(jnp.asarray(r.q[k : k + 2]), sc, substeps=20,
+            dense = np.asarray(sp.geometry.dense_trajectory_clearance(jnp.asarray(r.q[k : k + 2]), sc, substeps=20,
                                                              arm_samples=100, curve_samples=1000))[0][mask]
             assert dense[j] >= lower[k, j] - 1e-9 and dense[j] > contact, (label, k, j, dense[j], lower[k, j])
     assert skipped > 3 * searched and searched > 0, (skipped, searched)
@@ -403,19 +403,19 @@ def test_swept_proof_skips_only_motions_that_cannot_collide():
 def test_swept_clear_edge_cases(paper):
     """swept_clear: a zero motion proves every clear slot clear; NaN, a clearance at the contact
     tolerance, a motion as long as the clearance or a solve that did not converge never do."""
-    from softplan_jax.metrics import swept_clear
-    from softplan_jax.obstacles import radius_and_mask
+    from softplan_jax.geometry.clearance import swept_clear
+    from softplan_jax.geometry.obstacles import radius_and_mask
 
     sc = paper["tree"]
     q = sc.q0
-    truth = jax.jit(sp.true_closest, static_argnums=2)(q, sc, make_options().solver)
+    truth = jax.jit(sp.geometry.true_closest, static_argnums=2)(q, sc, make_options().solver)
     _, mask = radius_and_mask(sc)
     c = jnp.where(mask, truth.distance - sc.arm_radius - sc.curves.radius, jnp.inf)
     contact = 1e-6
     swept_clear = jax.jit(swept_clear)
     assert bool(jnp.all(swept_clear(q, q, truth, c, contact)))
     moved = q.at[0, 2].add(1.0)  # turn the whole arm: the bound (~ the arm's length) exceeds every clearance
-    assert float(sp.motion_bound(q, moved)[-1]) > float(jnp.max(jnp.where(mask, c, 0.0)))
+    assert float(sp.geometry.motion_bound(q, moved)[-1]) > float(jnp.max(jnp.where(mask, c, 0.0)))
     assert not bool(jnp.any(swept_clear(q, moved, truth, c, contact) & mask))
     assert not bool(jnp.any(swept_clear(q, q, truth, jnp.full_like(c, contact), contact)))
     assert not bool(jnp.any(swept_clear(q, q, truth, c * jnp.nan, contact)))
@@ -423,11 +423,11 @@ def test_swept_clear_edge_cases(paper):
 
 
 def test_tune_gains_lowers_the_loss_and_compiles_once(paper):
-    from softplan_jax.tuning import tune_gains
+    from softplan_jax.tuning.pathwise import tune_gains
 
     # The call of notebooks/tuning.ipynb at its test size (tests/test_notebooks.py): the two
     # share one compilation through the persistent compilation cache.
-    sc = sp.stack_scenarios([paper["sim1"], paper["tree"]])
+    sc = sp.scenarios.stack_scenarios([paper["sim1"], paper["tree"]])
     first = tune_gains(sc, steps=2, max_steps=10, progress=False, tune=("k_att", "eta", "d0", "dt"))
     assert first.compile_seconds > 0
     assert np.all(np.isfinite(first.losses)) and first.losses[-1] < first.losses[0], first.losses

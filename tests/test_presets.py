@@ -1,4 +1,4 @@
-"""Gain presets (softplan_jax.presets) and the CLI's ``--gains`` option.
+"""Gain presets (softplan_jax.planning.presets) and the CLI's ``--gains`` option.
 
 The paper preset's figures checked here are the ones issue 10 quotes (and an
 independent NumPy implementation, benchmarks/numpy_baseline.py, reproduces:
@@ -18,7 +18,7 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.cli import main
-from softplan_jax.presets import PRESETS, preset
+from softplan_jax.planning.presets import PRESETS, preset
 
 
 def test_preset_data():
@@ -45,7 +45,7 @@ def test_apply_preset_start_pose_and_plain_pinv_well_defined():
         np.testing.assert_array_equal(q0[:, 1:], np.tile([0.1, 0.0], (3, 1)))
         assert float(gains.damping) == 0 and float(gains.rep_max) == math.inf
         # The plain pseudo-inverse J^T (J J^T)^-1 needs J J^T invertible at the start: it is.
-        J = np.asarray(sp.tip_jacobian(sc.q0))
+        J = np.asarray(sp.geometry.tip_jacobian(sc.q0))
         assert np.linalg.svd(J, compute_uv=False)[-1] > 0.05
         same, g_def, o_def = sp.apply_preset("default", base)
         np.testing.assert_array_equal(np.asarray(same.q0), np.asarray(base.q0))
@@ -61,10 +61,10 @@ def test_uncapped_repulsion_is_khatib_and_differentiable():
     V = jnp.array([0.0, 0.0, 0.05])
     for d in (0.01, 0.05, 0.149, 0.2):
         raw = 1e-3 * (1 / d - 1 / 0.15) / d**2 if d < 0.15 else 0.0
-        np.testing.assert_allclose(float(jnp.linalg.norm(sp.repulsion(V, d, g))), raw, rtol=1e-12, atol=1e-300)
+        np.testing.assert_allclose(float(jnp.linalg.norm(sp.planning.repulsion(V, d, g))), raw, rtol=1e-12, atol=1e-300)
 
     def mag(eta, d):
-        return jnp.linalg.norm(sp.repulsion(V, d, g._replace(eta=eta)))
+        return jnp.linalg.norm(sp.planning.repulsion(V, d, g._replace(eta=eta)))
 
     for d in (0.05, 0.2):
         grad = jax.grad(mag)(jnp.asarray(1e-3), d)

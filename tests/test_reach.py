@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax import global_planner
-from softplan_jax.fallback import _search_jit
-from softplan_jax.reach import _goal_configurations_jit
+from softplan_jax.search import tree as global_planner
+from softplan_jax.search.fallback import _search_jit
+from softplan_jax.search.reach import _goal_configurations_jit
 
-OPTS = sp.ReachOptions()
+OPTS = sp.search.ReachOptions()
 PAD = dict(curve_slots=5, degree=2)  # test_planner's shape
 # The straight start's tip is at (0, 0, 3); a wall of two segments blocks the way to this goal.
 GOAL = (1.6, 0.0, 1.4)
@@ -44,11 +44,11 @@ def decided():
         scene(goal=(0.9, 0.3, 2.0), obstacles=[sp.line_segment([0.9, -1.2, 2.0], [0.9, 1.2, 2.0], radius=0.05)]),
         scene(goal=(0.0, 0.0, 0.0)),
     ]
-    batch = sp.stack_scenarios(scenes)
+    batch = sp.scenarios.stack_scenarios(scenes)
     # One scene at a time with an extra start: plan_fallback's program (compiled once for all).
-    parts = [sp.reachability(s, q_extra=s.q0, options=OPTS) for s in scenes]
-    return batch, sp.Reachability(*(np.stack([getattr(p, f) for p in parts]) if f != "reason" else
-                                    tuple(p.reason for p in parts) for f in sp.Reachability._fields))
+    parts = [sp.search.reachability(s, q_extra=s.q0, options=OPTS) for s in scenes]
+    return batch, sp.search.Reachability(*(np.stack([getattr(p, f) for p in parts]) if f != "reason" else
+                                    tuple(p.reason for p in parts) for f in sp.search.Reachability._fields))
 
 
 def test_reachable_goal_has_certified_configuration(decided):
@@ -59,7 +59,7 @@ def test_reachable_goal_has_certified_configuration(decided):
     assert r.certified[0, 0]
     # Tip on the goal, and the brute-force clearance agrees that the configuration is clear.
     assert float(jnp.linalg.norm(sp.tip_position(q) - s.goal)) <= OPTS.ik_tolerance
-    dense = np.asarray(sp.dense_trajectory_clearance(jnp.stack([q, q]), s, substeps=1))
+    dense = np.asarray(sp.geometry.dense_trajectory_clearance(jnp.stack([q, q]), s, substeps=1))
     assert np.min(dense) >= OPTS.ik_clearance - 1e-9
     assert np.min(dense) == pytest.approx(r.clearance[0, 0], abs=5e-3)  # the sampling error of the brute force
     # Certified rows first, sorted by clearance.
@@ -118,11 +118,11 @@ def test_fallback_reaches_what_the_local_planner_does_not(rescued):
 def test_fallback_path_is_collision_free_by_brute_force(rescued):
     s, _, r = rescued
     q = jnp.asarray(r.q[r.global_start:])
-    dense = np.asarray(sp.dense_trajectory_clearance(q, s, substeps=4, arm_samples=60, curve_samples=600))
+    dense = np.asarray(sp.geometry.dense_trajectory_clearance(q, s, substeps=4, arm_samples=60, curve_samples=600))
     assert np.min(dense) > 0
     assert not r.collided and r.min_clearance > 0
     # Every step of the search's part satisfies the swept proof: exact clearance at its start > its motion bound.
-    B = np.asarray(jax.vmap(lambda a, b: sp.motion_bound(a, b)[-1])(q[:-1], q[1:]))
+    B = np.asarray(jax.vmap(lambda a, b: sp.geometry.motion_bound(a, b)[-1])(q[:-1], q[1:]))
     assert np.all(r.clearance[r.global_start:-1].min(axis=1) - B > 1e-6)
     # Steps are short: the path is a sequence of planner-like steps, not jumps.
     assert np.max(B) <= OPTS.step_motion + 1e-12
@@ -152,17 +152,17 @@ def test_plot_shows_the_global_part(rescued):
 def test_batch_compiles_the_search_once_and_keeps_local_results(rescued):
     # rescue() on a batch (plan_fallback's second half), from the local results of plan's
     # compiled program: the search runs per scene in chunks of one shape, one program.
-    from softplan_jax.fallback import rescue
+    from softplan_jax.search.fallback import rescue
 
     s, local, single = rescued
     near = scene(goal=(0.005, 0.0, 3.0))  # within the goal tolerance of the start's tip
     local_near = sp.plan(near, max_steps=15)
     assert local_near.reached
-    fn = _search_jit(OPTS, sp.SolverOptions(), 1e-6)
-    ik = _goal_configurations_jit(OPTS, sp.SolverOptions(), 1e-6, True)
+    fn = _search_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
+    ik = _goal_configurations_jit(OPTS, sp.geometry.SolverOptions(), 1e-6, True)
     before = fn._cache_size(), ik._cache_size()
     assert before[0] >= 1 and before[1] >= 1  # compiled by the single scene (the fixture)
-    res = rescue(sp.stack_scenarios([s, near, s]), [local, local_near, local], sp.make_options())
+    res = rescue(sp.scenarios.stack_scenarios([s, near, s]), [local, local_near, local], sp.make_options())
     assert [r.planner for r in res] == ["global", "local", "global"]
     assert all(r.reached for r in res)
     assert res[1] is local_near or res[1] == local_near
@@ -212,17 +212,17 @@ def test_wrap_delta_turns_the_short_way():
 )
 def test_bad_reach_options(bad, match):
     with pytest.raises(ValueError, match=match):
-        sp.reachability(scene(), options=OPTS._replace(**bad))
+        sp.search.reachability(scene(), options=OPTS._replace(**bad))
 
 
 def test_bad_input():
     s = scene()
     with pytest.raises(ValueError, match="Scenario"):
-        sp.reachability("not a scene")
+        sp.search.reachability("not a scene")
     with pytest.raises(ValueError, match="q_extra"):
-        sp.reachability(s, q_extra=np.zeros((2, 3)))
+        sp.search.reachability(s, q_extra=np.zeros((2, 3)))
     with pytest.raises(ValueError, match="q_extra"):
-        sp.reachability(s, q_extra=np.full((3, 3), np.nan))
+        sp.search.reachability(s, q_extra=np.full((3, 3), np.nan))
     with pytest.raises(ValueError, match="chunk"):
         sp.plan_fallback(s, chunk=0)
     with pytest.raises(ValueError, match="Scenario"):
@@ -233,8 +233,8 @@ def test_bad_input():
 
 @pytest.mark.slow
 def test_float32_reachability_smoke():
-    s = sp.make_scenario(GOAL, WALL, q0=sp.default_start(dtype=jnp.float32), **PAD)
-    r = sp.reachability(s, options=OPTS._replace(ik_tolerance=1e-4))
+    s = sp.make_scenario(GOAL, WALL, q0=sp.scenarios.default_start(dtype=jnp.float32), **PAD)
+    r = sp.search.reachability(s, options=OPTS._replace(ik_tolerance=1e-4))
     assert r.q_goal.dtype == np.float32
     assert r.reachable and np.all(np.isfinite(r.q_goal))
     assert r.tip_error[0] <= 1e-4 and r.clearance[0] >= OPTS.ik_clearance

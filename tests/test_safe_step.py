@@ -12,8 +12,8 @@ import oracle
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.metrics import apply_collision_checks
-from softplan_jax.planner import make_options, rollout_batch, rollout_jit
+from softplan_jax.geometry.clearance import apply_collision_checks
+from softplan_jax.planning.planner import make_options, rollout_batch, rollout_jit
 
 PAD = dict(curve_slots=5, degree=2)
 
@@ -46,15 +46,15 @@ def test_motion_bound_is_sound_on_random_motions():
         dq = rng.normal(size=(n, 3)) * 10 ** rng.uniform(-3, 0)
         q_b = q_a + dq
         q_b[:, 0] = np.maximum(q_b[:, 0], 0.05)
-        bound = np.asarray(sp.motion_bound(q_a, q_b))
+        bound = np.asarray(sp.geometry.motion_bound(q_a, q_b))
         seen = _observed_motion(q_a, q_b, substeps=20, arm_samples=30)
         assert bound.shape == (n,)
         assert np.all(bound >= seen - 1e-12), (k, bound, seen)
     # At theta = 0 and with no motion: finite, and zero.
-    q = np.asarray(sp.default_start())
-    assert np.all(np.asarray(sp.motion_bound(q, q)) == 0)
+    q = np.asarray(sp.scenarios.default_start())
+    assert np.all(np.asarray(sp.geometry.motion_bound(q, q)) == 0)
     with pytest.raises(ValueError, match="same shape"):
-        sp.motion_bound(q, q[:2])
+        sp.geometry.motion_bound(q, q[:2])
 
 
 def test_motion_bound_is_sound_and_tight_on_planner_steps():
@@ -64,7 +64,7 @@ def test_motion_bound_is_sound_and_tight_on_planner_steps():
     r = sp.plan(sc, max_steps=200, **sp.PAPER_STEP)  # the rollout test_planner compiles too
     ratios = []
     for k in range(0, r.iterations, 5):
-        bound = np.asarray(sp.motion_bound(r.q[k], r.q[k + 1]))
+        bound = np.asarray(sp.geometry.motion_bound(r.q[k], r.q[k + 1]))
         seen = _observed_motion(r.q[k], r.q[k + 1])
         assert np.all(bound >= seen - 1e-12), k
         ratios.append(bound[-1] / seen[-1])
@@ -73,8 +73,8 @@ def test_motion_bound_is_sound_and_tight_on_planner_steps():
 
 
 def test_motion_bound_gradient_is_finite_at_theta_zero():
-    q = sp.default_start()
-    g = jax.grad(lambda d: sp.motion_bound(q, q + d)[-1])(jnp.full((3, 3), 1e-3))
+    q = sp.scenarios.default_start()
+    g = jax.grad(lambda d: sp.geometry.motion_bound(q, q + d)[-1])(jnp.full((3, 3), 1e-3))
     assert np.isfinite(np.asarray(g)).all()
 
 
@@ -151,7 +151,7 @@ def test_safe_step_keeps_the_clearance_above_the_floor(colliding_scenes):
         c = np.min(r.clearance[b, : it + 1], axis=1)
         assert np.all(c[1:] >= (1 - f) * c[:-1] - 1e-12)
         for k in range(0, it, 7):
-            bound = float(sp.motion_bound(r.q[b, k], r.q[b, k + 1])[-1])
+            bound = float(sp.geometry.motion_bound(r.q[b, k], r.q[b, k + 1])[-1])
             assert bound <= f * c[k] + 1e-12, (b, k, bound, c[k])
         assert np.all((r.step_scale[b, :it] > 0) & (r.step_scale[b, :it] <= 1))
 
@@ -243,11 +243,11 @@ def test_goal_warning_names_the_obstacle_slot():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sc = sp.make_scenario(goal, [wire, pts, ring], curve_slots=2)
-        msgs = sp.scenario_warnings(sc)
+        msgs = sp.scenarios.scenario_warnings(sc)
         assert len(msgs) == 1 and f"obstacle(s) [{slot}]" in msgs[0], (goal, msgs)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert sp.scenario_warnings(sp.make_scenario(far, [wire, pts, ring], curve_slots=2)) == []
+        assert sp.scenarios.scenario_warnings(sp.make_scenario(far, [wire, pts, ring], curve_slots=2)) == []
 
 
 def test_goal_beyond_reach_warns():
@@ -261,12 +261,12 @@ def test_goal_beyond_reach_warns():
 def test_degenerate_inputs_are_errors():
     with pytest.raises(ValueError, match="same point"):
         sp.line_segment([1.0, 2.0, 3.0], [1.0, 2.0, 3.0])
-    q = sp.default_start()
+    q = sp.scenarios.default_start()
     for s in (-0.1, 1.5):
         with pytest.raises(ValueError, match=r"\[0, 1\]"):
-            sp.segment_point(q, 0, s)
+            sp.geometry.segment_point(q, 0, s)
         with pytest.raises(ValueError, match=r"\[0, 1\]"):
-            sp.point_jacobian(q, 0, s)
+            sp.geometry.point_jacobian(q, 0, s)
     with pytest.raises(ValueError, match="not finite inside u_range"):
         sp.ParametricCurve(lambda u: jnp.stack([jnp.sqrt(u), u, u]), (-1.0, 1.0))
     with pytest.raises(ValueError, match="safe_fraction"):

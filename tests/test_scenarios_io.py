@@ -136,7 +136,7 @@ def test_load_float32(tmp_path):
 def test_minimal_file_uses_defaults(tmp_path):
     src = write_json(tmp_path / "min.json", {"goal": [1, 0, 2]})
     scenario = sp.load_scenario(src)
-    np.testing.assert_array_equal(scenario.q0, sp.default_start())
+    np.testing.assert_array_equal(scenario.q0, sp.scenarios.default_start())
     assert not np.asarray(scenario.curve_mask).any()
     assert not np.asarray(scenario.point_mask).any()
 

@@ -1,4 +1,4 @@
-"""The smoothed tuning objective (softplan_jax.smoothing, issue 22): its gradient
+"""The smoothed tuning objective (softplan_jax.tuning.smoothing, issue 22): its gradient
 against central finite differences of the same objective, against re-run
 differences of the smoothed objective (common random numbers), the GainFunction
 against the Gains it generalises, tune_smoothed's history and budget, bad input.
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.smoothing import (
+from softplan_jax.tuning.smoothing import (
     GainSpace,
     estimate_objective,
     smoothed_objective,
@@ -218,14 +218,14 @@ def test_gain_function_generalises_gains():
     g = sp.default_gains()._replace(d0=jnp.asarray(3.0, jnp.float64))  # the obstacle within d0: the repulsion acts
     q = sc.q0.at[:, 1].set(0.3)
     opts = sp.PlanOptions(step="plain")
-    ref = np.asarray(sp.planner_step(q, sc, g, opts))
+    ref = np.asarray(sp.planning.planner_step(q, sc, g, opts))
     fn = sp.GainFunction.from_gains(g, 5, 3)
-    np.testing.assert_array_equal(np.asarray(sp.planner_step(q, sc, fn, opts)), ref)
+    np.testing.assert_array_equal(np.asarray(sp.planning.planner_step(q, sc, fn, opts)), ref)
     c = 0.7
-    scaled = np.asarray(sp.planner_step(q, sc, g._replace(eta=g.eta * math.exp(c)), opts))
+    scaled = np.asarray(sp.planning.planner_step(q, sc, g._replace(eta=g.eta * math.exp(c)), opts))
     assert np.abs(scaled - ref).max() > 1e-6  # the repulsion matters here
     for f in (fn._replace(rep_profile=jnp.full((5,), c)), fn._replace(seg_weights=jnp.full((3,), c))):
-        np.testing.assert_allclose(np.asarray(sp.planner_step(q, sc, f, opts)), scaled, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(np.asarray(sp.planning.planner_step(q, sc, f, opts)), scaled, rtol=1e-12, atol=1e-14)
 
 
 def test_gain_space_encode_decode_round_trip():

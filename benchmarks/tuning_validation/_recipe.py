@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import softplan_jax as sp
-from softplan_jax.smoothing import GainSpace, tune_smoothed
+from softplan_jax.tuning.smoothing import GainSpace, tune_smoothed
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from tuning import plan_kw  # noqa: E402  (benchmarks/tuning.py: the method keywords of a model)

@@ -13,8 +13,8 @@ import jax.numpy as jnp
 
 jax.config.update("jax_enable_x64", True)
 import softplan_jax as sp
-from softplan_jax.planner import make_options
-from softplan_jax.smoothing import GainSpace, score_batch
+from softplan_jax.planning.planner import make_options
+from softplan_jax.tuning.smoothing import GainSpace, score_batch
 
 m = sys.argv[1]
 kw = dict(method="curve", n_points=10) if m == "curve" else dict(method="points", n_points=int(m))

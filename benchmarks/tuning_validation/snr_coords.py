@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 from _recipe import CENTRE, TRAIN, plan_kw
 
-from softplan_jax.planner import make_options
-from softplan_jax.smoothing import GainSpace, estimate_objective, smoothing_sample
+from softplan_jax.planning.planner import make_options
+from softplan_jax.tuning.smoothing import GainSpace, estimate_objective, smoothing_sample
 
 m = sys.argv[1] if sys.argv[1] == "curve" else int(sys.argv[1])
 space = GainSpace(("d0", "dt"), stable_dt=True)

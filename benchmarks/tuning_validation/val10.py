@@ -21,7 +21,7 @@ import numpy as np
 import optax
 from _recipe import CENTRE, tune_recipe, validation_success
 
-from softplan_jax.smoothing import ScoreWeights
+from softplan_jax.tuning.smoothing import ScoreWeights
 
 m = sys.argv[1] if sys.argv[1] == "curve" else int(sys.argv[1])
 configs = sys.argv[2].split(",")

@@ -16,7 +16,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np
 from _recipe import TRAIN, plan_kw, tune_recipe, validation_success
 
-from softplan_jax.smoothing import GainSpace, tune_smoothed
+from softplan_jax.tuning.smoothing import GainSpace, tune_smoothed
 
 m = sys.argv[1] if sys.argv[1] == "curve" else int(sys.argv[1])
 configs = sys.argv[2].split(",") if len(sys.argv) > 2 else ["F0", "G0", "FN", "FN2", "GN"]

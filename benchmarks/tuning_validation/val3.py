@@ -10,7 +10,7 @@ import optax
 
 jax.config.update("jax_enable_x64", True)
 import softplan_jax as sp
-from softplan_jax.smoothing import GainSpace, tune_smoothed
+from softplan_jax.tuning.smoothing import GainSpace, tune_smoothed
 
 m = sys.argv[1]
 kw = dict(method="curve", n_points=10) if m == "curve" else dict(method="points", n_points=int(m))

@@ -10,7 +10,7 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 import softplan_jax as sp
-from softplan_jax.smoothing import GainSpace, ScoreWeights, tune_smoothed
+from softplan_jax.tuning.smoothing import GainSpace, ScoreWeights, tune_smoothed
 
 m = sys.argv[1]
 configs = sys.argv[2].split(",") if len(sys.argv) > 2 else ["A", "B", "C", "D"]

@@ -11,7 +11,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 from _recipe import BOX, TRAIN, plan_kw, tune_recipe, validation_success
 
-from softplan_jax.smoothing import GainSpace, tune_smoothed
+from softplan_jax.tuning.smoothing import GainSpace, tune_smoothed
 
 m = sys.argv[1] if sys.argv[1] == "curve" else int(sys.argv[1])
 guard = sys.argv[2] if len(sys.argv) > 2 else "clip"

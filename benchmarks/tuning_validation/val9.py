@@ -10,7 +10,7 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp
 from _recipe import CENTRE, tune_recipe, validation_success
 
-from softplan_jax.smoothing import ScoreWeights
+from softplan_jax.tuning.smoothing import ScoreWeights
 
 m = sys.argv[1] if sys.argv[1] == "curve" else int(sys.argv[1])
 configs = sys.argv[2].split(",") if len(sys.argv) > 2 else ["T", "C", "R"]

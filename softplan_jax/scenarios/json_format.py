@@ -21,7 +21,7 @@ import tempfile
 import jax.numpy as jnp
 import numpy as np
 
-from ..curves import PolynomialCurve, line_segment
+from ..geometry.curves import PolynomialCurve, line_segment
 from .scenario import Scenario, default_start, make_scenario
 
 __all__ = [
@@ -99,7 +99,7 @@ def moving_from_dict(data: dict, dtype=None):
     """Build a :class:`~softplan_jax.motion.MovingScenario` from the JSON structure
     (a file without motion gives one where nothing moves); every malformed field
     raises a ValueError naming the field."""
-    from ..motion import curve_motion, goal_path, make_moving_scenario
+    from .motion import curve_motion, goal_path, make_moving_scenario
 
     scen, motions, path = _parse(data, dtype)
     dtype = scen.q0.dtype

@@ -23,8 +23,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..curves import line_segment
-from ..motion import CurveMotion, GoalPath, MovingScenario, curve_motion, goal_path, make_moving_scenario
+from ..geometry.curves import line_segment
+from .motion import CurveMotion, GoalPath, MovingScenario, curve_motion, goal_path, make_moving_scenario
 from .paper import paper_scenario
 from .random_suite import random_scenarios, seed_sequence
 from .scenario import default_start, make_scenario

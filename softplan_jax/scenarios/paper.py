@@ -13,7 +13,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..curves import PolynomialCurve
+from ..geometry.curves import PolynomialCurve
 from .scenario import Scenario, default_start, make_scenario
 
 __all__ = ["PAPER_SCENARIOS", "PAPER_RESULTS", "paper_scenario"]

@@ -26,9 +26,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..curves import ParametricCurve, PolynomialCurve, stack_curves
-from ..obstacles import obstacle_count, obstacle_samples  # obstacle_count re-exported: the layout belongs to obstacles
-from ..validation import as_float_array, check_configuration, check_finite, check_points
+from ..geometry.curves import ParametricCurve, PolynomialCurve, stack_curves
+from ..geometry.obstacles import obstacle_count, obstacle_samples  # obstacle_count re-exported: the layout belongs to obstacles
+from ..base.validation import as_float_array, check_configuration, check_finite, check_points
 
 __all__ = [
     "Scenario",

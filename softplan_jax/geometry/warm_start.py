@@ -105,7 +105,7 @@ from .closest import (
 )
 from .curves import PolynomialCurve
 from .kinematics import segment_frames
-from .numerics import evaluate_where
+from ..base.numerics import evaluate_where
 
 __all__ = ["CurveData", "curve_data", "warm_curves"]
 

@@ -26,9 +26,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .compilation_cache import rollout_compiler_options
-from .planner import Gains, PlanOptions, check_gains, make_options, rollout
-from .scenarios import Scenario
+from ..base.compilation_cache import rollout_compiler_options
+from ..planning.planner import Gains, PlanOptions, check_gains, make_options, rollout
+from ..scenarios import Scenario
 
 __all__ = ["LossWeights", "rollout_loss", "batch_loss", "tune_gains", "TuningResult"]
 

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .validation import (
+from ..base.validation import (
     as_float_array,
     check_finite,
     check_points,
@@ -304,7 +304,7 @@ def fit_polynomial_curve(points, degree: int = 3, radius=0.0, *, ordered: bool =
       PolynomialCurve with coeffs (3, degree + 1) and u_range (0, 1).
     """
     if not ordered:
-        from .fitting import fit_curve  # fitting imports this module
+        from ..clouds.fitting import fit_curve  # fitting imports this module
 
         return fit_curve(points, int(degree), radius=radius).curve
     points = check_points(points)
@@ -324,7 +324,7 @@ def fit_polynomial_curve(points, degree: int = 3, radius=0.0, *, ordered: bool =
     coeffs, *_ = jnp.linalg.lstsq(V, points)
     curve = PolynomialCurve(coeffs.T, jnp.array([0.0, 1.0], dtype=points.dtype), radius)
     if is_concrete(coeffs):
-        from .fitting import warn_if_poor  # fitting imports this module
+        from ..clouds.fitting import warn_if_poor  # fitting imports this module
 
         warn_if_poor(curve, points, "fit_polynomial_curve")
     return curve

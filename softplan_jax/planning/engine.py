@@ -55,13 +55,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .closest import ClosestPoint, SolverOptions, curve_closest
-from .kinematics import tip_position
-from .metrics import between_steps, contact_tolerance, swept_clear
-from .motion import MovingScenario, goal_velocity, moved_cells, moved_curves, scenario_at, speed_bounds
-from .numerics import evaluate_where, safe_norm, tie
-from .obstacles import placeholder_closest, radius_and_mask, true_closest, warm_cells, warm_closest, warm_state
-from .status import Status
+from ..geometry.closest import ClosestPoint, SolverOptions, curve_closest
+from ..geometry.kinematics import tip_position
+from ..geometry.clearance import between_steps, contact_tolerance, swept_clear
+from ..scenarios.motion import MovingScenario, goal_velocity, moved_cells, moved_curves, scenario_at, speed_bounds
+from ..base.numerics import evaluate_where, safe_norm, tie
+from ..geometry.obstacles import placeholder_closest, radius_and_mask, true_closest, warm_cells, warm_closest, warm_state
+from ..base.status import Status
 from .step import attraction, next_q, tracking_attraction
 
 __all__ = ["Rollout", "Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "run", "run_lanes",

@@ -76,9 +76,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
-from .curves import PolynomialCurve
-from .scenarios import write_json_file
-from .validation import check_cloud, check_points
+from ..geometry.curves import PolynomialCurve
+from ..scenarios import write_json_file
+from ..base.validation import check_cloud, check_points
 
 __all__ = [
     "CurveFit",
@@ -1337,7 +1337,7 @@ def fit_scenario_dict(fit, goal, q0=None, *, name: str | None = None, metadata: 
     Returns:
       dict in the ``softplan-scenario/1`` format.
     """
-    from .scenarios import make_scenario, scenario_to_dict
+    from ..scenarios import make_scenario, scenario_to_dict
 
     cf = CloudFit.from_fit(fit)
     scenario = make_scenario(goal, [f.curve for f in cf.fits], q0)

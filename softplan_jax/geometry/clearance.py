@@ -43,9 +43,9 @@ import jax.numpy as jnp
 
 from .closest import ClosestPoint, FixedPoint
 from .kinematics import backbone_points, motion_bound, segment_point
-from .numerics import contact_floor, evaluate_where, get_epsilon, safe_norm, solve_small
+from ..base.numerics import contact_floor, evaluate_where, get_epsilon, safe_norm, solve_small
 from .obstacles import map_obstacle_groups, map_obstacles, radius_and_mask, true_closest
-from .status import Status
+from ..base.status import Status
 
 __all__ = [
     "true_closest",

@@ -64,7 +64,7 @@ def _pyplot():
 def _trajectory(scenario, result) -> dict:
     """Configurations, tips and outcome of ``result`` as NumPy, trimmed to the
     steps taken."""
-    from .planner import Rollout, result_from_rollout
+    from ..planning.planner import Rollout, result_from_rollout
 
     if scenario.q0.ndim != 2:
         raise ValueError("plot one scenario at a time (this Scenario is batched)")
@@ -98,7 +98,7 @@ def _trajectory(scenario, result) -> dict:
 
 def _backbones(qs) -> np.ndarray:
     """(T, n * ARM_SAMPLES + 1, 3) smooth backbones, the base (origin) first."""
-    from .kinematics import backbone_points
+    from ..geometry.kinematics import backbone_points
 
     out = []
     for q in qs:
@@ -114,7 +114,7 @@ def _joint_indices(n_segments: int) -> np.ndarray:
 
 def _obstacles(scenario) -> list[dict]:
     """Every real obstacle as a dict(kind "curve" | "points", pts (N, 3), radius)."""
-    from .obstacles import obstacle_samples
+    from ..geometry.obstacles import obstacle_samples
 
     return obstacle_samples(scenario, CURVE_SAMPLES)
 
@@ -533,7 +533,7 @@ def plot_clearance(result, scenario=None, ax=None, labels=None, title=None, figs
     c = c[: it + 1]
     c = c[:, ~np.all(np.isinf(c), axis=0)]  # padding slots of a Rollout
     if labels is None and scenario is not None:
-        from .obstacles import obstacle_labels
+        from ..geometry.obstacles import obstacle_labels
 
         labels = obstacle_labels(scenario)
         if len(labels) != c.shape[1]:
@@ -673,8 +673,8 @@ def plot_cloud_fit(points, fit, ax=None, title=None, max_points: int = 6000, fig
     Returns:
       The matplotlib Figure.
     """
-    from .fitting import CloudFit
-    from .validation import check_cloud
+    from ..clouds import CloudFit
+    from ..base.validation import check_cloud
 
     P = check_cloud(points)
     cf = CloudFit.from_fit(fit)
@@ -784,7 +784,7 @@ def _tracking_data(result):
 
 
 def _obstacles_at(moving, t) -> list[dict]:
-    from .motion import scenario_at
+    from ..scenarios.motion import scenario_at
 
     return _obstacles(scenario_at(moving, float(t)))
 

@@ -42,11 +42,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .closest import DEFAULT_OPTIONS, SolverOptions
-from .kinematics import points_jacobian, tip_position
-from .numerics import damped_pinv, safe_norm, solve_small
-from .obstacles import radius_and_mask, true_closest
-from .scenarios import Scenario
+from ..geometry.closest import DEFAULT_OPTIONS, SolverOptions
+from ..geometry.kinematics import points_jacobian, tip_position
+from ..base.numerics import damped_pinv, safe_norm, solve_small
+from ..geometry.obstacles import radius_and_mask, true_closest
+from ..scenarios import Scenario
 
 __all__ = ["ReachOptions", "Reachability", "REACH_REASONS", "reachability", "goal_configurations"]
 
@@ -329,8 +329,8 @@ def unreachable_proof(scenario: Scenario) -> str:
         return "beyond_reach"
     arm_r = float(scenario.arm_radius)
     # Polynomial curves: exact point-curve distance (roots of the stationarity polynomial).
-    from .curves import PolynomialCurve
-    from .fitting import curve_distance  # exact: the roots of the stationarity polynomial and the ends
+    from ..geometry.curves import PolynomialCurve
+    from ..clouds import curve_distance  # exact: the roots of the stationarity polynomial and the ends
 
     coeffs = np.asarray(scenario.curves.coeffs, np.float64)
     u_range = np.asarray(scenario.curves.u_range, np.float64)

@@ -37,15 +37,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .batching import pad_batch
-from .closest import DEFAULT_OPTIONS
-from .global_planner import global_search
-from .kinematics import tip_position
-from .metrics import contact_tolerance
-from .planner import PlanResult, make_options, plan, plan_batch
+from ..planning.batching import pad_batch
+from ..geometry.closest import DEFAULT_OPTIONS
+from .tree import global_search
+from ..geometry.kinematics import tip_position
+from ..geometry.clearance import contact_tolerance
+from ..planning.planner import PlanResult, make_options, plan, plan_batch
 from .reach import Reachability, ReachOptions, check_reach_options, clearances, reachability
-from .scenarios import Scenario, stack_scenarios
-from .status import Status, status_name
+from ..scenarios import Scenario, stack_scenarios
+from ..base.status import Status, status_name
 
 __all__ = ["plan_fallback", "rescue"]
 
@@ -62,8 +62,8 @@ def _search_jit(options: ReachOptions, solver, contact: float):
 def _path_check_jit(solver, contact: float):
     """Per step of a path: the exact clearances (m,), and whether the motion to the
     next step is proven clear by the swept proof (metrics.swept_clear)."""
-    from .metrics import swept_clear
-    from .obstacles import radius_and_mask
+    from ..geometry.clearance import swept_clear
+    from ..geometry.obstacles import radius_and_mask
 
     def one(scenario, q_a, q_b):
         c, truth, _ = clearances(q_a, scenario, solver)
@@ -199,7 +199,7 @@ def _say(msg: str):
 
 
 def _local_result(r, b: int, batch: Scenario) -> PlanResult:
-    from .planner import result_from_rollout
+    from ..planning.planner import result_from_rollout
 
     one = jax.tree_util.tree_map(lambda x: x[b], r)
     return result_from_rollout(one, _scene(batch, b))
@@ -252,7 +252,7 @@ def _search_all(batch, results, scenes, decided, rows, reach: ReachOptions, solv
 def _with_path(local: PlanResult, q: np.ndarray, k_root: int, scenario: Scenario, check, tolerance,
                size: int) -> PlanResult:
     """The result for the path q (the local path to step k_root, then the search's)."""
-    from .obstacles import radius_and_mask
+    from ..geometry.obstacles import radius_and_mask
 
     # The search's part, padded with its last configuration to one shape (a program per
     # length would compile anew for every path): clearance at every step, swept proof of every motion.
@@ -289,6 +289,6 @@ def _with_path(local: PlanResult, q: np.ndarray, k_root: int, scenario: Scenario
 
 
 def _status_code(name: str) -> int:
-    from .status import STATUS_NAMES
+    from ..base.status import STATUS_NAMES
 
     return {v: k for k, v in STATUS_NAMES.items()}[name]

@@ -45,9 +45,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .curves import PolynomialCurve
-from .scenarios.scenario import Scenario
-from .validation import as_float_array, is_concrete
+from ..geometry.curves import PolynomialCurve
+from .scenario import Scenario
+from ..base.validation import as_float_array, is_concrete
 
 __all__ = [
     "CurveMotion",

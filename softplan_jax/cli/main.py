@@ -293,7 +293,7 @@ def _check_plot_format(path: str) -> None:
 
 def _check_gains_arg(value: str) -> str | None:
     """The path of ``--gains`` when it names a gains file; None for a preset name."""
-    from .presets import PRESETS
+    from ..planning.presets import PRESETS
 
     if value in PRESETS:
         return None
@@ -311,9 +311,9 @@ def _resolve_gains(args, scenario, method: str, n_points: int):
     and options (ValueError for a bad or mismatched file). ``gain_values`` is the JSON
     form of the gains (:func:`~softplan_jax.gains_file.gains_to_dict`; ``rep_max`` null
     = no cap)."""
-    from .gains_file import gains_to_dict, load_gains
-    from .planner import check_gains
-    from .presets import apply_preset
+    from ..tuning.gains_file import gains_to_dict, load_gains
+    from ..planning.planner import check_gains
+    from ..planning.presets import apply_preset
 
     scenario, gains, extra = apply_preset("default" if args.gains_file else args.gains, scenario)
     if args.gains_file:
@@ -515,7 +515,7 @@ def _warn(msg: str) -> None:
 def _load(args, dtype):
     import warnings
 
-    from .scenarios import load_scenario, paper_scenario
+    from ..scenarios import load_scenario, paper_scenario
 
     if args.scenario in _paper_names():
         return paper_scenario(args.scenario, dtype=dtype), args.scenario
@@ -533,20 +533,20 @@ def _load(args, dtype):
 
 
 def _paper_names():
-    from .scenarios import PAPER_SCENARIOS
+    from ..scenarios import PAPER_SCENARIOS
 
     return sorted(PAPER_SCENARIOS)
 
 
 def _moving_names():
-    from .scenarios.moving import MOVING_SCENARIOS
+    from ..scenarios.moving import MOVING_SCENARIOS
 
     return sorted(MOVING_SCENARIOS)
 
 
 def _is_moving_file(path: str) -> bool:
     """The scenario file has motion fields (read once more by _load_moving for the errors)."""
-    from .scenarios.json_format import is_moving_dict, read_json_file
+    from ..scenarios.json_format import is_moving_dict, read_json_file
 
     try:
         return is_moving_dict(read_json_file(path, "scenario"))
@@ -573,7 +573,7 @@ def _write_figures(args, summary: dict, make_plot, write_gif) -> None:
         matplotlib.use("Agg")  # the command never opens a window
     import matplotlib.pyplot as plt
 
-    from . import plotting
+    from ..plotting import figures as plotting
 
     try:
         if args.plot is not None:
@@ -628,7 +628,7 @@ def _report(args, summary: dict, text, reached: bool) -> int:
 def _cmd_run(args) -> int:
     import jax
 
-    from .compilation_cache import enable_compilation_cache
+    from ..base.compilation_cache import enable_compilation_cache
 
     enable_compilation_cache()  # a second run loads the compiled rollout from disk
     if not args.float32:
@@ -636,7 +636,7 @@ def _cmd_run(args) -> int:
         jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
 
-    from .planner import make_options, result_from_rollout, rollout_jit
+    from ..planning.planner import make_options, result_from_rollout, rollout_jit
 
     paper_names = _paper_names()
     _check_run_args(args, paper_names + _moving_names())
@@ -667,7 +667,7 @@ def _cmd_run(args) -> int:
     result = result_from_rollout(rollout, scenario)
     fallback_time = 0.0
     if not args.no_fallback and result.status in ("stalled", "max_steps"):
-        from .fallback import rescue
+        from ..search.fallback import rescue
 
         print(f"softplan: the local planner ended {result.status}; deciding reachability and searching globally "
               "(the first time compiles for about a minute) ...", file=sys.stderr, flush=True)
@@ -729,9 +729,9 @@ def _cmd_track(args, dtype) -> int:
     """``softplan run`` on a moving scene: track its goal among its moving obstacles (softplan_jax.track)."""
     import jax
 
-    from .scenarios.json_format import load_moving_scenario
-    from .scenarios.moving import MOVING_OPTIONS, moving_scenario
-    from .tracking import make_track_options, result_from_track, track_program
+    from ..scenarios.json_format import load_moving_scenario
+    from ..scenarios.moving import MOVING_OPTIONS, moving_scenario
+    from ..planning.tracking import make_track_options, result_from_track, track_program
 
     label = args.scenario
     try:
@@ -754,7 +754,7 @@ def _cmd_track(args, dtype) -> int:
     except ValueError as err:
         raise InputError(str(err)) from None
     max_steps = int(args.max_steps)
-    from .planner import strong_gains
+    from ..planning.planner import strong_gains
 
     gains = strong_gains(gains, dtype)
     print("softplan: a moving scene: tracking its goal for "
@@ -895,7 +895,7 @@ def _cmd_batch(args) -> int:
         _check_output_path(args.out, "--out")
     import jax
 
-    from .compilation_cache import enable_compilation_cache
+    from ..base.compilation_cache import enable_compilation_cache
 
     if distributed:
         try:
@@ -911,10 +911,10 @@ def _cmd_batch(args) -> int:
     import jax.numpy as jnp
     import numpy as np
 
-    from .batching import pad_batch, round_chunk
-    from .planner import make_options, plan_batch, rollout_batch
-    from .scenarios import random_scenarios
-    from .status import STATUS_NAMES, Status
+    from ..planning.batching import pad_batch, round_chunk
+    from ..planning.planner import make_options, plan_batch, rollout_batch
+    from ..scenarios import random_scenarios
+    from ..base.status import STATUS_NAMES, Status
 
     dtype = jnp.float32 if args.float32 else jnp.float64
     args.gains_file = _check_gains_arg(args.gains)
@@ -1046,7 +1046,7 @@ def _text_summary(s: dict) -> str:
 
 
 def _cmd_scenarios(args) -> int:
-    from .scenarios import PAPER_SCENARIOS
+    from ..scenarios import PAPER_SCENARIOS
 
     rows = []
     for name in sorted(PAPER_SCENARIOS):
@@ -1071,7 +1071,7 @@ def _cmd_export(args) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)  # write the paper's numbers exactly
-    from .scenarios import paper_scenario, save_scenario
+    from ..scenarios import paper_scenario, save_scenario
 
     names = _paper_names()
     if args.name not in names:
@@ -1093,7 +1093,7 @@ def _cmd_fit(args) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)  # fit and write the coefficients in float64
-    from .fitting import (
+    from ..clouds import (
         CLOUD_EXTENSIONS,
         CloudFit,
         FitWarning,
@@ -1149,7 +1149,7 @@ def _cmd_fit(args) -> int:
             matplotlib.use("Agg")  # the command never opens a window
         import matplotlib.pyplot as plt
 
-        from .plotting import plot_cloud_fit
+        from ..plotting.figures import plot_cloud_fit
 
         fig = plot_cloud_fit(points, fit, title=f"{os.path.basename(cloud)}: {len(cf.fits)} curve(s), "
                              f"max residual {cf.max_residual:.3g}")

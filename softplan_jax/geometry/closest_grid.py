@@ -37,7 +37,7 @@ from .closest import (
     trust_region_radius,
     u_samples,
 )
-from .numerics import psd_shift
+from ..base.numerics import psd_shift
 
 __all__ = ["GridSolverOptions", "solve_pair_grid"]
 

@@ -39,8 +39,8 @@ import re
 import jax.numpy as jnp
 import numpy as np
 
-from .planner import GainFunction, Gains, check_gains
-from .scenarios.json_format import read_json_file, write_json_file
+from ..planning.planner import GainFunction, Gains, check_gains
+from ..scenarios.json_format import read_json_file, write_json_file
 
 __all__ = ["GAINS_FORMAT", "gains_to_dict", "gains_from_dict", "save_gains", "load_gains"]
 

@@ -71,9 +71,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .compilation_cache import rollout_compiler_options
-from .planner import GainFunction, Gains, PlanOptions, check_gains, make_options, rollout
-from .scenarios import Scenario
+from ..base.compilation_cache import rollout_compiler_options
+from ..planning.planner import GainFunction, Gains, PlanOptions, check_gains, make_options, rollout
+from ..scenarios import Scenario
 
 __all__ = [
     "GainSpace",

@@ -43,11 +43,11 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .closest import SolverOptions
-from .kinematics import motion_bound, tip_position
+from ..geometry.closest import SolverOptions
+from ..geometry.kinematics import motion_bound, tip_position
 from .reach import ReachOptions, clearances, random_configurations
-from .scenarios import Scenario
-from .step import safe_scale
+from ..scenarios import Scenario
+from ..planning.step import safe_scale
 
 __all__ = ["wrap_delta", "advance", "global_search", "SearchResult"]
 

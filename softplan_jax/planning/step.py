@@ -35,12 +35,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
-from .kinematics import motion_bound, points_jacobian, tip_position
-from .metrics import contact_tolerance
-from .numerics import damped_pinv, safe_norm
-from .obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
-from .scenarios import Scenario
+from ..geometry.closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
+from ..geometry.kinematics import motion_bound, points_jacobian, tip_position
+from ..geometry.clearance import contact_tolerance
+from ..base.numerics import damped_pinv, safe_norm
+from ..geometry.obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
+from ..scenarios import Scenario
 
 __all__ = [
     "Gains",

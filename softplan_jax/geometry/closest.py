@@ -68,7 +68,7 @@ import jax.numpy as jnp
 
 from .curves import ParametricCurve, PolynomialCurve
 from .kinematics import backbone_points, segment_frames
-from .numerics import (
+from ..base.numerics import (
     atan_over_x,
     curvature_floor,
     one_minus_cos_over_x,
@@ -77,7 +77,7 @@ from .numerics import (
     sin_over_x,
     solver_tolerance,
 )
-from .validation import check_configuration, check_points
+from ..base.validation import check_configuration, check_points
 
 __all__ = [
     "ClosestPoint",

@@ -22,8 +22,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .numerics import one_minus_cos_over_x, sin_over_x
-from .validation import check_configuration, check_fraction, check_segment_index
+from ..base.numerics import one_minus_cos_over_x, sin_over_x
+from ..base.validation import check_configuration, check_fraction, check_segment_index
 
 __all__ = [
     "segment_transform",

@@ -52,8 +52,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .engine import Rollout, check_engine_sizes, run
-from .motion import MovingScenario, goal_at
-from .obstacles import radius_and_mask
+from ..scenarios.motion import MovingScenario, goal_at
+from ..geometry.obstacles import radius_and_mask
 from .planner import (
     Gains,
     PlanOptions,
@@ -65,7 +65,7 @@ from .planner import (
     run_batch,
     strong_gains,
 )
-from .status import status_name
+from ..base.status import status_name
 from .step import tracking_attraction as tracking_attraction  # re-exported: its old import path
 
 __all__ = ["TrackOptions", "Track", "TrackResult", "tracking_attraction", "track_rollout", "track", "track_batch"]

@@ -22,14 +22,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from .batching import BATCH_AXIS, Progress, batch_mesh, gather, is_global, pad_batch, round_chunk, shard_batch
-from .compilation_cache import load_or_export, rollout_compiler_options
+from ..base.compilation_cache import load_or_export, rollout_compiler_options
 from .engine import DEFAULT_LANES, Rollout, check_engine_sizes, run, run_lanes
-from .metrics import apply_collision_checks as apply_collision_checks  # moved to metrics; old import path
-from .obstacles import radius_and_mask
-from .scenarios import Scenario
-from .status import STATUS_NAMES as STATUS_NAMES  # noqa: F401  (re-exported: the old import path)
-from .status import Status as Status  # noqa: F401  (re-exported: the old import path)
-from .status import status_name
+from ..geometry.clearance import apply_collision_checks as apply_collision_checks  # moved to metrics; old import path
+from ..geometry.obstacles import radius_and_mask
+from ..scenarios import Scenario
+from ..base.status import STATUS_NAMES as STATUS_NAMES  # noqa: F401  (re-exported: the old import path)
+from ..base.status import Status as Status  # noqa: F401  (re-exported: the old import path)
+from ..base.status import status_name
 from .step import (  # noqa: F401  (the step's names, re-exported: their old import path)
     PAPER_STEP,
     GainFunction,

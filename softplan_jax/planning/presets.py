@@ -32,7 +32,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from .planner import PAPER_STEP, Gains, default_gains
-from .scenarios import Scenario
+from ..scenarios import Scenario
 
 __all__ = ["Preset", "PRESETS", "preset", "apply_preset"]
 

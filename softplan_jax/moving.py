@@ -1,0 +1,45 @@
+"""Moving goals and moving obstacles, in one namespace (``sp.moving``).
+
+The types and scenes live in :mod:`softplan_jax.scenarios` (:mod:`.scenarios.motion`,
+:mod:`.scenarios.moving`), the tracker in :mod:`softplan_jax.planning.tracking`.
+"""
+
+from .planning.tracking import Track, TrackOptions, TrackResult, make_track_options, track, track_batch
+from .scenarios.json_format import load_moving_scenario, save_moving_scenario
+from .scenarios.motion import (
+    CurveMotion,
+    GoalPath,
+    MovingScenario,
+    curve_motion,
+    goal_at,
+    goal_path,
+    make_moving_scenario,
+    scenario_at,
+    speed_bounds,
+    stack_moving_scenarios,
+)
+from .scenarios.moving import MOVING_SCENARIOS, moving_scenario, random_moving_scenarios
+
+__all__ = [
+    "CurveMotion",
+    "GoalPath",
+    "MovingScenario",
+    "curve_motion",
+    "goal_path",
+    "make_moving_scenario",
+    "stack_moving_scenarios",
+    "scenario_at",
+    "goal_at",
+    "speed_bounds",
+    "MOVING_SCENARIOS",
+    "moving_scenario",
+    "random_moving_scenarios",
+    "load_moving_scenario",
+    "save_moving_scenario",
+    "TrackOptions",
+    "make_track_options",
+    "Track",
+    "TrackResult",
+    "track",
+    "track_batch",
+]

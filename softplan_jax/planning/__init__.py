@@ -1,0 +1,70 @@
+"""Planning: the potential-field planner of paper eq. (9) on one rollout engine.
+
+* :mod:`.step` -- the gains, the field of eq. (9), the safe step, one planner step;
+* :mod:`.engine` -- the rollout loop (plan to the goal or track a moving one),
+  paid by the step, and the batch loop that refills its lanes;
+* :mod:`.planner` -- the entry points :func:`plan` and :func:`plan_batch`,
+  compiled programs and results;
+* :mod:`.tracking` -- :func:`track` and :func:`track_batch` for moving goals
+  and obstacles;
+* :mod:`.presets` -- named calibrations (``"paper"``, ``"default"``);
+* :mod:`.batching` -- host-side helpers of batch runs.
+"""
+
+from ..base.status import STATUS_NAMES, Status, status_name
+from .planner import (
+    PlanResult,
+    make_options,
+    plan,
+    plan_batch,
+    result_from_rollout,
+    rollout,
+    rollout_batch,
+    rollout_jit,
+)
+from .engine import Rollout
+from .presets import PRESETS, Preset, apply_preset, preset
+from .step import (
+    PAPER_STEP,
+    GainFunction,
+    Gains,
+    PlanOptions,
+    attraction,
+    default_gains,
+    planner_step,
+    repulsion,
+)
+from .tracking import Track, TrackOptions, TrackResult, make_track_options, track, track_batch
+
+__all__ = [
+    "Gains",
+    "GainFunction",
+    "default_gains",
+    "attraction",
+    "repulsion",
+    "PlanOptions",
+    "make_options",
+    "PAPER_STEP",
+    "planner_step",
+    "Status",
+    "STATUS_NAMES",
+    "status_name",
+    "Rollout",
+    "rollout",
+    "rollout_jit",
+    "rollout_batch",
+    "PlanResult",
+    "result_from_rollout",
+    "plan",
+    "plan_batch",
+    "TrackOptions",
+    "make_track_options",
+    "Track",
+    "TrackResult",
+    "track",
+    "track_batch",
+    "Preset",
+    "PRESETS",
+    "preset",
+    "apply_preset",
+]

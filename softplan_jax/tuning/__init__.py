@@ -1,0 +1,62 @@
+"""Tuning the gains of eq. (9) on a suite of scenes, and gains files.
+
+* :mod:`.smoothing` -- the tuner: Gaussian smoothing of the rollout score over a
+  box of gains (:class:`GainSpace`), its unbiased gradient estimate, and
+  :func:`tune_smoothed` (Adam on that estimate, with optax);
+* :mod:`.gains_file` -- tuned gains as JSON, with the obstacle model they were
+  tuned for;
+* :mod:`.pathwise` -- the earlier pathwise-gradient tuner (``tune_gains``),
+  deprecated: it differentiates through the rollout, whose score is piecewise
+  constant in the gains (reached or not), so its gradient sees none of what the
+  smoothed tuner optimises.
+"""
+
+import warnings as _warnings
+
+from . import pathwise
+from .gains_file import gains_from_dict, gains_to_dict, load_gains, save_gains
+from .smoothing import (
+    GainSpace,
+    ObjectiveEstimate,
+    ScoreWeights,
+    SmoothingSample,
+    TuneResult,
+    estimate_objective,
+    rollout_score,
+    score_batch,
+    smoothed_objective,
+    smoothing_sample,
+    tune_smoothed,
+)
+
+__all__ = [
+    "GainSpace",
+    "ScoreWeights",
+    "rollout_score",
+    "score_batch",
+    "SmoothingSample",
+    "smoothing_sample",
+    "smoothed_objective",
+    "ObjectiveEstimate",
+    "estimate_objective",
+    "TuneResult",
+    "tune_smoothed",
+    "save_gains",
+    "load_gains",
+    "gains_to_dict",
+    "gains_from_dict",
+]
+
+_PATHWISE = ("tune_gains", "TuningResult", "LossWeights", "rollout_loss", "batch_loss")
+
+
+def __getattr__(name):
+    if name in _PATHWISE:
+        _warnings.warn(
+            f"softplan_jax.tuning.{name} is deprecated (the pathwise-gradient tuner); use "
+            f"softplan_jax.tuning.tune_smoothed, or import softplan_jax.tuning.pathwise.{name} to keep it",
+            DeprecationWarning, stacklevel=2)
+        from . import pathwise
+
+        return getattr(pathwise, name)
+    raise AttributeError(f"module 'softplan_jax.tuning' has no attribute {name!r}")
