@@ -1,5 +1,6 @@
 """Helpers shared by the benchmark scripts: machine header, formatting, a text
-progress bar, timing of compiled calls, and writing results.
+progress bar, timing of compiled calls, writing results, and importing another
+version of the package side by side with this one.
 
 Import this AFTER choosing jax's precision (``jax_enable_x64``) in the script:
 it imports jax but does not change its configuration.
@@ -7,6 +8,7 @@ it imports jax but does not change its configuration.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import platform
@@ -19,6 +21,32 @@ import numpy as np
 
 RESULTS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 FIGURES_DIR = os.path.join(RESULTS_DIR, "figures")
+QUICK_DIR = os.path.join(RESULTS_DIR, "quick")  # quick runs (git-ignored): never over the committed results
+
+
+def output_paths(name: str, quick: bool, out: str | None = None) -> tuple[str, str]:
+    """``(prefix, figure folder)`` of a script's results: ``results/NAME`` and
+    ``results/figures/``; in quick mode ``results/quick/NAME`` and
+    ``results/quick/figures/``; with ``--out PREFIX``, PREFIX and a ``figures/``
+    folder beside it."""
+    if out:
+        return out, os.path.join(os.path.dirname(os.path.abspath(out)), "figures")
+    if quick:
+        return os.path.join(QUICK_DIR, name), os.path.join(QUICK_DIR, "figures")
+    return os.path.join(RESULTS_DIR, name), FIGURES_DIR
+
+
+def load_variant(name: str, path: str):
+    """The package directory ``path`` (e.g. another checkout's ``softplan_jax``) imported
+    as module ``softplan_kernel_<name>``, beside the installed package."""
+    mod_name = f"softplan_kernel_{name}"
+    spec = importlib.util.spec_from_file_location(
+        mod_name, os.path.join(path, "__init__.py"), submodule_search_locations=[path]
+    )
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[mod_name] = mod
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def log(msg: str) -> None:

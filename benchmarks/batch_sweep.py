@@ -179,9 +179,11 @@ def main(argv=None) -> dict:
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
     import softplan_jax as sp
-    from softplan_jax.planning.batching import pad_batch, round_chunk
+    from softplan_jax.base.status import Status
     from softplan_jax.geometry.clearance import apply_collision_checks
-    from softplan_jax.planning.planner import Status, make_options, rollout
+    from softplan_jax.planning.batching import pad_batch, round_chunk
+    from softplan_jax.planning.planner import make_options
+    from softplan_jax.planning.programs import rollout
 
     t_start = time.perf_counter()
     dtype = jnp.float32 if args.float32 else jnp.float64

@@ -1,7 +1,7 @@
 """Closest-point benchmark: curve method vs N-point method, and the SolverOptions sweep.
 
 Two parts, one run, one report (``benchmarks/results/closest.md`` and ``.json``;
-``--quick`` writes ``closest_quick.*`` so it never overwrites the full report):
+``--quick`` writes ``results/quick/closest.*`` so it never overwrites the full report):
 
 1. Speed. One closest-point query (3 segments x 1 curve) and a vmapped batch of
    10^4 queries, in float64 and float32 (x64 on; the float32 rows cast q, the
@@ -22,10 +22,10 @@ Two parts, one run, one report (``benchmarks/results/closest.md`` and ``.json``;
    times.
 
 2. Accuracy sweep over ``SolverOptions`` candidates on the test suite's cases
-   (``benchmarks/closest_cases.py``: the ~1000 main cases, the paper obstacles
-   and the helix), against the independent NumPy/SciPy oracle
-   (``benchmarks/oracle.py``); ``tests/test_closest.py`` uses the same two
-   modules. A miss is |distance - oracle| > 1e-9 (the suite's bar; NaN is a
+   (``softplan_jax/testing/closest_cases.py``: the ~1000 main cases, the paper
+   obstacles and the helix), against the independent NumPy/SciPy oracle
+   (``softplan_jax/testing/oracle.py``); ``tests/test_closest.py`` uses the same
+   two modules. A miss is |distance - oracle| > 1e-9 (the suite's bar; NaN is a
    miss). Each candidate also gets its single-query and batch times (float64),
    next to the 10-point method's timed in the same loop. The oracle's answers
    are cached on disk by ``closest_cases`` (in ``.cache/oracle/``, keyed by the
@@ -63,22 +63,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-RESULTS_DIR = os.path.join(REPO, "benchmarks", "results")
-# benchmarks/ for the case corpus and the oracle (as when run as a script).
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
-import closest_cases as cc  # noqa: E402
-
-import softplan_jax as sp  # noqa: E402
-from softplan_jax.geometry.closest import (  # noqa: E402
+import softplan_jax as sp
+from softplan_jax.geometry.closest import (
     SolverOptions,
     curve_closest,
-    points_closest,
 )
-from softplan_jax.geometry.closest_grid import GridSolverOptions  # noqa: E402
-from softplan_jax.geometry.curves import PolynomialCurve, curve_points  # noqa: E402
+from softplan_jax.geometry.closest_grid import GridSolverOptions
+from softplan_jax.geometry.curves import PolynomialCurve, curve_points
+from softplan_jax.geometry.point_sets import points_closest
+from softplan_jax.testing import closest_cases as cc
 
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RESULTS_DIR = os.path.join(REPO, "benchmarks", "results")
 TOL = cc.TOL  # the suite's bar, 1e-9
 CHUNK = 64  # cases per library call (as tests/test_closest.py): one compiled shape per n
 ARM_SAMPLES = 10  # points per segment of the N-point method (paper Table 1)
@@ -772,9 +768,9 @@ def _markdown(report: dict) -> str:
         "",
         "## 2. Accuracy sweep over SolverOptions candidates (float64)",
         "",
-        "Cases from `benchmarks/closest_cases.py` (as `tests/test_closest.py`): "
+        "Cases from `softplan_jax/testing/closest_cases.py` (as `tests/test_closest.py`): "
         + ", ".join(f"{k} {v}" for k, v in n_sets.items())
-        + f"; reference `benchmarks/oracle.py` ({o['cases']} answers via `closest_cases`, cached in "
+        + f"; reference `softplan_jax/testing/oracle.py` ({o['cases']} answers via `closest_cases`, cached in "
         f"`{o['cache_dir']}`: {o['oracle_s']:.0f} s). Miss: |distance - oracle| > {TOL:g} (or NaN); "
         "the library runs as the suite runs it (`sp.closest_point(q, curve, options)` vmapped, "
         "`run_pairwise`). *not conv.*: the winning solve's `converged` flag is False. *Newton its*: "
@@ -844,7 +840,7 @@ def main(argv=None) -> dict:
         "--quick",
         action="store_true",
         help="< 60 s on an idle machine: float64 only, batch 1000, a few n = 3 cases, no helix, "
-        "the default SolverOptions only; writes closest_quick.md/.json",
+        "the default SolverOptions only; writes results/quick/closest.md/.json",
     )
     ap.add_argument(
         "--candidates",
@@ -862,14 +858,14 @@ def main(argv=None) -> dict:
         "--out",
         default=None,
         help="output path prefix (.md and .json are appended); default benchmarks/results/closest "
-        "(quick: closest_quick, so that a quick run never overwrites the full report)",
+        "(quick: results/quick/closest, so that a quick run never overwrites the full report)",
     )
     args = ap.parse_args(argv)
     # float64 for the accuracy sweep and the float64 rows (the float32 rows cast
     # their inputs). Set here, not at import: importing this module changes nothing.
     jax.config.update("jax_enable_x64", True)
     quick = args.quick
-    out = args.out or os.path.join(RESULTS_DIR, "closest_quick" if quick else "closest")
+    out = args.out or os.path.join(RESULTS_DIR, "quick" if quick else "", "closest")
     t_start = time.perf_counter()
     try:
         if args.candidates is not None:

@@ -37,16 +37,15 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _common import (  # noqa: E402
-    FIGURES_DIR,
-    RESULTS_DIR,
     finish_machine,
     fmt_s,
+    load_variant,
     log,
     machine_info,
     machine_lines,
+    output_paths,
     write_results,
 )
-from kernel import load_variant  # noqa: E402
 
 import softplan_jax  # noqa: E402
 
@@ -92,6 +91,13 @@ def compare_batches(new, old) -> dict:
                 q_max_diff=float(dq.max()), q_over_1e9=int(np.sum(dq > 1e-9)), steps_taken=int(np.sum(new.iterations)))
 
 
+def _random_moving(pkg):
+    """``random_moving_scenarios`` of a package version: under ``moving`` (its place since the
+    package was split into layers), else at the top level (earlier versions)."""
+    moving = getattr(pkg, "moving", None)
+    return getattr(moving, "random_moving_scenarios", None) or pkg.random_moving_scenarios
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--base", help="the softplan_jax folder of the previous version (omit: the package alone)")
@@ -100,7 +106,7 @@ def main(argv=None):
     ap.add_argument("--track-batch", type=int, default=256)
     ap.add_argument("--fallback", type=int, default=64, help="scenes for the plan_fallback case (0: skip)")
     ap.add_argument("--quick", action="store_true", help="small sizes, one round (a smoke run)")
-    ap.add_argument("--out", default=os.path.join(RESULTS_DIR, "engine"))
+    ap.add_argument("--out", default=None, help="output prefix (default results/engine; quick: results/quick/engine)")
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
     for name in ("rounds", "batch", "track_batch"):
@@ -110,6 +116,7 @@ def main(argv=None):
         ap.error("--fallback must be >= 0")
     if args.quick:
         args.rounds, args.batch, args.track_batch, args.fallback = 1, 32, 8, 0
+    args.out, fig_dir = output_paths("engine", args.quick, args.out)
     machine = machine_info("float64")
     pkgs = {"new": softplan_jax}
     if args.base:
@@ -126,7 +133,7 @@ def main(argv=None):
     batch = {v: p.random_scenarios(1, args.batch) for v, p in pkgs.items()}
     cases[f"plan_batch({args.batch} scenes, max_steps 600)"] = {
         v: (lambda p=p, v=v: p.plan_batch(batch[v], max_steps=600)) for v, p in pkgs.items()}
-    moving = {v: p.random_moving_scenarios(1, args.track_batch) for v, p in pkgs.items()}
+    moving = {v: _random_moving(p)(1, args.track_batch) for v, p in pkgs.items()}
     cases[f"track_batch({args.track_batch} moving scenes, max_steps 600)"] = {
         v: (lambda p=p, v=v: p.track_batch(moving[v], max_steps=600)) for v, p in pkgs.items()}
     log(f"engine benchmark: {len(cases)} cases x {len(pkgs)} versions, {args.rounds} rounds")
@@ -200,7 +207,7 @@ def main(argv=None):
         if "same_statuses" in report["fallback"]:
             md.append(f"- fallback statuses identical: {report['fallback']['same_statuses']}")
     write_results(args.out, report, "\n".join(md) + "\n")
-    _figure(report, os.path.join(FIGURES_DIR, os.path.basename(args.out) + ".png"))
+    _figure(report, os.path.join(fig_dir, os.path.basename(args.out) + ".png"))
     print("\n".join(md))
 
 

@@ -1,4 +1,4 @@
-"""Moving goals and moving obstacles (issue 23): tracking among swaying, sweeping curves.
+"""Moving goals and moving obstacles: tracking among swaying, sweeping curves.
 
 One command, progress on stderr::
 
@@ -54,7 +54,8 @@ def parse_args(argv=None):
     ap.add_argument("--quick", action="store_true", help="smoke run (small sizes) into results/quick/")
     ap.add_argument("--seed", type=int, default=1, help="held-out seed of random_moving_scenarios")
     ap.add_argument("--n", type=int, default=None, help="scenes (default 1024; quick 16)")
-    ap.add_argument("--max-steps", type=int, default=300, help="steps of every rollout (dt 0.1 s)")
+    ap.add_argument("--max-steps", type=int, default=None, help="steps of every rollout (dt 0.1 s; default 300, "
+                    "quick 100)")
     ap.add_argument("--chunk", type=int, default=128, help="scenes per compiled batch call")
     ap.add_argument("--brute", type=int, default=None, help="curve scenes re-checked by brute force (default 32)")
     ap.add_argument("--exact", type=int, default=None, help="curve scenes whose every step is re-solved (128)")
@@ -83,17 +84,18 @@ def main(argv=None):
 
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
-    import oracle
     from _common import FIGURES_DIR, RESULTS_DIR, finish_machine, log, machine_info, machine_lines, write_results
     from stats import paired_table, pct_interval, wilson
 
     import softplan_jax as sp
-    from softplan_jax.planning.planner import make_options, rollout_batch, rollout_jit
+    from softplan_jax.planning.planner import make_options
+    from softplan_jax.planning.programs import rollout_batch, rollout_jit
     from softplan_jax.planning.tracking import make_track_options, track_program
+    from softplan_jax.testing import oracle
 
     quick = args.quick
     n = args.n or (16 if quick else 1024)
-    T = args.max_steps
+    T = args.max_steps or (100 if quick else 300)
     n_brute = min(n, args.brute if args.brute is not None else (4 if quick else 32))
     n_exact = min(n, args.exact if args.exact is not None else (4 if quick else 128))
     n_oracle = args.oracle if args.oracle is not None else (6 if quick else 60)
@@ -165,8 +167,10 @@ def main(argv=None):
     brute = np.array(brute)
 
     # 2b. The rollouts' closest points against the full solve at the same (q_k, t_k).
-    full = jax.jit(jax.vmap(lambda q, m, t: sp.geometry.true_closest(q, sp.moving.scenario_at(m, t), sp.geometry.SolverOptions()).distance,
-                            in_axes=(0, None, 0)))
+    def full_distance(q, m, t):
+        return sp.geometry.true_closest(q, sp.moving.scenario_at(m, t), sp.geometry.SolverOptions()).distance
+
+    full = jax.jit(jax.vmap(full_distance, in_axes=(0, None, 0)))
     worst_exact, pairs_checked, misses = 0.0, 0, 0
     for b in range(n_exact):
         m = jax.tree_util.tree_map(lambda x, b=b: x[b], suite)
@@ -247,7 +251,7 @@ def main(argv=None):
 
     machine = finish_machine(machine)
     report = {
-        "issue": 23, "seed": args.seed, "n": n, "max_steps": T, "dt": dt, "table": table, "paired_curve_vs": paired,
+        "seed": args.seed, "n": n, "max_steps": T, "dt": dt, "table": table, "paired_curve_vs": paired,
         "brute_force": {"scenes": int(n_brute), "min_clearance": float(brute.min()) if brute.size else None,
                         "contacts": int((brute <= 0).sum())},
         "warm_start_exactness": {"scenes": int(n_exact), "pairs": int(pairs_checked), "misses_gt_1e-9": int(misses),
@@ -311,7 +315,7 @@ def _figures(sp, table, n, fig_dir, quick, T):
 def _markdown(rep, pct_interval, wilson, names):
     n = rep["n"]
     lines = [
-        "# Moving goals and moving obstacles (issue 23)",
+        "# Moving goals and moving obstacles",
         "",
         f"`python benchmarks/moving.py` — held-out seed {rep['seed']}, `random_moving_scenarios({rep['seed']}, {n})`, "
         f"{rep['max_steps']} steps of {rep['dt']:g} s, default gains and options (safe step, escapes, no look-ahead).",

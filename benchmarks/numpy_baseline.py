@@ -32,8 +32,8 @@ fast in NumPy's own terms:
   landed in (eqs. 13-14 inside, 15-18 on the edges) from the seed and from the
   descent's point; a saddle (negative curvature) is stepped off both ways;
   plus the four endpoint pairs. About 30-40 solves per tree step (5 curves x
-  3 segments). It matches the oracle (``closest_cases.py``, 1,120 cases) to
-  < 1e-9 in every case.
+  3 segments). It matches the oracle (``softplan_jax.testing.closest_cases``,
+  1,120 cases) to < 1e-9 in every case.
 * N-point method: each curve is ``N`` points evenly spaced in u (N = 1: the
   middle), the arm is sampled at s = j/10, j = 1..10 on every segment (one
   broadcast per step), and the nearest pair comes from
@@ -48,9 +48,10 @@ fast in NumPy's own terms:
   Every obstacle's exact closest point is computed at every step, as the JAX
   step does.
 
-Measured step time (tree scenario, default gains, ``python
-benchmarks/numpy_peer_timing.py --old <the previous version>``, 26 states x 5
-interleaved rounds, 2 shared cores at load ~3): curve method 12.0 ms min /
+Measured step time (tree scenario, default gains, the earlier script
+``numpy_peer_timing.py``, in git history: ``git show
+b850131:benchmarks/numpy_peer_timing.py``; 26 states x 5 interleaved rounds,
+2 shared cores at load ~3): curve method 12.0 ms min /
 19.5 ms median per step (the previous version, with finite-difference
 Jacobians and 21 bounded trf solves per segment-curve pair: 379 / 607 ms);
 10 points 0.34 / 0.34 ms (previously 0.80 / 0.81 ms). Trajectories agree with
@@ -60,7 +61,8 @@ method's stress-gain runs of sim2 and the tree.
 Run ``python benchmarks/numpy_baseline.py`` (full, < 10 min) or ``--quick``
 (< 1 min on an idle machine): it checks NumPy-vs-JAX trajectory agreement on
 the paper's scenarios and times both planners on the tree scenario, writing
-``benchmarks/results/numpy_baseline.md`` and ``.json``.
+``benchmarks/results/numpy_baseline.md`` and ``.json`` (quick:
+``results/quick/``).
 
 Importing this module changes no jax setting: :func:`main` switches float64
 on (``jax_enable_x64``); an in-process caller (the tests, ``paper_tables``)
@@ -87,7 +89,9 @@ import scipy
 from scipy import optimize, spatial
 
 import softplan_jax as sp
-from softplan_jax.planning.planner import PAPER_STEP, make_options, planner_step, rollout_jit
+from softplan_jax.planning.planner import make_options
+from softplan_jax.planning.programs import rollout_jit
+from softplan_jax.planning.step import PAPER_STEP, planner_step
 
 __all__ = [
     "NumpyScenario",
@@ -1339,11 +1343,13 @@ def _markdown(report: dict) -> str:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="few steps, no rollout timing, N=10 only (< 1 min)")
-    ap.add_argument("--out", default=os.path.join(RESULTS_DIR, "numpy_baseline"),
-                    help="output path prefix (.md and .json are appended)")
+    ap.add_argument("--out", default=None, help="output path prefix (.md and .json are appended; default "
+                    "benchmarks/results/numpy_baseline, quick: results/quick/numpy_baseline)")
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # both planners in float64
     quick = args.quick
+    if args.out is None:
+        args.out = os.path.join(RESULTS_DIR, "quick" if quick else "", "numpy_baseline")
     t_start = time.perf_counter()
     report = dict(mode="quick" if quick else "full", machine=_machine(), agreement=[], speed=[], notes=[],
                   gains=dict(default=numpy_gains(), stress=stress_gains()))

@@ -4,8 +4,8 @@ defaults; plus the independent NumPy implementation (benchmarks/numpy_baseline.p
 with the "paper" preset under the paper's rotation convention (a check of the
 library) and under Webster & Jones' (the effect of the R_i convention).
 
-    python -m benchmarks.paper_presets            # ~10-20 min on 2 cores (the NumPy curve method is slow)
-    python -m benchmarks.paper_presets --quick    # sim1 and sim2 only, NumPy curve and N = 10 only
+    python benchmarks/paper_presets.py            # ~10-20 min on 2 cores (the NumPy curve method is slow)
+    python benchmarks/paper_presets.py --quick    # sim2 only, the curve and 10-point models only
 
 Cell format: ``r33`` = reached the goal after 33 iterations, ``c21`` =
 collided at iteration 21 (true clearance <= 1e-6 at a step or during the
@@ -102,8 +102,8 @@ def numpy_run(nb, scenario, method, n_points, gains, max_steps, convention, goal
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", default=None)
+    ap.add_argument("--quick", action="store_true", help="sim2 only, curve and 10 points only, into results/quick/")
+    ap.add_argument("--out", default=None, help="output prefix (default results/paper_presets; quick: results/quick/)")
     ap.add_argument("--numpy-methods", default=None,
                     help="comma list of the models the NumPy columns run (default all; quick: curve,10)")
     ap.add_argument("--resume", action="store_true",
@@ -121,7 +121,8 @@ def main(argv=None) -> dict:
 
     t_all = time.perf_counter()
     machine = machine_info("float64")
-    scenes = SCENES[:2] if args.quick else SCENES
+    scenes = ("sim2",) if args.quick else SCENES  # quick: the scene where the paper's point models collide
+    methods = ("curve", 10) if args.quick else METHODS
 
     def report(done):
         finish_machine(machine)
@@ -130,7 +131,7 @@ def main(argv=None) -> dict:
         L = ["# The paper's tables, three ways: printed, 'paper' preset, library defaults" + (" (QUICK)" if args.quick
                                                                                               else ""), ""]
         L += machine_lines(machine)
-        L += [f"- command: `python -m benchmarks.paper_presets{' --quick' if args.quick else ''}`; wall time "
+        L += [f"- command: `python benchmarks/paper_presets.py{' --quick' if args.quick else ''}`; wall time "
               f"{total:.0f} s (shared machine)",
               f"- 'paper' preset: gains {p.gains}, start theta = {p.start_theta}, phi = {p.start_phi} on every segment, "
               f"options {p.options} (`sp.apply_preset('paper', scenario)`); 150 steps",
@@ -216,7 +217,7 @@ def main(argv=None) -> dict:
             continue
         base = sp.paper_scenario(name)
         sc_paper, g_paper, o_paper = sp.apply_preset("paper", base)
-        for m in METHODS:
+        for m in methods:
             method, n = ("curve", 10) if m == "curve" else ("points", m)
             rp = sp.plan(sc_paper, method, n, gains=g_paper, max_steps=150, **o_paper)
             rd = sp.plan(base, method, n, max_steps=600)

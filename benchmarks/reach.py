@@ -1,4 +1,4 @@
-"""Reach every goal that can be reached (issue 24): the global fallback on held-out scenes.
+"""Reach every goal that can be reached: the global fallback on held-out scenes.
 
 One command, progress on stderr::
 
@@ -49,9 +49,9 @@ def parse_args(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="smoke run (small sizes) into results/quick/")
     ap.add_argument("--seed", type=int, default=1, help="held-out seed of random_scenarios")
-    ap.add_argument("--n", type=int, default=None, help="scenes (default 1024; quick 16)")
+    ap.add_argument("--n", type=int, default=None, help="scenes (default 1024; quick 8)")
     ap.add_argument("--max-steps", type=int, default=600, help="local planner steps (plan's default)")
-    ap.add_argument("--timing-scenes", type=int, default=None, help="scenes timed one by one (default all)")
+    ap.add_argument("--timing-scenes", type=int, default=None, help="scenes timed one by one (default all; quick 4)")
     ap.add_argument("--chunk", type=int, default=1, help="scenes per compiled search call")
     ap.add_argument("--dense", type=int, default=2, help="substeps per step of the brute-force check")
     ap.add_argument("--out", default=None, help="output prefix (default results/reach; quick: results/quick/reach)")
@@ -75,8 +75,8 @@ def main(argv=None):
 
     import softplan_jax as sp
 
-    n = args.n or (16 if args.quick else 1024)
-    n_time = n if args.timing_scenes is None else min(args.timing_scenes, n)
+    n = args.n or (8 if args.quick else 1024)
+    n_time = min(4 if args.quick else n, n) if args.timing_scenes is None else min(args.timing_scenes, n)
     if args.out is not None:
         out_dir = os.path.dirname(os.path.abspath(args.out))
         fig_dir = os.path.join(out_dir, "figures")
@@ -220,7 +220,7 @@ def main(argv=None):
 def _markdown(rep, machine, pct_interval) -> str:
     k, n = rep["ik_reachable"], rep["settings"]["n"]
     lines = [
-        "# Reach every goal that can be reached (issue 24)",
+        "# Reach every goal that can be reached",
         "",
         *machine,
         f"- held-out `random_scenarios({rep['settings']['seed']}, {n})`, default curve planner and gains, "

@@ -1,78 +1,129 @@
-"""Regenerate every benchmark result: the closest-point benchmark and solver sweep,
-the NumPy baseline, the paper's tables, the speed targets, the batched sweep, the
-paper tables with gain presets (paper_presets), the tuned held-out comparison
-(science) and the safe-step sweep (held-out seed 1, float64 and float32), one after the other
-(each in its own process, so that each sets jax's precision
-and devices itself).
+"""Regenerate every benchmark result: each script of benchmarks/README.md, one after the
+other, each in its own process (so that each sets jax's precision and devices itself).
 
-    python benchmarks/run_all.py                 # everything, as in benchmarks/README.md
-    python benchmarks/run_all.py --quick         # smoke run, written to benchmarks/results/quick/
-    python benchmarks/run_all.py --sweep-n 200   # a smaller sweep (the default is batch_sweep's)
+    python benchmarks/run_all.py                       # everything, as in benchmarks/README.md (hours)
+    python benchmarks/run_all.py --quick               # every script's --quick, into benchmarks/results/quick/
+    python benchmarks/run_all.py --only closest,moving
+    python benchmarks/run_all.py --skip devices,throughput --sweep-n 256
+    python benchmarks/run_all.py --only engine --with "engine:--base /tmp/previous/softplan_jax"
 
-Extra arguments after ``--`` go to batch_sweep.py (e.g. ``-- --float32``).
+A script that fails does not stop the others; the exit code is non-zero if any
+failed. At the end, the wall time of every script (compile included) is printed
+and written to ``results/run_all.md`` (quick: ``results/quick/run_all.md``).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import subprocess
 import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+RESULTS = os.path.join(HERE, "results")
+
+# The held-out runs of safe_step.py whose reports are committed (seed 1, 1,000 scenes, 600 steps).
+_HELD_OUT = ["--seed", "1", "--n", "1000", "--chunk", "64", "--max-steps", "600"]
+
+# Every script, in the order run_all runs them (the quick ones first), with its full runs: a list
+# of argument lists (one process each). Its quick run is always `NAME.py --quick`.
+SCRIPTS = {
+    "closest": [[]],
+    "numpy_baseline": [[]],
+    "paper_tables": [[]],
+    "paper_presets": [[]],
+    "speed_targets": [[]],
+    "warm_start": [[]],
+    "batch_sweep": [[]],
+    "safe_step": [
+        _HELD_OUT + ["--variants", "default", "--methods", "curve,10,50"],
+        _HELD_OUT + ["--variants", "default", "--float32"],
+        _HELD_OUT + ["--variants", "plain,safe", "--out", os.path.join(RESULTS, "safe_step_float64_seed1_n1000_before")],
+    ],
+    "science": [[]],
+    "tuning": [[]],
+    "reach": [[]],
+    "moving": [[]],
+    "engine": [[]],
+    "throughput": [[]],
+    "devices": [[]],
+    "baselines": [["save", "--fallback"]],
+}
+
+
+def _names(text: str, ap) -> list:
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    bad = sorted(set(names) - set(SCRIPTS))
+    if bad:
+        ap.error(f"unknown script(s) {bad}; the scripts: {', '.join(SCRIPTS)}")
+    return names
+
+
+def plan_runs(args) -> list:
+    """[(name, argv), ...]: the processes to run, in order."""
+    runs = []
+    for name, full in SCRIPTS.items():
+        if (args.only and name not in args.only) or name in args.skip:
+            continue
+        for argv in [["--quick"]] if args.quick else full:
+            argv = list(argv)
+            if name == "batch_sweep" and args.sweep_n and not args.quick:
+                argv += ["--n", str(args.sweep_n)]
+            runs.append((name, argv + args.extra.get(name, [])))
+    return runs
+
+
+def parse_args(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="every script's --quick, into results/quick/")
+    ap.add_argument("--only", default="", help=f"comma list of scripts to run (default all: {', '.join(SCRIPTS)})")
+    ap.add_argument("--skip", default="", help="comma list of scripts to skip")
+    ap.add_argument("--sweep-n", type=int, default=None,
+                    help="scenarios of batch_sweep.py's full run (its default, 10,000, takes hours on 2 CPUs)")
+    ap.add_argument("--with", dest="extra_args", action="append", default=[], metavar="NAME:ARGS",
+                    help="further arguments for one script's runs, e.g. 'engine:--base /tmp/prev/softplan_jax'")
+    ap.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    args = ap.parse_args(argv)
+    args.only, args.skip = set(_names(args.only, ap)), set(_names(args.skip, ap))
+    args.extra = {}
+    for item in args.extra_args:
+        name, sep, rest = item.partition(":")
+        if not sep:
+            ap.error(f"--with {item!r}: write NAME:ARGS")
+        args.extra.setdefault(_names(name, ap)[0], []).extend(shlex.split(rest))
+    return args
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="quick mode of every script (results/quick/)")
-    ap.add_argument("--sweep-n", type=int, default=None, help="scenarios in the batched sweep (--n)")
-    ap.add_argument(
-        "--skip",
-        default="",
-        help="comma list of scripts to skip: closest, numpy_baseline, paper_tables, speed_targets, batch_sweep, "
-        "paper_presets, science, safe_step",
-    )
-    ap.add_argument("sweep_args", nargs="*", help="further batch_sweep.py arguments (after --)")
-    args = ap.parse_args(argv)
-    skip = {s.strip() for s in args.skip.split(",") if s.strip()}
-    quick = ["--quick"] if args.quick else []
-    quick_dir = os.path.join(HERE, "results", "quick")
-    runs = [
-        ("closest", quick),
-        ("numpy_baseline", quick + (["--out", os.path.join(quick_dir, "numpy_baseline")] if args.quick else [])),
-        ("paper_tables", quick),
-        ("speed_targets", quick),
-        ("batch_sweep", quick + (["--n", str(args.sweep_n)] if args.sweep_n else []) + args.sweep_args),
-    ]
-    runs.append(("paper_presets", quick))
-    runs.append(("science", quick))
-    if args.quick:
-        runs.append(("safe_step", ["--n", "16", "--max-steps", "60", "--chunk", "16",
-                                   "--out", os.path.join(quick_dir, "safe_step")]))
-    else:
-        held_out = ["--seed", "1", "--n", "1000", "--chunk", "64", "--max-steps", "600"]
-        runs += [
-            ("safe_step", held_out + ["--variants", "default", "--methods", "curve,10,50"]),
-            ("safe_step", held_out + ["--variants", "default", "--float32"]),
-            ("safe_step", held_out + ["--variants", "plain,safe", "--out",
-                                      os.path.join(HERE, "results", "safe_step_float64_seed1_n1000_before")]),
-        ]
-    times = {}
-    for k, (name, extra) in enumerate(runs):
-        if name in skip:
-            continue
+    args = parse_args(argv)
+    runs = plan_runs(args)
+    times, failed = [], []
+    for name, extra in runs:
         cmd = [sys.executable, os.path.join(HERE, f"{name}.py"), *extra]
-        print(f"$ {' '.join(cmd)}", file=sys.stderr, flush=True)
+        print(f"$ {shlex.join(cmd)}", file=sys.stderr, flush=True)
+        if args.dry_run:
+            continue
         t0 = time.perf_counter()
         rc = subprocess.call(cmd, stdout=subprocess.DEVNULL)
-        times[f"{name} ({k})" if name in times else name] = time.perf_counter() - t0
+        times.append((name, extra, time.perf_counter() - t0, rc))
         if rc:
-            print(f"{name} failed (exit code {rc})", file=sys.stderr)
-            return rc
-    for name, t in times.items():
-        print(f"{name}: {t:.0f} s", file=sys.stderr)
-    return 0
+            failed.append(name)
+            print(f"{name} failed (exit code {rc})", file=sys.stderr, flush=True)
+    if args.dry_run:
+        return 0
+    lines = [f"# run_all.py{' --quick' if args.quick else ''}: wall time per script (compile included)", "",
+             "| script | arguments | wall time | exit code |", "|---|---|---|---|"]
+    lines += [f"| {name} | `{shlex.join(extra)}` | {t:.0f} s | {rc} |" for name, extra, t, rc in times]
+    lines += ["", f"Total {sum(t for _, _, t, _ in times):.0f} s; failed: {', '.join(failed) or 'none'}."]
+    text = "\n".join(lines) + "\n"
+    print(text)
+    out = os.path.join(RESULTS, "quick" if args.quick else "", "run_all.md")
+    os.makedirs(os.path.dirname(out), exist_ok=True)
+    with open(out, "w", encoding="utf-8") as fh:
+        fh.write(text)
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

@@ -18,10 +18,14 @@ Variants:
 * ``safe``: the same with the clearance-bounded step;
 * ``default``: the library's defaults (safe step, escapes, stall test 30 steps / 0.02).
 
-Usage::
+Usage (``run_all.py`` runs the three held-out runs whose reports are committed)::
 
-    python benchmarks/safe_step.py --seed 0 --n 256            # training seed
-    python benchmarks/safe_step.py --seed 1 --n 1000 --float32 # held out, float32
+    python benchmarks/safe_step.py --seed 0 --n 256            # training seed (the defaults were chosen on it)
+    python benchmarks/safe_step.py --seed 1 --n 1000 --chunk 64 --max-steps 600 --variants default --methods curve,10,50
+    python benchmarks/safe_step.py --seed 1 --n 1000 --chunk 64 --max-steps 600 --variants default --float32
+    python benchmarks/safe_step.py --seed 1 --n 1000 --chunk 64 --max-steps 600 --variants plain,safe \\
+        --out benchmarks/results/safe_step_float64_seed1_n1000_before
+    python benchmarks/safe_step.py --quick                     # smoke run into results/quick/
 
 Writes ``benchmarks/results/safe_step_<dtype>_seed<seed>_n<n>.{md,json}``.
 """
@@ -45,7 +49,7 @@ VARIANTS = ("plain", "safe", "default")
 
 def variant_options(variant: str) -> dict:
     """PlanOptions fields of a variant (imported lazily: this module imports no jax)."""
-    from softplan_jax.planning.planner import PAPER_STEP
+    from softplan_jax.planning.step import PAPER_STEP
 
     return {
         "plain": dict(PAPER_STEP),  # the earlier default: the paper's step, no escapes, stall test 60 / 1e-4
@@ -58,9 +62,10 @@ STATUSES = ("reached", "collided", "stalled", "max_steps", "non_finite")
 def parse_args(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seed", type=int, default=0, help="seed of random_scenarios (default 0: the training seed)")
-    ap.add_argument("--n", type=int, default=256, help="number of scenes (default 256)")
-    ap.add_argument("--chunk", type=int, default=128, help="scenes per vmapped call (default 128)")
-    ap.add_argument("--max-steps", type=int, default=300, help="planner steps (default 300, as plan)")
+    ap.add_argument("--quick", action="store_true", help="smoke run (16 scenes, 60 steps) into results/quick/")
+    ap.add_argument("--n", type=int, default=None, help="number of scenes (default 256; quick 16)")
+    ap.add_argument("--chunk", type=int, default=None, help="scenes per vmapped call (default 128; quick 16)")
+    ap.add_argument("--max-steps", type=int, default=None, help="planner steps (default 300, as plan; quick 60)")
     ap.add_argument("--variants", default="plain,safe,default", help="comma list of plain, safe, default")
     ap.add_argument("--methods", default="curve", help="comma list of 'curve' and point counts N (default curve)")
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
@@ -68,6 +73,9 @@ def parse_args(argv=None):
     ap.add_argument("--float32", action="store_true", help="float32 (default float64)")
     ap.add_argument("--out", default=None, help="output prefix (default benchmarks/results/safe_step_...)")
     args = ap.parse_args(argv)
+    for key, full, quick in (("n", 256, 16), ("chunk", 128, 16), ("max_steps", 300, 60)):
+        if getattr(args, key) is None:
+            setattr(args, key, quick if args.quick else full)
     args.variant_list = args.variants.split(",")
     for v in args.variant_list:
         if v not in VARIANTS:
@@ -98,8 +106,10 @@ def main(argv=None) -> dict:
     from _common import RESULTS_DIR, finish_machine, log, machine_info, machine_lines
 
     import softplan_jax as sp
+    from softplan_jax.base.status import status_name
     from softplan_jax.geometry.clearance import apply_collision_checks
-    from softplan_jax.planning.planner import make_options, rollout_batch, status_name
+    from softplan_jax.planning.planner import make_options
+    from softplan_jax.planning.programs import rollout_batch
 
     dtype = jnp.float32 if args.float32 else jnp.float64
     dname = "float32" if args.float32 else "float64"
@@ -193,7 +203,7 @@ def main(argv=None) -> dict:
         if r["collided_scenes"]:
             lines.append(f"- {r['label']} collided in scenes {r['collided_scenes']}")
     report = "\n".join(lines) + "\n"
-    out = args.out or os.path.join(RESULTS_DIR, f"safe_step_{dname}_seed{args.seed}_n{n}")
+    out = args.out or os.path.join(RESULTS_DIR, "quick" if args.quick else "", f"safe_step_{dname}_seed{args.seed}_n{n}")
     os.makedirs(os.path.dirname(out), exist_ok=True)
     with open(out + ".md", "w", encoding="utf-8") as fh:
         fh.write(report)

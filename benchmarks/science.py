@@ -1,11 +1,11 @@
-"""The fair comparison of issue 10: curve obstacles vs N-point models, each
+"""The fair comparison: curve obstacles vs N-point models, each
 with gains tuned for it, on held-out random scenes, with intervals, paired
 tests and plots.
 
 One command regenerates everything, in one process (progress on stderr)::
 
-    python -m benchmarks.science            # full: train seed 0 (64 scenes), held-out seed 1 (1,024 scenes)
-    python -m benchmarks.science --quick    # smoke run, written to benchmarks/results/quick/
+    python benchmarks/science.py            # full: train seed 0 (64 scenes), held-out seed 1 (1,024 scenes)
+    python benchmarks/science.py --quick    # smoke run (curve and N = 10, grid only), into benchmarks/results/quick/
 
 Every rollout is the library's default planner (safe step, escapes) with its
 collision checks inside the scan (``make_options(method, N)``, i.e. what
@@ -90,9 +90,10 @@ def parse_args(argv=None):
     ap.add_argument("--n-eval", type=int, default=None, help="held-out scenes (default 1024; quick 16)")
     ap.add_argument("--train-steps", type=int, default=None, help="rollout steps on the training seed (default 100)")
     ap.add_argument("--max-steps", type=int, default=None, help="rollout steps on the held-out seed (default 150)")
-    ap.add_argument("--methods", default="curve,1,10,50,100", help="comma list of curve and point counts N")
-    ap.add_argument("--grid-d0", default=None, help="default 0.07,0.1,0.15,0.2,0.3,0.4 (quick 0.07,0.15,0.3)")
-    ap.add_argument("--grid-dt", default=None, help="default 0.1,0.2,0.4,0.6,0.8 (quick 0.1,0.2,0.3)")
+    ap.add_argument("--methods", default=None, help="comma list of curve and point counts N (default "
+                    "curve,1,10,50,100; quick curve,10)")
+    ap.add_argument("--grid-d0", default=None, help="default 0.07,0.1,0.15,0.2,0.3,0.4 (quick 0.07,0.3)")
+    ap.add_argument("--grid-dt", default=None, help="default 0.1,0.2,0.4,0.6,0.8 (quick 0.1,0.3)")
     ap.add_argument("--grid-eta", default=None, help="default 0.001,0.004 (quick 0.001)")
     ap.add_argument("--grad-updates", type=int, default=None, help="optax updates per method (default 40)")
     ap.add_argument("--grad-scenes", type=int, default=None, help="training scenes per gradient (default 32)")
@@ -101,19 +102,23 @@ def parse_args(argv=None):
     ap.add_argument("--chunk", type=int, default=None, help="scenes per vmapped call (default 64; quick 8)")
     ap.add_argument("--timing-chunks", type=int, default=None,
                     help="held-out chunks timed per method, planning only (default 3; quick 1)")
-    ap.add_argument("--settings", default="default,grid,grad", help="held-out gain settings")
-    ap.add_argument("--skip-paper-figures", action="store_true")
+    ap.add_argument("--settings", default=None, help="held-out gain settings (default default,grid,grad; quick "
+                    "default,grid: the gradient's compile alone takes minutes)")
+    ap.add_argument("--skip-paper-figures", action="store_true", help="(quick: skipped)")
     ap.add_argument("--out", default=None, help="output prefix (default results/science or results/quick/science)")
     args = ap.parse_args(argv)
     q = args.quick
     defaults = dict(n_train=8 if q else 64, n_eval=16 if q else 1024, train_steps=40 if q else 100,
                     max_steps=60 if q else 150, grad_updates=2 if q else 40, grad_scenes=4 if q else 32,
                     chunk=8 if q else 64, timing_chunks=1 if q else 3,
-                    grid_d0="0.07,0.15,0.3" if q else "0.07,0.1,0.15,0.2,0.3,0.4",
-                    grid_dt="0.1,0.2,0.3" if q else "0.1,0.2,0.4,0.6,0.8", grid_eta="0.001" if q else "0.001,0.004")
+                    grid_d0="0.07,0.3" if q else "0.07,0.1,0.15,0.2,0.3,0.4",
+                    grid_dt="0.1,0.3" if q else "0.1,0.2,0.4,0.6,0.8", grid_eta="0.001" if q else "0.001,0.004",
+                    methods="curve,10" if q else "curve,1,10,50,100",
+                    settings="default,grid" if q else "default,grid,grad")
     for k, v in defaults.items():
         if getattr(args, k) is None:
             setattr(args, k, v)
+    args.skip_paper_figures = args.skip_paper_figures or q
     args.method_list = [m if m == "curve" else int(m) for m in args.methods.split(",")]
     args.grid_axes = {k: sorted(float(x) for x in getattr(args, f"grid_{k}").split(",")) for k in TUNED}
     args.grid = [(a, b, c) for a in args.grid_axes["d0"] for b in args.grid_axes["dt"] for c in args.grid_axes["eta"]]
@@ -160,7 +165,7 @@ class Runner:
     def ensure_compiled(self, suite, gains, method, max_steps: int, check: bool = True, log=None) -> float:
         """Compile the program for this shape ahead of time (jax keeps it for the
         later calls); returns the compile seconds (0 if already compiled)."""
-        from softplan_jax.planning.planner import rollout_batch
+        from softplan_jax.planning.programs import rollout_batch
 
         jax = self.jax
         _, idx = self.batches(suite)[0]
@@ -179,7 +184,8 @@ class Runner:
         """Checked rollouts of every scene of ``suite``. Chunk c0's escapes use
         ``seed * 100003 + c0``. -> dict(status names, iterations, min_clearance,
         seconds per scene-step of each chunk, run seconds, compile seconds)."""
-        from softplan_jax.planning.planner import rollout_batch, status_name
+        from softplan_jax.base.status import status_name
+        from softplan_jax.planning.programs import rollout_batch
 
         jax = self.jax
         n = suite.q0.shape[0]
@@ -398,7 +404,7 @@ def write(args, out, machine, t_all, phases, grid_rows, grid_choice, grid_cost, 
     finish_machine(machine)
     argv = sys.argv[1:] if argv is None else list(argv)
     report = dict(
-        machine=machine, command=" ".join(["python -m benchmarks.science", *argv]),
+        machine=machine, command=" ".join(["python benchmarks/science.py", *argv]),
         args={k: v for k, v in vars(args).items()}, seconds=total, complete=final, phases=phases,
         grid=grid_rows, grid_choice=grid_choice, grid_cost=grid_cost,
         grid_edges={lab: edge_of(c, args.grid_axes) for lab, c in grid_choice.items()},
@@ -425,7 +431,7 @@ def cost_per_step(args, runner, suite, gains, stamp) -> dict:
     robin over the methods (so the machine's load falls on all alike)."""
     import jax
 
-    from softplan_jax.planning.planner import rollout_batch
+    from softplan_jax.planning.programs import rollout_batch
 
     batches = runner.batches(suite)[: args.timing_chunks]
     for m in args.method_list:

@@ -1,4 +1,4 @@
-"""The speed targets of the benchmarks issue, each measured as a ratio or rate in ONE run.
+"""The speed targets, each measured as a ratio or rate in ONE run.
 
 On the paper's tree scenario (five curves, three segments), float64 and float32:
 
@@ -35,8 +35,7 @@ and ``plan_batch`` run), and so are the loss and its gradient (what
 ``benchmarks/results/speed_targets.{md,json}``.
 
     python benchmarks/speed_targets.py            # ~4 min on 2 CPUs (219 s in the last run)
-    python benchmarks/speed_targets.py --quick    # ~2.5 min: fewer repeats, smaller batch, no float32
-    python benchmarks/speed_targets.py --checked-only   # item 6 alone (float64), into results/speed_checked.*
+    python benchmarks/speed_targets.py --quick    # ~1.5 min: fewer repeats, smaller batch, no float32
 """
 
 from __future__ import annotations
@@ -67,7 +66,8 @@ from _common import (  # noqa: E402
 import softplan_jax as sp  # noqa: E402
 from softplan_jax.base.compilation_cache import rollout_compiler_options  # noqa: E402
 from softplan_jax.geometry.obstacles import radius_and_mask  # noqa: E402
-from softplan_jax.planning.planner import make_options, rollout, rollout_jit  # noqa: E402
+from softplan_jax.planning.planner import make_options  # noqa: E402
+from softplan_jax.planning.programs import rollout, rollout_jit  # noqa: E402
 from softplan_jax.tuning.pathwise import rollout_loss  # noqa: E402
 
 
@@ -91,12 +91,12 @@ def compiled(fn, *args, **static):
 COMPILE_REPEATS = 3
 
 
-def compile_min_median(fn, first_s, *args, **static):
+def compile_min_median(fn, first_s, *args, compile_repeats=COMPILE_REPEATS, **static):
     """Compile time of a target rollout on this shared machine: ``first_s`` (the compile
-    whose program is run) and COMPILE_REPEATS - 1 more, each after ``jax.clear_caches()``
+    whose program is run) and ``compile_repeats`` - 1 more, each after ``jax.clear_caches()``
     (no in-memory hit; the persistent cache is off here); (min, median) seconds."""
     times = [first_s]
-    for _ in range(COMPILE_REPEATS - 1):
+    for _ in range(compile_repeats - 1):
         jax.clear_caches()
         times.append(compiled(fn, *args, **static)[1])
     return min(times), float(np.median(times))
@@ -109,7 +109,7 @@ def batch_of(scenario, size, seed=0):
     return sp.scenarios.stack_scenarios([scenario._replace(goal=jnp.asarray(g, scenario.goal.dtype)) for g in goals])
 
 
-def measure(dtype, steps, batch_size, repeats):
+def measure(dtype, steps, batch_size, repeats, compile_repeats=COMPILE_REPEATS):
     sc = sp.paper_scenario("tree", dtype=dtype)
     g = sp.default_gains(dtype)
     out = {}
@@ -120,7 +120,8 @@ def measure(dtype, steps, batch_size, repeats):
         t = median_run(c, sc, g, repeats=repeats)
         out[f"{name}_step_s"] = t / (steps + 1)
         if name == "curve":
-            ct, out[f"{name}_compile_median_s"] = compile_min_median(rollout, ct, sc, g, options=o, max_steps=steps)
+            ct, out[f"{name}_compile_median_s"] = compile_min_median(rollout, ct, sc, g, options=o, max_steps=steps,
+                                                                     compile_repeats=compile_repeats)
         out[f"{name}_compile_s"] = ct
         log(f"  [{jnp.dtype(dtype).name}] {name}: compile {ct:.1f} s, {fmt_s(t / (steps + 1))} per step")
     # The checked rollout (true clearance + between-steps collision checks), as sp.plan runs it.
@@ -128,8 +129,8 @@ def measure(dtype, steps, batch_size, repeats):
     c, ct = compiled(rollout, sc, g, options=checked, max_steps=steps)
     out["curve_checked_step_s"] = median_run(c, sc, g, repeats=repeats) / (steps + 1)
     out["curve_checked_compile_s"], out["curve_checked_compile_median_s"] = compile_min_median(
-        rollout, ct, sc, g, options=checked, max_steps=steps)
-    log(f"  checked rollout: compile {out['curve_checked_compile_s']:.1f} s (min of {COMPILE_REPEATS}), "
+        rollout, ct, sc, g, options=checked, max_steps=steps, compile_repeats=compile_repeats)
+    log(f"  checked rollout: compile {out['curve_checked_compile_s']:.1f} s (min of {compile_repeats}), "
         f"{fmt_s(out['curve_checked_step_s'])} per step")
     # Batched, curve method, planning only.
     batch = batch_of(sc, batch_size)
@@ -280,13 +281,11 @@ def numpy_step_time(steps_timed):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="fewer repeats, batch 16, float64 only")
+    ap.add_argument("--quick", action="store_true", help="fewer repeats, one compile each, batch 16, float64 only")
     ap.add_argument("--steps", type=int, default=200, help="rollout length (default 200)")
     ap.add_argument("--batch", type=int, default=None, help="batch size (default 256; quick 16)")
     ap.add_argument("--checked-batch", type=int, default=None,
                     help="random scenes in the batch of item 6 (default 64; quick 16)")
-    ap.add_argument("--checked-only", action="store_true",
-                    help="item 6 alone, float64, into benchmarks/results/speed_checked.{md,json}")
     ap.add_argument("--out", default=None,
                     help="output prefix (default benchmarks/results/speed_targets; quick: results/quick/...)")
     args = ap.parse_args(argv)
@@ -295,14 +294,12 @@ def main(argv=None):
             args.checked_batch is not None and args.checked_batch < 1):
         ap.error("--steps, --batch and --checked-batch must be >= 1")
     if args.out is None:
-        stem = "speed_checked" if args.checked_only else "speed_targets"
-        args.out = os.path.join(RESULTS_DIR, "quick" if args.quick else "", stem)
+        args.out = os.path.join(RESULTS_DIR, "quick" if args.quick else "", "speed_targets")
     batch = args.batch or (16 if args.quick else 256)
     checked_batch = args.checked_batch or (16 if args.quick else 64)
     repeats = 3 if args.quick else 7
-    if args.checked_only:
-        return checked_only(args, checked_batch, repeats)
-    machine = machine_info("float64 and float32")
+    compile_repeats = 1 if args.quick else COMPILE_REPEATS
+    machine = machine_info("float64" if args.quick else "float64 and float32")
     t_start = time.perf_counter()
     log("NumPy/SciPy baseline step (tree, curve method) ...")
     numpy_s = numpy_step_time(3 if args.quick else 8)
@@ -310,7 +307,7 @@ def main(argv=None):
     results = {}
     for dtype in (jnp.float64,) if args.quick else (jnp.float64, jnp.float32):
         log(f"{jnp.dtype(dtype).name}:")
-        results[jnp.dtype(dtype).name] = measure(dtype, args.steps, batch, repeats)
+        results[jnp.dtype(dtype).name] = measure(dtype, args.steps, batch, repeats, compile_repeats)
         log(f"  checked / planning-only rollouts (batch of {checked_batch} random scenes) ...")
         results[jnp.dtype(dtype).name]["checked"] = measure_checked(dtype, args.steps, checked_batch, repeats)
     recompiles = count_recompiles(args.steps)
@@ -327,9 +324,9 @@ def main(argv=None):
              numpy_s / r["batch_scenario_step_s"], "x"),
             (name, "batched throughput, curve method", ">= 200,000", 1.0 / r["batch_scenario_step_s"],
              "scenario-steps/s"),
-            (name, f"compile time of a rollout (planning only; median of {COMPILE_REPEATS}, "
+            (name, f"compile time of a rollout (planning only; median of {compile_repeats}, "
              f"min {r['curve_compile_s']:.2f} s)", "<= 5 s", r["curve_compile_median_s"], "s"),
-            (name, f"compile time of a rollout (with collision checks; median of {COMPILE_REPEATS}, "
+            (name, f"compile time of a rollout (with collision checks; median of {compile_repeats}, "
              f"min {r['curve_checked_compile_s']:.2f} s)", "<= 5 s", r["curve_checked_compile_median_s"], "s"),
             (name, f"gradient of a {args.steps}-step rollout loss / the rollout", "<= 5", r["grad_s"] / r["loss_s"],
              "x"),
@@ -346,7 +343,7 @@ def main(argv=None):
         "<= 1.3": lambda v: v <= 1.3,
     }
     lines = [
-        "# Speed targets (benchmarks issue, item 4)",
+        "# Speed targets",
         "",
         f"- generated by `python benchmarks/speed_targets.py{' --quick' if args.quick else ''}` in "
         f"{time.perf_counter() - t_start:.0f} s; tree scenario, {args.steps}-step rollouts, batch {batch}",
@@ -378,27 +375,6 @@ def main(argv=None):
                   targets=[dict(dtype=a, quantity=b, target=c, value=d, unit=e, met=bool(met[c](d)))
                            for a, b, c, d, e in rows])
     write_results(args.out, report, md)
-    print(md)
-    return 0
-
-
-def checked_only(args, checked_batch, repeats):
-    """``--checked-only``: item 6 in float64, written to its own report."""
-    machine = machine_info("float64")
-    t_start = time.perf_counter()
-    r = measure_checked(jnp.float64, args.steps, checked_batch, repeats)
-    finish_machine(machine)
-    lines = [
-        "# Checked vs planning-only rollouts (speed target: checked <= 1.3x planning only)",
-        "",
-        f"- generated by `python benchmarks/speed_targets.py --checked-only{' --quick' if args.quick else ''}` in "
-        f"{time.perf_counter() - t_start:.0f} s; {args.steps}-step rollouts, curve method, default options",
-        *machine_lines(machine),
-        "",
-        *checked_lines("float64", r),
-    ]
-    md = "\n".join(lines) + "\n"
-    write_results(args.out, dict(machine=machine, steps=args.steps, results=r), md)
     print(md)
     return 0
 

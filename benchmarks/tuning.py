@@ -1,5 +1,5 @@
 """Gradient tuning against grid, random and CMA-ES search at equal budgets, on
-held-out scenes (issue 22).
+held-out scenes.
 
 One command regenerates the whole comparison, in one process (progress on stderr)::
 
@@ -27,8 +27,8 @@ checks in the scan). Per obstacle model (curve, N = 10, N = 50):
    SGD with momentum 0.5, step ``--lr`` decaying to a tenth, the mean of the
    last third of the iterates) from the same centre, B_grid / ``--fraction``
    rollouts (updates x 2 x pairs), on ``--grad-names`` (default d0 and dt; eta
-   stays at the centre: its gradient is noise, see
-   ``tuning_validation/README.md``) with ``dt`` parametrised against the Euler
+   stays at the centre: its gradient is noise on the validation seed) with
+   ``dt`` parametrised against the Euler
    step's stability bound (``GainSpace(stable_dt=True)``), sigma ``--sigma``
    (one per tuned gain: 0.3 for log d0, 0.7 for dt's logit), stepping along the
    natural gradient ``sigma^2 grad J`` (``--natural``), each update clipped to
@@ -46,7 +46,9 @@ checks in the scan). Per obstacle model (curve, N = 10, N = 50):
 
 The tuners' settings (start, optimiser, step size, pairs, averaging) were
 chosen on a validation seed (``random_scenarios(2, 256)``), never on the
-held-out one.
+held-out one; the validation scripts and logs, and the rerun of the gradient
+and random search with tuner seeds 0-4 (``tuning_seeds.py``), are in git
+history (``git show b850131:benchmarks/tuning_validation/README.md``).
 
 Held-out: every choice (and the default gains) on ``random_scenarios(eval
 seed, n_eval)``, ``--max-steps`` steps; success = reached without collision;
@@ -194,8 +196,8 @@ def draw_in_box(args, rng) -> dict:
 
 
 def grad_kwargs(args) -> dict:
-    """The gradient's step settings for :func:`softplan_jax.tuning.smoothing.tune_smoothed`
-    (shared by tuning.py and tuning_seeds.py): sigma (one, or one per tuned gain), the
+    """The gradient's step settings for :func:`softplan_jax.tuning.smoothing.tune_smoothed`:
+    sigma (one, or one per tuned gain), the
     natural gradient, first step, and the guards (``--box``: the grid's box on the tuned
     gains; ``--max-step``)."""
     bounds = {k: (args.grid_axes[k][0], args.grid_axes[k][-1]) for k in args.grad_names} if args.box else None
@@ -231,7 +233,7 @@ def main(argv=None) -> dict:
 
     import softplan_jax as sp
     from softplan_jax.planning.planner import make_options
-    from softplan_jax.tuning.smoothing import GainSpace, ScoreWeights, score_batch, tune_smoothed
+    from softplan_jax.tuning import GainSpace, ScoreWeights, score_batch, tune_smoothed
 
     t_all = time.perf_counter()
     machine = machine_info("float64")
@@ -571,7 +573,7 @@ def figures(results: dict, args, fig_dir: str, sp) -> None:
     # tuned repulsion functions
     import jax.numpy as jnp
 
-    from softplan_jax.planning.planner import GainFunction, repulsion, repulsion_scale
+    from softplan_jax.planning.step import GainFunction, repulsion, repulsion_scale
 
     fig, axes = plt.subplots(1, len(labs), figsize=(4 * len(labs), 3.2), squeeze=False)
     for ax, lab in zip(axes[0], labs, strict=True):

@@ -28,14 +28,21 @@ import warnings as _warnings
 from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
 from importlib.metadata import version as _version
 
+from . import clouds as clouds
+from . import geometry as geometry
+from . import moving as moving
+from . import planning as planning
+from . import scenarios as scenarios
+from . import search as search
+from . import tuning as tuning
 from ._compat import install as _install_old_module_paths
-from . import clouds, geometry, moving, planning, scenarios, search, tuning
 from .base.compilation_cache import enable_compilation_cache
-from .geometry.closest import closest_point, closest_point_to_points
+from .base.status import Status
+from .geometry.closest import closest_point
 from .geometry.curves import ParametricCurve, PolynomialCurve, line_segment
 from .geometry.kinematics import point_jacobian, segment_point, tip_position
+from .geometry.point_sets import closest_point_to_points
 from .planning.planner import PlanResult, make_options, plan, plan_batch
-from .base.status import Status
 from .planning.presets import apply_preset
 from .planning.step import PAPER_STEP, GainFunction, Gains, PlanOptions, default_gains
 from .planning.tracking import track, track_batch

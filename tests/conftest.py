@@ -30,9 +30,8 @@ jax.config.update("jax_enable_x64", True)
 if os.environ.get("SOFTPLAN_TEST_STRICT", "1") != "0":
     jax.config.update("jax_numpy_dtype_promotion", "strict")
 
-# `import helpers` / `import session` from tests/; `import oracle` /
-# `import closest_cases` (the independent reference and the closest-point case
-# corpus, shared with the benchmarks) and the benchmark scripts from benchmarks/.
+# `import helpers` / `import session` from tests/, and the benchmark scripts from
+# benchmarks/ (the independent reference is softplan_jax.testing).
 sys.path.insert(0, os.path.join(os.path.dirname(TESTS), "benchmarks"))
 sys.path.insert(0, TESTS)
 

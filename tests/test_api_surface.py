@@ -186,7 +186,7 @@ def test_moved_names_still_work_with_a_deprecation_warning():
 
 def test_old_module_paths_still_import_with_a_deprecation_warning():
     """The flat modules' paths (softplan_jax.planner, .closest, ...) forward to the new modules."""
-    from softplan_jax import _compat
+    from softplan_jax._compat import OLD_MODULES
 
     code = ("import warnings, importlib; warnings.simplefilter('error', DeprecationWarning)\n"
             "import softplan_jax\n"
@@ -203,7 +203,7 @@ def test_old_module_paths_still_import_with_a_deprecation_warning():
             "from softplan_jax.motion import MovingScenario\n"
             "import softplan_jax.closest as c, softplan_jax.geometry.closest as g\n"
             "assert c.closest_point is g.closest_point and plan is softplan_jax.plan\n"
-            "print('ok')\n") % (sorted(_compat.OLD_MODULES),)
+            "print('ok')\n") % (sorted(OLD_MODULES),)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=subprocess_env(),
                          cwd=REPO, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stdout + out.stderr
@@ -213,7 +213,7 @@ def test_old_module_paths_still_import_with_a_deprecation_warning():
 # The house: folders by layer, every import pointing down, no loops, no module much over 500 lines.
 
 # Layers from the top floor down; a module may import from its own layer or any layer below.
-LAYERS = ["cli", "plotting", "tuning", "search", "planning", "clouds", "scenarios", "geometry", "base"]
+LAYERS = ["cli", "plotting", "tuning", "search", "planning", "clouds", "scenarios", "geometry", "base", "testing"]
 TOP_LEVEL = {"softplan_jax", "softplan_jax._compat", "softplan_jax.moving"}  # the faces, above every layer
 MAX_LINES = 500
 
@@ -242,7 +242,8 @@ def _import_graph():
                     mod = ".".join(base + ([node.module] if node.module else []))
                 else:
                     mod = node.module or ""
-                targets = [mod] + [f"{mod}.{a.name}" for a in node.names]
+                # `from pkg import name`: the module pkg.name where it is one, else pkg itself
+                targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in modules else mod for a in node.names]
             elif isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
             out |= {t for t in targets if t in modules and t != name}
@@ -316,3 +317,19 @@ def test_no_module_is_much_over_500_lines():
     sizes = {m: sum(1 for _ in open(p, encoding="utf-8")) for m, p in modules.items()}
     big = {m: n for m, n in sizes.items() if n > MAX_LINES}
     assert big == {}, f"modules over {MAX_LINES} lines: {big}"
+
+
+def test_the_oracle_stands_apart():
+    """softplan_jax.testing (the independent reference of the tests and benchmarks) imports nothing
+    of the package and not jax, and nothing of the package imports it."""
+    modules, graph = _import_graph()
+    for m, targets in graph.items():
+        if _layer(m) == "testing":
+            assert all(_layer(t) == "testing" for t in targets), f"{m} imports {targets}"
+            with open(modules[m], encoding="utf-8") as fh:
+                tree = ast.parse(fh.read())
+            names = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+            names |= {(n.module or "").split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+            assert "jax" not in names, f"{m} imports jax"
+        else:
+            assert not any(_layer(t) == "testing" for t in targets), f"{m} imports the oracle"

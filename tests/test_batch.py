@@ -32,9 +32,10 @@ import pytest
 from session import subprocess_env
 
 import softplan_jax as sp
-from softplan_jax.geometry.clearance import apply_collision_checks
 from softplan_jax.base.numerics import evaluate_where, solve_small, tie
-from softplan_jax.planning.planner import make_options, rollout_jit
+from softplan_jax.geometry.clearance import apply_collision_checks
+from softplan_jax.planning.planner import make_options
+from softplan_jax.planning.programs import rollout_jit
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PAD = dict(curve_slots=5, degree=2)
@@ -256,7 +257,7 @@ def test_two_host_devices_match_one():
 
 
 def test_batch_keys_per_scenario():
-    from softplan_jax.planning.planner import batch_keys
+    from softplan_jax.planning.programs import batch_keys
 
     keys = jax.random.split(jax.random.PRNGKey(4), 5)
     np.testing.assert_array_equal(np.asarray(batch_keys(4, 5)), np.asarray(keys))

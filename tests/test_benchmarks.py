@@ -1,14 +1,15 @@
 """Smoke tests of the benchmark scripts and tests of ``random_scenarios``.
 
-* ``benchmarks/paper_tables.py --quick`` (default run) and
-  ``benchmarks/batch_sweep.py --quick`` (``slow``, with the other benchmark
-  scripts' quick runs) run in subprocesses (outputs written to a temporary
-  directory): they must finish, and their Markdown, JSON and figures must exist
-  and parse. No timing is asserted (timings belong in the benchmarks). Each
-  spends most of its time compiling; they share the suite's persistent
-  compilation cache (conftest.py), so a rerun of the suite is much faster.
-  Sharding over 2 host devices is tested on plan_batch itself
+* ``benchmarks/paper_tables.py --quick`` (default run) and every other
+  script's quick run (``slow``) run in subprocesses or in-process (outputs
+  written to a temporary directory): they must finish, and their Markdown, JSON
+  and figures must exist and parse. No timing is asserted (timings belong in
+  the benchmarks). Each spends most of its time compiling; they share the
+  suite's persistent compilation cache (conftest.py), so a rerun of the suite
+  is much faster. Sharding over 2 host devices is tested on plan_batch itself
   (tests/test_batch.py), which the sweep calls.
+* ``benchmarks/run_all.py`` knows every script of the folder, and each has a
+  ``--quick`` mode; the scripts' argument checks and pure helpers.
 * ``random_scenarios``: seeded and deterministic, the requested shapes, each
   entry equal to ``make_scenario`` of its own obstacles, goals reachable (an
   independent least-squares inverse kinematics finds a configuration within
@@ -135,6 +136,83 @@ def test_batch_sweep_quick(tmp_path):
     for key in ("| method | success | collided", "CPUs", f"jax {jax.__version__}", "float64", "QUICK MODE"):
         assert key in md, key
     assert (d / "sweep1.png").stat().st_size > 10_000
+
+
+# ----------------------------------------------------------------------------
+# run_all.py and every script's quick run
+
+HELPERS = {"_common", "stats", "run_all"}  # modules of benchmarks/ that are not benchmark scripts
+
+
+def _scripts():
+    return sorted(f[:-3] for f in os.listdir(BENCH) if f.endswith(".py") and f[:-3] not in HELPERS)
+
+
+def test_run_all_runs_every_script_and_each_has_a_quick_mode():
+    import run_all
+
+    assert sorted(run_all.SCRIPTS) == _scripts()
+    for name in _scripts():
+        with open(os.path.join(BENCH, f"{name}.py"), encoding="utf-8") as fh:
+            assert '"--quick"' in fh.read(), f"{name}.py has no --quick"
+
+    def planned(*argv):
+        return run_all.plan_runs(run_all.parse_args(list(argv)))
+
+    assert planned("--quick") == [(name, ["--quick"]) for name in run_all.SCRIPTS]
+    assert [n for n, _ in planned("--quick", "--only", "moving,closest")] == ["closest", "moving"]
+    assert "devices" not in [n for n, _ in planned("--skip", "devices")]
+    assert [n for n, _ in planned("--only", "safe_step")] == ["safe_step"] * 3  # the three committed held-out runs
+    assert planned("--only", "batch_sweep", "--sweep-n", "256", "--with", "batch_sweep:--chunk 64") == [
+        ("batch_sweep", ["--n", "256", "--chunk", "64"])]
+
+
+def test_run_all_rejects_unknown_scripts(capsys):
+    import run_all
+
+    with pytest.raises(SystemExit):
+        run_all.main(["--only", "no_such_script", "--dry-run"])
+    assert "no_such_script" in capsys.readouterr().err
+    assert run_all.main(["--quick", "--only", "closest", "--with", "closest:--candidates default", "--dry-run"]) == 0
+    assert "closest.py --quick --candidates default" in capsys.readouterr().err
+
+
+# Scripts whose quick run no other test below runs: `NAME.py --quick --out DIR/NAME` in a subprocess.
+QUICK_ONLY = ["baselines", "closest", "devices", "engine", "numpy_baseline", "paper_presets", "speed_targets",
+              "throughput", "warm_start"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", QUICK_ONLY)
+def test_quick_run_writes_its_report(tmp_path, name):
+    prefix = tmp_path / name
+    args = ["save", f"{prefix}.npz", "--quick"] if name == "baselines" else ["--quick", "--out", str(prefix)]
+    _ok(_run([sys.executable, os.path.join(BENCH, f"{name}.py"), *args]))
+    report = json.loads((tmp_path / f"{name}.json").read_text())
+    assert report and (tmp_path / f"{name}.md").read_text().startswith("#")
+    if name in ("engine", "throughput"):
+        assert (tmp_path / "figures" / f"{name}.png").stat().st_size > 10_000
+    if name == "baselines":
+        assert (tmp_path / "baselines.npz").exists() and report["arrays"] > 0
+        assert baselines_compare(tmp_path / "baselines.npz", tmp_path / "baselines.npz").startswith(
+            f"{report['arrays']} of {report['arrays']} arrays bit-identical")
+
+
+def baselines_compare(a, b) -> str:
+    p = subprocess.run([sys.executable, os.path.join(BENCH, "baselines.py"), "compare", str(a), str(b)],
+                       capture_output=True, text=True, timeout=SUBPROCESS_TIMEOUT, env=_env(None), cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+    return p.stdout
+
+
+def test_every_script_is_tested_by_a_quick_run():
+    """Every script's quick run is run by one of the tests of this file."""
+    own = {"paper_tables": "test_paper_tables_quick", "batch_sweep": "test_batch_sweep_quick",
+           "safe_step": "test_safe_step_quick_run_writes_its_report", "science": "test_science_quick_run",
+           "tuning": "test_tuning_benchmark_quick_run", "reach": "test_reach_benchmark_quick_run",
+           "moving": "test_moving_benchmark_quick_run"}
+    assert all(callable(globals().get(test)) for test in own.values())
+    assert set(QUICK_ONLY) | set(own) == set(_scripts())
 
 
 # ----------------------------------------------------------------------------
@@ -369,31 +447,6 @@ def test_science_quick_run(tmp_path):
     assert (tmp_path / "figures" / "science_rates_vs_n.png").exists()
 
 
-# ----------------------------------------------------------------------------
-# kernel.py
-
-
-def test_kernel_rejects_bad_arguments(capsys):
-    import kernel
-
-    for argv in (["--steps", "0"], ["--dtypes", "float16"], ["--variant", "nope"], ["--variant", "a=/no/such/dir"]):
-        with pytest.raises(SystemExit) as e:
-            kernel.main(argv)
-        assert e.value.code == 2, argv
-    assert "--variant" in capsys.readouterr().err
-
-
-@pytest.mark.slow
-def test_kernel_quick_run_writes_its_report(tmp_path):
-    import kernel
-
-    out = tmp_path / "kernel.md"
-    kernel.main(["--steps", "5", "--batch", "2", "--rounds", "1", "--dtypes", "float64", "--out", str(out)])
-    md = out.read_text()
-    assert "| float64 | current | curve | single |" in md and "| float64 | current | points10 | batch |" in md
-    assert "## Profile, float64" in md and "| warm closest point |" in md
-
-
 def test_importing_a_benchmark_script_changes_no_jax_setting():
     """Every script in benchmarks/ imports without switching float64 on (each ``main`` does)."""
     scripts = sorted(f[:-3] for f in os.listdir(BENCH) if f.endswith(".py"))
@@ -404,11 +457,11 @@ def test_importing_a_benchmark_script_changes_no_jax_setting():
                        timeout=SUBPROCESS_TIMEOUT)
     assert p.returncode == 0, p.stderr[-3000:]
     assert p.stdout.strip().splitlines()[-1] == "False", p.stdout
-    assert "kernel" in scripts and "science" in scripts
+    assert "closest" in scripts and "science" in scripts
 
 
 # ----------------------------------------------------------------------------
-# tuning.py (issue 22)
+# tuning.py
 
 
 def test_tuning_benchmark_rejects_bad_arguments():
@@ -429,23 +482,19 @@ def test_tuning_benchmark_rejects_bad_arguments():
     # The guards reach tune_smoothed: by default the clip 0.3; --box: the grid's box; 0: no clip.
     kw = tuning_bench.grad_kwargs(tuning_bench.parse_args([]))
     assert kw["bounds"] is None and kw["max_step"] == 0.3
-    # The recipe (val10.py): one sigma per tuned gain, the natural gradient from 3.75.
+    # The recipe chosen on the validation seed: one sigma per tuned gain, the natural gradient from 3.75.
     assert kw["sigma"] == (0.3, 0.7) and kw["natural"] is True and kw["learning_rate"] == 3.75
     kw = tuning_bench.grad_kwargs(tuning_bench.parse_args(["--box", "--max-step", "0", "--sigma", "0.4",
                                                            "--no-natural"]))
     assert kw["bounds"] == dict(d0=(0.07, 0.4), dt=(0.1, 0.8)) and kw["max_step"] is None
     assert kw["sigma"] == 0.4 and kw["natural"] is False
     # The gain-function stage: d0, dt, eta's scales, then --fn-sigma for the 17 profile knots and weights.
-    from softplan_jax.tuning.smoothing import GainSpace
+    from softplan_jax.tuning import GainSpace
 
     args = tuning_bench.parse_args([])
     kw = tuning_bench.fn_kwargs(args, GainSpace(tuning_bench.TUNED, knots=14, segments=3))
     assert kw["sigma"] == (0.3, 0.7, 0.3) + (0.3,) * 17 and kw["natural"] and kw["max_step"] == 0.3
     assert tuning_bench.fn_kwargs(args, GainSpace(tuning_bench.TUNED))["sigma"] == (0.3, 0.7, 0.3)
-    import tuning_seeds
-
-    with pytest.raises(ValueError, match="seeds"):
-        tuning_seeds.main(["--seeds", "0,x"])
 
 
 @pytest.mark.slow
@@ -468,22 +517,10 @@ def test_tuning_benchmark_quick_run(tmp_path):
         assert 0 <= res["cost"][name]["rollouts"] <= budget, name
     assert "Wilson" in (tmp_path / "tuning.md").read_text()
     assert (tmp_path / "figures" / "tuning_heldout.png").exists()
-    # The seed spread script reruns the same tuners: its seed 0 makes the same choices.
-    import tuning_seeds
-
-    spread = tuning_seeds.main(["--quick", "--seeds", "0", "--out", str(out)])
-    row = spread["methods"]["curve"]["rows"][0]
-    assert spread["methods"]["curve"]["grid"] == res["choices"]["grid"]
-    for name in ("gradient", "random"):
-        assert row[name] == pytest.approx(res["choices"][name], rel=1e-12), name
-        assert row[f"{name}_success"] == res["heldout"][name]["success"], name
-    # The report names the arguments it ran with (e.g. a budget other than the default's).
-    assert spread["argv"] == ["--quick", "--seeds", "0", "--out", str(out)]
-    assert "tuning_seeds.py --quick --seeds 0 --out" in (tmp_path / "tuning_seeds.md").read_text()
 
 
 # ----------------------------------------------------------------------------
-# reach.py (issue 24)
+# reach.py
 
 
 def test_reach_benchmark_rejects_bad_arguments():
@@ -513,7 +550,7 @@ def test_reach_benchmark_quick_run(tmp_path):
 
 
 # ----------------------------------------------------------------------------
-# moving.py (issue 23)
+# moving.py
 
 
 def test_moving_benchmark_rejects_bad_arguments():
@@ -542,53 +579,6 @@ def test_moving_benchmark_quick_run(tmp_path):
     assert rep["ratio_single_min"] > 0 and rep["ratio_batch_min"] > 0
     assert "| model | reached and held |" in (tmp_path / "moving.md").read_text()
     assert (tmp_path / "figures" / "moving_outcomes.png").exists()
-
-
-# ----------------------------------------------------------------------------
-# step_kernels.py and throughput.py (issue 25)
-
-
-def test_step_kernels_rejects_bad_arguments(capsys):
-    import step_kernels
-
-    for argv in (["--steps", "0"], ["--rounds", "0"], ["--variants", "no_such_patch"]):
-        with pytest.raises(SystemExit) as e:
-            step_kernels.main(argv)
-        assert e.value.code == 2, argv
-    assert "no_such_patch" in capsys.readouterr().err
-    assert "polish_unrolled" in step_kernels.available_variants()
-
-
-def test_step_kernels_counts_the_scan_body_and_its_fixed_loops():
-    """The thunk counter against programs whose loops are known: a scan of 50 steps whose
-    body holds a fori_loop of n iterations and a while loop of data-dependent length; the
-    fixed loop is expanded (n times its body), the while loop listed apart."""
-    import step_kernels
-
-    def program(n):
-        def f(x):
-            def body(c, _):
-                # (sort: a kernel of its own, so that XLA keeps the loops as loops)
-                c = jax.lax.fori_loop(0, n, lambda i, v: jnp.sin(v) * v + jnp.cos(v * i) + jnp.sort(v), c)
-                c = jax.lax.while_loop(lambda v: jnp.sum(v) > 1.0, lambda v: jnp.sort(v * 0.5 + jnp.exp(-v)), c)
-                return c, jnp.sum(c)
-
-            return jax.lax.scan(body, x, None, length=50)
-
-        return jax.jit(f).lower(jnp.ones(5)).compile().as_text()
-
-    counts = {}
-    for n in (4, 12):
-        got = step_kernels.step_thunks(program(n), 50)
-        assert got["scan_trip"] == 50
-        assert len(got["dynamic_loops"]) == 1 and got["dynamic_loops"][0] >= 1
-        counts[n] = got["per_step"]
-    comps, _ = step_kernels.parse_hlo(program(4))
-    inner = [(body, trip) for name in comps for body, _, trip in step_kernels._loops(comps, name) if trip == 4]
-    assert len(inner) == 1
-    cond = [c for name in comps for body, c, trip in step_kernels._loops(comps, name) if trip == 4][0]
-    per_iteration = step_kernels._static_count(comps, inner[0][0])[0] + step_kernels._static_count(comps, cond)[0]
-    assert counts[12] - counts[4] == 8 * per_iteration
 
 
 def test_throughput_rejects_bad_arguments():

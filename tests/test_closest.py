@@ -22,16 +22,16 @@ import math
 import os
 from functools import cache
 
-import closest_cases as cc
 import jax
 import jax.numpy as jnp
 import numpy as np
-import oracle
 import pytest
 from helpers import assert_allclose, assert_finite, closest_per_obstacle, unpack_stacked
 
 import softplan_jax as sp
 from softplan_jax.geometry.closest import SolverOptions
+from softplan_jax.testing import closest_cases as cc
+from softplan_jax.testing import oracle
 
 TOL = cc.TOL  # 1e-9
 
@@ -637,9 +637,9 @@ def test_point_distance_matches_dense_sampling():
 
 @pytest.mark.parametrize("theta", [0.0, 1e-9, 0.05, 1.3])
 def test_newton_kernel_matches_autodiff(theta):
-    """closest.pair_terms (paper eqs. 13-18, the one Newton kernel) against
+    """closest_newton.pair_terms (paper eqs. 13-18, the one Newton kernel) against
     jax.grad / jax.hessian of |F_Ri(s) - F_o(u)|^2 / 2, at and near theta = 0."""
-    from softplan_jax.geometry.closest import Segment, pair_terms
+    from softplan_jax.geometry.closest_newton import Segment, pair_terms
 
     q = jnp.array([[0.9, 0.4, 0.3], [1.1, theta, -0.7]])
     R, P = sp.geometry.segment_frames(q)
@@ -667,7 +667,7 @@ def test_atan_over_x_both_branches():
 
 @jax.jit
 def _arc_distances(q, pts):
-    from softplan_jax.geometry.closest import Segment, arc_distance2, project_to_arc
+    from softplan_jax.geometry.closest_newton import Segment, arc_distance2, project_to_arc
 
     R, P = sp.geometry.segment_frames(q)
     seg = Segment.from_frame(q[0], R[0], P[0])
@@ -676,7 +676,7 @@ def _arc_distances(q, pts):
 
 @pytest.mark.parametrize("theta", [0.0, 1e-9, -1e-9, 0.7, -2.5, 3.5, -4.5, 6.5])
 def test_arc_distance_matches_dense_sampling(theta):
-    """closest.arc_distance2 (the certificate's trigonometry-free point-to-arc distance)
+    """closest_newton.arc_distance2 (the certificate's trigonometry-free point-to-arc distance)
     against the oracle's segment sampled at 20,001 points plus a golden-section polish,
     and against project_to_arc's value; points at random, at the circle's centre, on
     its axis, near and beyond both ends, and nearly on the arc."""
@@ -711,7 +711,7 @@ def test_arc_distance_matches_dense_sampling(theta):
 
 
 def test_arc_distance_gradient_finite_at_theta_zero_and_the_centre():
-    from softplan_jax.geometry.closest import Segment, arc_distance2
+    from softplan_jax.geometry.closest_newton import Segment, arc_distance2
 
     def f(q, p):
         R, P = sp.geometry.segment_frames(q)

@@ -54,7 +54,8 @@ def test_traced_rollout_is_kept_on_disk_and_gives_the_same_result(monkeypatch, t
     import numpy as np
 
     import softplan_jax as sp
-    from softplan_jax.planning.planner import make_options, rollout_jit
+    from softplan_jax.planning.planner import make_options
+    from softplan_jax.planning.programs import rollout_jit
 
     monkeypatch.delenv("SOFTPLAN_COMPILATION_CACHE", raising=False)
     monkeypatch.setenv("SOFTPLAN_CACHE_DIR", str(tmp_path))
@@ -96,8 +97,13 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     import numpy as np
 
     import softplan_jax as sp
-    from softplan_jax.base.compilation_cache import CPU_COMPILER_OPTIONS, CURVE_CPU_COMPILER_OPTIONS, rollout_compiler_options
-    from softplan_jax.planning.planner import make_options, rollout, rollout_jit
+    from softplan_jax.base.compilation_cache import (
+        CPU_COMPILER_OPTIONS,
+        CURVE_CPU_COMPILER_OPTIONS,
+        rollout_compiler_options,
+    )
+    from softplan_jax.planning.planner import make_options
+    from softplan_jax.planning.programs import rollout, rollout_jit
 
     sc, g, key = sp.paper_scenario("sim1"), sp.default_gains(), jax.random.PRNGKey(0)
     opts = make_options("points", 10, check_collisions=False)

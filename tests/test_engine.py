@@ -11,7 +11,8 @@ import pytest
 import softplan_jax as sp
 from softplan_jax.base.compilation_cache import rollout_compiler_options
 from softplan_jax.planning.engine import check_engine_sizes, run
-from softplan_jax.planning.planner import batch_keys, make_options, rollout, rollout_jit
+from softplan_jax.planning.planner import make_options
+from softplan_jax.planning.programs import batch_keys, rollout, rollout_jit
 from softplan_jax.planning.step import safe_scale
 
 PAD = dict(curve_slots=5, degree=2)  # test_planner's shape: its programs are shared (conftest SHARED)

@@ -1,4 +1,4 @@
-"""Curves fitted to unordered, noisy, branching point clouds (issue 11).
+"""Curves fitted to unordered, noisy, branching point clouds.
 
 Every check is against an independent reference: the TRUE curve the cloud was
 drawn from (dense samples), and brute-force dense sampling of the fitted
@@ -53,7 +53,7 @@ def two_way(fit, truth):
     return cKDTree(fitted).query(true)[0].max(), cKDTree(true).query(fitted)[0].max()
 
 
-quadratic = lambda u: np.stack([1 + 0.2 * u, u, 0.5 - u + 0.3 * u**2], 1)  # the issue's example
+quadratic = lambda u: np.stack([1 + 0.2 * u, u, 0.5 - u + 0.3 * u**2], 1)  # the shuffled-cloud example below
 helix = lambda t: np.stack([0.5 * np.cos(t), 0.5 * np.sin(t), 0.15 * t], 1)
 sine = lambda u: np.stack([u, 0.3 * np.sin(3 * u), 0.2 * u**2], 1)
 trunk = lambda u: np.stack([1 + 0 * u, 1 + 0 * u, u], 1)
@@ -74,21 +74,21 @@ CLOUDS = {
 
 
 # ----------------------------------------------------------------------------
-# The issue's example.
+# A noisy quadratic, shuffled: the ordered-only fit fails, fit_curve recovers it.
 
 
-def test_issue_example_shuffled_fit_matches_the_ordered_fit():
+def test_shuffled_quadratic_fit_matches_the_ordered_fit():
     rng = np.random.default_rng(0)
     u = np.linspace(-1, 1, 400)
     pts = quadratic(u) + SIGMA * rng.normal(size=(400, 3))
     ordered = sp.clouds.fit_polynomial_curve(jnp.asarray(pts), 2)
     ordered_max = brute_distance(pts, [ordered]).max()
-    assert ordered_max < 0.03  # the issue: 0.018 in order
+    assert ordered_max < 0.03  # about 0.018 in order
     shuffled = pts[rng.permutation(400)]
     # The ordered-only fit on shuffled points is wrong, and now says so.
     with pytest.warns(sp.clouds.FitWarning, match="ordered"):
         bad = sp.clouds.fit_polynomial_curve(jnp.asarray(shuffled), 2)
-    assert brute_distance(shuffled, [bad]).max() > 0.5  # the issue's 1.57
+    assert brute_distance(shuffled, [bad]).max() > 0.5  # about 1.57
     fit = sp.clouds.fit_curve(shuffled)
     assert fit.degree == 2  # chosen by BIC
     assert fit.max_residual <= 1.05 * ordered_max

@@ -14,11 +14,11 @@ import itertools
 import jax
 import jax.numpy as jnp
 import numpy as np
-import oracle
 import pytest
 from helpers import assert_allclose, assert_finite
 
 import softplan_jax as sp
+from softplan_jax.testing import oracle
 
 TWO_PI = 2 * np.pi
 SPECIAL_THETAS = [

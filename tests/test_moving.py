@@ -18,13 +18,13 @@ import json
 import jax
 import jax.numpy as jnp
 import numpy as np
-import oracle
 import pytest
 
 import softplan_jax as sp
 from softplan_jax.cli import main
-from softplan_jax.scenarios.motion import curve_radius_bound, goal_velocity, moved_curves
 from softplan_jax.scenarios import load_moving_scenario, load_scenario, moving_to_dict, save_moving_scenario
+from softplan_jax.scenarios.motion import curve_radius_bound, goal_velocity, moved_curves
+from softplan_jax.testing import oracle
 
 STEPS = 200
 PAD = dict(curve_slots=5, degree=2)  # the tree's padded shape: one compiled program for every scene here
@@ -138,7 +138,8 @@ def test_closest_point_on_a_moving_curve_is_exact():
     for _ in range(6):
         q = np.stack([np.ones(3), rng.uniform(0.0, 1.8, 3), rng.uniform(-np.pi, np.pi, 3)], axis=1)
         t = float(rng.uniform(0.0, 10.0))
-        got = sp.geometry.true_closest(jnp.asarray(q), sp.moving.scenario_at(m, jnp.asarray(t)), sp.geometry.SolverOptions())
+        got = sp.geometry.true_closest(jnp.asarray(q), sp.moving.scenario_at(m, jnp.asarray(t)),
+                                       sp.geometry.SolverOptions())
         for j in (0, 1):
             c, ur = np.asarray(scene.curves.coeffs[j]), np.asarray(scene.curves.u_range[j])
             R, offset = _np_pose(_slot(m, j), t)
@@ -229,7 +230,8 @@ def test_random_moving_scenes_have_no_contact_by_brute_force(random_moving):
 def test_warm_started_closest_points_stay_exact_on_moving_curves(random_moving):
     """The rollout's clearances (warm start, certificate, moved grid) against the full solve at the
     same (q_k, t_k): 0 differences above 1e-9."""
-    full = jax.jit(lambda q, m, t: sp.geometry.true_closest(q, sp.moving.scenario_at(m, t), sp.geometry.SolverOptions()).distance)
+    full = jax.jit(lambda q, m, t: sp.geometry.true_closest(q, sp.moving.scenario_at(m, t),
+                                                            sp.geometry.SolverOptions()).distance)
     worst = 0.0
     for moving in random_moving[:3]:
         r = sp.track(moving, max_steps=STEPS)

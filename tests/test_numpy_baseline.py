@@ -22,14 +22,13 @@ Tolerances:
 
 from __future__ import annotations
 
-import closest_cases
 import jax.numpy as jnp
 import numpy as np
 import numpy_baseline as nb  # benchmarks/ is on sys.path (conftest); importing it changes no jax setting
-import oracle
 import pytest
 
 import softplan_jax as sp
+from softplan_jax.testing import closest_cases, oracle
 
 TRAJ_TOL = 1e-8
 STEPS = 10
@@ -37,7 +36,7 @@ STEPS = 10
 
 def _dense_curve_distance(q, coeffs, u_range, n_s=501, n_u=2001):
     """Brute-force min distance arm <-> curve on a dense (s, u) grid, and the
-    grid's Lipschitz error bound. Arm points from benchmarks/oracle.py (independent)."""
+    grid's Lipschitz error bound. Arm points from softplan_jax/testing/oracle.py (independent)."""
     u = np.linspace(u_range[0], u_range[1], n_u)
     C = np.stack([np.polynomial.polynomial.polyval(u, coeffs[k]) for k in range(3)], axis=-1)
     dC = np.stack([np.polynomial.polynomial.polyval(u, np.polynomial.polynomial.polyder(coeffs[k]))

@@ -5,12 +5,13 @@ clearance of whole trajectories, central finite differences."""
 import jax
 import jax.numpy as jnp
 import numpy as np
-import oracle
 import pytest
 
 import softplan_jax as sp
 from softplan_jax.base.compilation_cache import rollout_compiler_options
-from softplan_jax.planning.planner import make_options, rollout_jit
+from softplan_jax.planning.planner import make_options
+from softplan_jax.planning.programs import rollout_jit
+from softplan_jax.testing import oracle
 
 # All paper scenarios padded to one shape: one compilation serves the three.
 PAD = dict(curve_slots=5, degree=2)
@@ -240,8 +241,8 @@ def test_mixed_obstacles_both_methods():
             assert r.reached and not r.collided, (r.status, r.min_clearance)
             assert r.min_clearance > 0
             # The motion up to the goal (the frozen steps after it do not move).
-            dense = np.asarray(sp.geometry.dense_trajectory_clearance(jnp.asarray(r.q[: r.iterations + 1]), sc, substeps=4,
-                                                             arm_samples=40, curve_samples=1000))
+            dense = np.asarray(sp.geometry.dense_trajectory_clearance(
+                jnp.asarray(r.q[: r.iterations + 1]), sc, substeps=4, arm_samples=40, curve_samples=1000))
             assert dense.min() > 0, dense.min()
 
 

@@ -8,12 +8,13 @@ import warnings
 import jax
 import jax.numpy as jnp
 import numpy as np
-import oracle
 import pytest
 
 import softplan_jax as sp
 from softplan_jax.geometry.clearance import apply_collision_checks
-from softplan_jax.planning.planner import make_options, rollout_batch, rollout_jit
+from softplan_jax.planning.planner import make_options
+from softplan_jax.planning.programs import rollout_batch, rollout_jit
+from softplan_jax.testing import oracle
 
 PAD = dict(curve_slots=5, degree=2)
 

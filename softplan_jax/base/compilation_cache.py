@@ -21,12 +21,12 @@ depends on: the source of every module of this package, the jax and jaxlib
 versions, the backend and device kind, ``jax_enable_x64``, ``XLA_FLAGS``, the
 static arguments (options, ``max_steps``), the pytree structure and the
 argument shapes and dtypes. Scenarios with a
-:class:`~softplan_jax.curves.ParametricCurve` (a Python function, not data) are
+:class:`~softplan_jax.geometry.curves.ParametricCurve` (a Python function, not data) are
 not kept. Any failure to read or write an artifact falls back to the ordinary
 compilation.
 
 :func:`rollout_compiler_options` holds the XLA options the rollouts are
-compiled with (issue 9, items 2 and 4), per obstacle model: every rollout
+compiled with, per obstacle model: every rollout
 without XLA's YNN fusions, and the curve method's also without its MLIR fusion
 emitters (a quarter less compile time; the N-point model's batched step runs
 slower with it, so it keeps them). They are passed per program
@@ -45,7 +45,7 @@ import tempfile
 
 __all__ = ["compilation_cache_dir", "enable_compilation_cache", "load_or_export", "rollout_compiler_options"]
 
-# XLA CPU options of the rollout programs (issue 9, items 2 and 4), measured by
+# XLA CPU options of the rollout programs, measured by
 # benchmarks/xla_options.py (results/xla_options.md), float64, checked rollouts:
 # - xla_cpu_experimental_ynn_fusion_type="" (every rollout): no XNNPACK (YNN) fusions; the
 #   planner's small (..., 3) arrays gain nothing from them and pay layout copies. Median
@@ -123,8 +123,8 @@ def _known_option(name: str, value) -> bool:
 
 @functools.cache
 def rollout_compiler_options(method: str = "curve") -> dict | None:
-    """The XLA options that :data:`~softplan_jax.planner.rollout_jit`,
-    :data:`~softplan_jax.planner.rollout_batch` and ``rollout_jit.cached`` compile a
+    """The XLA options that :data:`~softplan_jax.planning.planner.rollout_jit`,
+    :data:`~softplan_jax.planning.planner.rollout_batch` and ``rollout_jit.cached`` compile a
     rollout of the planner's ``method`` ("curve" or "points") with, on the CPU backend:
     :data:`CPU_COMPILER_OPTIONS`, and for "curve" also :data:`CURVE_CPU_COMPILER_OPTIONS`,
     each kept only if this jaxlib knows it. None (XLA's defaults) on other backends, when

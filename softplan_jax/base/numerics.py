@@ -239,8 +239,8 @@ def evaluate_where(todo, fn, chunk: int, fill):
     ``lax.cond`` becomes under vmap). ``fn(p)`` returns a pytree shaped like one
     row of ``fill`` (a pytree of arrays with leading axis P) and must accept any
     index in [0, P) (chunk slots left over run on index P - 1 and are dropped).
-    Used by the between-step search (:mod:`softplan_jax.metrics`) and the warm
-    start's fallback (:mod:`softplan_jax.warm_start`).
+    Used by the between-step search (:mod:`softplan_jax.geometry.clearance`) and the warm
+    start's fallback (:mod:`softplan_jax.geometry.warm_start`).
     """
     P = todo.shape[0]
 

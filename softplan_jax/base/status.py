@@ -32,7 +32,7 @@ class Status(enum.IntEnum):
     def label(self) -> str:
         """The report name: "running", "reached", "collided", "stalled", "max_steps", "non_finite",
         "unreachable" (set by :func:`~softplan_jax.plan_fallback` only: no collision-free
-        configuration puts the tip on the goal, see :mod:`softplan_jax.reach`); with moving
+        configuration puts the tip on the goal, see :mod:`softplan_jax.search.reach`); with moving
         obstacles (:func:`~softplan_jax.track`) also "too_fast" (an obstacle could reach the arm
         within one step whatever the arm did: stopped at the last configuration proven clear) and
         "lost" (the moving goal was reached, then not held)."""

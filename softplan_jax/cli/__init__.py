@@ -1,5 +1,7 @@
 """The ``softplan`` command (``softplan --help``)."""
 
-from .main import build_parser, main, trajectory_record, write_trajectory
+from .main import main
+from .parser import build_parser
+from .trajectory import trajectory_record, write_trajectory
 
 __all__ = ["main", "build_parser", "trajectory_record", "write_trajectory"]

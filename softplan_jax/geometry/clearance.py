@@ -17,19 +17,19 @@ configurations are clear, and a collision is never invented. (It could in
 principle miss a dip whose basin neither end's closest pair leads into.)
 
 The search is skipped where a proof makes it pointless (:func:`swept_clear`):
-:func:`~softplan_jax.kinematics.motion_bound` B bounds how far any arm point
+:func:`~softplan_jax.geometry.kinematics.motion_bound` B bounds how far any arm point
 moves during the motion and the distance to an obstacle is 1-Lipschitz in the
 arm point, so the clearance stays >= c_a - B throughout (c_a: the exact
 clearance at q_a); where that exceeds the contact tolerance no collision is
 possible and the search could only report an achieved value above it. The
 skipped slots record min(c_a, c_b), also an achieved clearance. The rollout
 and :func:`apply_collision_checks` search the remaining (motion, slot) entries
-in a while loop (:func:`~softplan_jax.numerics.evaluate_where`), so that under
+in a while loop (:func:`~softplan_jax.base.numerics.evaluate_where`), so that under
 vmap a batch pays its largest number of them, not a select over all.
 
 :func:`apply_collision_checks` adds the true-clearance and between-step
 checks to a planning-only rollout after the fact (vectorised over time).
-Every per-obstacle loop goes through :mod:`softplan_jax.obstacles`.
+Every per-obstacle loop goes through :mod:`softplan_jax.geometry.obstacles`.
 
 :func:`dense_trajectory_clearance` is the slow, brute-force check of a whole
 trajectory (dense interpolation in q, dense sampling of arm and curve); the
@@ -41,11 +41,12 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .closest import ClosestPoint, FixedPoint
-from .kinematics import backbone_points, motion_bound, segment_point
 from ..base.numerics import contact_floor, evaluate_where, get_epsilon, safe_norm, solve_small
-from .obstacles import map_obstacle_groups, map_obstacles, radius_and_mask, true_closest
 from ..base.status import Status
+from .closest import ClosestPoint
+from .kinematics import backbone_points, motion_bound, segment_point
+from .obstacles import map_obstacle_groups, map_obstacles, radius_and_mask, true_closest
+from .point_sets import FixedPoint
 
 __all__ = [
     "true_closest",
@@ -145,8 +146,8 @@ def _searched_motions(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, sc
     """The between-step search of T motions q_a[t] -> q_b[t], run only for the
     (motion, slot) entries where ``search`` (T, m) is True: smallest distance found
     (T, m), +inf where not searched. Per group of slots of one kind
-    (:func:`~softplan_jax.obstacles.map_obstacle_groups`), the entries to search
-    go through :func:`~softplan_jax.numerics.evaluate_where`, ``chunk`` at a time."""
+    (:func:`~softplan_jax.geometry.obstacles.map_obstacle_groups`), the entries to search
+    go through :func:`~softplan_jax.base.numerics.evaluate_where`, ``chunk`` at a time."""
     T = q_a.shape[0]
 
     def take(tree, t, j):
@@ -184,7 +185,7 @@ def between_steps(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenar
     For every obstacle slot, Gauss-Newton over (tau, s, u) on the segment of
     the closest pair at either end, started from both ends' closest pairs
     (see :func:`_motion_pair_distance`); point sets use the closest point of
-    each end. ``truth_a``/``truth_b``: :func:`~softplan_jax.obstacles.true_closest`
+    each end. ``truth_a``/``truth_b``: :func:`~softplan_jax.geometry.obstacles.true_closest`
     at q_a and q_b. ``radius_sum`` (m,) = arm radius + obstacle radius.
 
     ``search`` (m,) bool, optional: search only these slots, one after the
@@ -215,7 +216,7 @@ def swept_clear(q_a, q_b, truth_a: ClosestPoint, clearance_a, contact):
     """(m,) bool: the motion q_a -> q_b provably keeps every obstacle slot's
     clearance above ``contact``, so the between-step search cannot find a collision there.
 
-    :func:`~softplan_jax.kinematics.motion_bound` B bounds how far any arm point
+    :func:`~softplan_jax.geometry.kinematics.motion_bound` B bounds how far any arm point
     moves during the straight-line motion, and the distance to a set is
     1-Lipschitz, so the clearance to obstacle j stays >= c_a[j] - B at every
     instant (c_a: the exact clearance at q_a). Proven where
@@ -260,7 +261,7 @@ def apply_collision_checks(r, scenario, options):
     time in a while loop; False: every motion of the rollout, vectorised.
 
     Args:
-      r: an unbatched :class:`~softplan_jax.planner.Rollout` (planning only).
+      r: an unbatched :class:`~softplan_jax.planning.planner.Rollout` (planning only).
       scenario: its Scenario.
       options: its PlanOptions (static: the solver, the contact tolerance,
         swept_proof).

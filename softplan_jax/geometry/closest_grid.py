@@ -12,13 +12,13 @@ edge's local minima; case 3 is the four endpoint pairs. Every start is a point
 of the box, so the answer is never worse than the best grid point.
 
 Each Newton step solves ``H dx = -g`` with the gradient and Hessian of
-``D^2 / 2`` from the shared kernel :func:`softplan_jax.closest.pair_terms`;
+``D^2 / 2`` from the shared kernel :func:`softplan_jax.geometry.closest.pair_terms`;
 ``H`` is shifted where it is not positive definite (a descent direction), a
 coordinate on a bound whose gradient points outward is held (projected
 Newton), and the step is limited by the shared trust region
-(:func:`softplan_jax.closest.trust_region_radius`) and accepted only if it
-lowers ``D^2``. The default solver (:class:`~softplan_jax.closest.SolverOptions`)
-is in :mod:`softplan_jax.closest`; this one is kept as the paper's formulation
+(:func:`softplan_jax.geometry.closest.trust_region_radius`) and accepted only if it
+lowers ``D^2``. The default solver (:class:`~softplan_jax.geometry.closest.SolverOptions`)
+is in :mod:`softplan_jax.geometry.closest`; this one is kept as the paper's formulation
 and as a cross-check (it passes the accuracy suite on the polynomial cases).
 """
 
@@ -29,7 +29,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .closest import (
+from ..base.numerics import psd_shift
+from .closest_newton import (
     Segment,
     first_order_converged,
     local_minima_1d,
@@ -37,14 +38,13 @@ from .closest import (
     trust_region_radius,
     u_samples,
 )
-from ..base.numerics import psd_shift
 
 __all__ = ["GridSolverOptions", "solve_pair_grid"]
 
 
 class GridSolverOptions(NamedTuple):
     """Static settings of the paper's 2-D solver (hashable; jit-static): pass it
-    where a :class:`~softplan_jax.closest.SolverOptions` goes.
+    where a :class:`~softplan_jax.geometry.closest.SolverOptions` goes.
 
     Attributes:
       grid_s: grid points along each segment (s), ends included.

@@ -8,8 +8,9 @@
   ``jax.jacfwd``.
 * :func:`line_segment` — a straight segment from ``a`` to ``b`` as a degree-1
   polynomial curve with u in [0, 1].
-* :func:`fit_polynomial_curve` — least-squares fit to an ordered point cloud
-  (paper §2.3: "derived from a set of points ... using regression").
+
+Curves fitted to scanned point clouds (paper §2.3: "derived from a set of
+points ... using regression") are made in :mod:`softplan_jax.clouds`.
 
 Both curve classes are pytrees whose array leaves are ``coeffs``/``u_range``/
 ``radius``; they give ``point``, ``derivative`` and ``second_derivative`` of a
@@ -27,7 +28,6 @@ import numpy as np
 from ..base.validation import (
     as_float_array,
     check_finite,
-    check_points,
     check_radius,
     check_u_range,
     is_concrete,
@@ -42,7 +42,6 @@ __all__ = [
     "line_segment",
     "stack_curves",
     "curve_points",
-    "fit_polynomial_curve",
 ]
 
 
@@ -279,52 +278,3 @@ def curve_points(curve, n_points: int):
     else:
         u = u0 + (u1 - u0) * jnp.linspace(0.0, 1.0, n_points, dtype=curve.u_range.dtype)
     return jax.vmap(curve.point)(u)
-
-
-def fit_polynomial_curve(points, degree: int = 3, radius=0.0, *, ordered: bool = True) -> PolynomialCurve:
-    """Fit a polynomial curve to an ordered point cloud by least squares.
-
-    The parameter is the normalised cumulative chord length, so u runs over
-    [0, 1] from the first point to the last. Ordered means the points follow
-    the obstacle from one end to the other (a branch scanned along its length).
-    When the fit is far from some points against the cloud's noise level (as
-    when the points are NOT in order), a :class:`~softplan_jax.fitting.FitWarning`
-    says so. For unordered clouds pass ``ordered=False`` (or use
-    :func:`~softplan_jax.fitting.fit_curve`, which also reports residuals, and
-    :func:`~softplan_jax.fitting.fit_curves` for several obstacles in one cloud).
-
-    Args:
-      points: (N, 3), N >= degree + 1, not all identical.
-      degree: polynomial degree >= 1.
-      radius: obstacle radius (>= 0).
-      ordered: False = the points are in any order: delegate to
-        :func:`~softplan_jax.fitting.fit_curve` (u_range (-1, 1) then).
-
-    Returns:
-      PolynomialCurve with coeffs (3, degree + 1) and u_range (0, 1).
-    """
-    if not ordered:
-        from ..clouds.fitting import fit_curve  # fitting imports this module
-
-        return fit_curve(points, int(degree), radius=radius).curve
-    points = check_points(points)
-    degree = int(degree)
-    if degree < 1:
-        raise ValueError(f"degree must be >= 1, got {degree}")
-    if points.shape[0] < degree + 1:
-        raise ValueError(
-            f"fitting degree {degree} needs at least {degree + 1} points; got {points.shape[0]}"
-        )
-    chord = jnp.linalg.norm(jnp.diff(points, axis=0), axis=1)
-    total = jnp.sum(chord)
-    if is_concrete(total) and float(total) == 0.0:
-        raise ValueError("points are all identical: no curve can be fitted")
-    u = jnp.concatenate([jnp.zeros(1, points.dtype), jnp.cumsum(chord)]) / total
-    V = u[:, None] ** jnp.arange(degree + 1, dtype=u.dtype)  # Vandermonde, lowest power first
-    coeffs, *_ = jnp.linalg.lstsq(V, points)
-    curve = PolynomialCurve(coeffs.T, jnp.array([0.0, 1.0], dtype=points.dtype), radius)
-    if is_concrete(coeffs):
-        from ..clouds.fitting import warn_if_poor  # fitting imports this module
-
-        warn_if_poor(curve, points, "fit_polynomial_curve")
-    return curve

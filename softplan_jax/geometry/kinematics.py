@@ -8,7 +8,7 @@ segment 0 is the origin with the identity orientation, z up.
 
 Every function here is pure and composes with ``jit``, ``vmap`` and ``grad``.
 ``theta = 0`` (a straight segment) is an ordinary input: the ratios
-``(1 - cos x)/x`` and ``sin(x)/x`` come from :mod:`softplan_jax.numerics`, so
+``(1 - cos x)/x`` and ``sin(x)/x`` come from :mod:`softplan_jax.base.numerics`, so
 values and derivatives of every order are finite and accurate there.
 
 There is one function per operation, plain and traceable: jit at the call

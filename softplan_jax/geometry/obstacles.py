@@ -15,7 +15,7 @@ function over the slots (:func:`map_obstacles`) or per-group function over
 the groups of slots of one kind (:func:`map_obstacle_groups`).
 
 The closest points are the paper's: exact for curves (paper §2.3, eqs. 13-18,
-:mod:`softplan_jax.closest`), exact for point sets (the arm backbone against
+:mod:`softplan_jax.geometry.closest`), exact for point sets (the arm backbone against
 each point), or the N-point model of paper §3 (the arm sampled at
 ``points_per_segment`` points per segment against ``n_points`` points of each
 curve) for ``method="points"``.
@@ -27,8 +27,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .closest import ClosestPoint, SolverOptions, curve_closest, point_set_closest, points_closest
+from .closest import ClosestPoint, SolverOptions, curve_closest
 from .curves import curve_points
+from .point_sets import point_set_closest, points_closest
 from .warm_start import curve_data, warm_curves
 
 __all__ = [
@@ -212,7 +213,7 @@ def _curve_groups(scenario):
 
 
 def warm_cells(scenario, solver: SolverOptions):
-    """The warm start's per-curve data (:func:`~softplan_jax.warm_start.curve_data`)
+    """The warm start's per-curve data (:func:`~softplan_jax.geometry.warm_start.curve_data`)
     of every curve slot, one entry per curve stack (polynomial stack, then each
     parametric curve); computed once per scenario, outside the scan."""
     dtype = scenario.q0.dtype
@@ -231,7 +232,7 @@ def warm_state(scenario):
 
 
 def warm_closest(q, scenario, solver: SolverOptions, cells, state, fresh):
-    """:func:`true_closest` with the warm start of :mod:`softplan_jax.warm_start`
+    """:func:`true_closest` with the warm start of :mod:`softplan_jax.geometry.warm_start`
     (same results, certified; derivatives the same).
 
     Args:
@@ -266,7 +267,7 @@ def model_closest(q, scenario, truth: ClosestPoint, method: str, n_points: int,
 
     ``method="curve"``: a curve's pair is its exact one, taken from ``truth``
     (:func:`true_closest` at the same q). ``method="points"``: every curve is
-    ``n_points`` points evenly spaced in u (:func:`~softplan_jax.curves.curve_points`).
+    ``n_points`` points evenly spaced in u (:func:`~softplan_jax.geometry.curves.curve_points`).
     Point sets always use the N-point model: the arm sampled at
     ``points_per_segment`` points per segment (paper Table 1), brute force.
 

@@ -1,17 +1,17 @@
-"""Warm-started, certified closest points for the planner's scan (issue 9).
+"""Warm-started, certified closest points for the planner's steps.
 
 From one planner step to the next the arm moves a little, so each
 (segment, curve) pair's closest point moves a little too. This module carries
 each pair's curve parameter u* from step to step, polishes it with a few
-Newton iterations (:func:`~softplan_jax.closest.reduced_newton`), then
+Newton iterations (:func:`~softplan_jax.geometry.closest.reduced_newton`), then
 CERTIFIES with a cheap lower bound that the result is the global minimum over
 the whole curve; only the pairs whose certificate fails are solved again by
-the full solver (:func:`~softplan_jax.closest.solve_pair_reduced`, with the
+the full solver (:func:`~softplan_jax.geometry.closest.solve_pair_reduced`, with the
 same options: a fallback gives exactly the full solver's answer).
 
 The reduced problem. For segment i the squared distance of a point p to the
 arc, ``d_i(p)^2 = min_s |F_Ri(s) - p|^2``, is exact in closed form
-(:func:`~softplan_jax.closest.project_to_arc`), so the pair's minimum is
+(:func:`~softplan_jax.geometry.closest.project_to_arc`), so the pair's minimum is
 ``min_u d_i(F_o(u))`` over the curve's range: a 1-D problem in u.
 
 The lower bound on a piece [a, b] of the curve. Let
@@ -28,9 +28,9 @@ curve leaves its chord by at most ``e = (b - a)^2 / 8 max |F_o''|`` on the
 piece (the linear interpolation error) and ``d_A`` is 1-Lipschitz, so every u
 in the piece has ``d_i(F_o(u)) >= sqrt(min_t [rhs]) - e``; the minimum over t
 of the quadratic is in closed form. ``max |F_o''|``: for a
-:class:`~softplan_jax.curves.PolynomialCurve` a rigorous bound (the Taylor
+:class:`~softplan_jax.geometry.curves.PolynomialCurve` a rigorous bound (the Taylor
 expansion of F_o'' at the piece's centre, term by term; exact for degree
-<= 2); for a :class:`~softplan_jax.curves.ParametricCurve` the largest of
+<= 2); for a :class:`~softplan_jax.geometry.curves.ParametricCurve` the largest of
 ``PARAMETRIC_SAMPLES`` samples over the range times ``PARAMETRIC_SAFETY`` (2),
 computed once per scenario: NOT a proof, a curve whose second derivative
 peaks sharply between samples can defeat it.
@@ -45,7 +45,7 @@ and curve) every piece passes once ``tan(alpha)`` exceeds a fixed fraction
 (scale free), where evenly spaced cells fail near the window whenever the
 curve runs nearly parallel to the arm. Cost: ``2 NODES`` point-to-arc
 distances per pair and step, in square roots and divisions only
-(:func:`~softplan_jax.closest.arc_distance2`: the certificate needs the
+(:func:`~softplan_jax.geometry.closest.arc_distance2`: the certificate needs the
 values, not the minimisers; measured in ``benchmarks/kernel.py``: 18.6 ->
 7.5 µs of the tree's step with project_to_arc's trigonometry gone), pair
 fallbacks 0.4-0.6 % with 8 nodes per side against 3 % with 16 even cells
@@ -56,7 +56,7 @@ achievable distance D_i; ``D_w = min_i D_i``. The WINDOW of half-width
 ``w = WINDOW (u_max - u_min) / (grid_u - 1)`` around u_i (1.5 mean spacings of
 the full solver's u-grid wide) is trusted to hold no value below D_i when the
 polish converged (the first-order test
-:func:`~softplan_jax.closest.first_order_converged`): THE ASSUMPTION, the one
+:func:`~softplan_jax.geometry.closest.first_order_converged`): THE ASSUMPTION, the one
 the full solver makes inside a cell of its u-grid, that no second, lower
 basin hides within about a grid spacing of a local minimum. Every piece
 outside the window must have a lower bound >= D_w minus a rounding tolerance
@@ -77,8 +77,8 @@ solve a pair for every member in each iteration. At the first step of a
 rollout (no warm state) every pair fails and takes the full solve.
 
 Derivatives. Everything here runs without derivatives (stop_gradient); the
-winning pair goes through :func:`~softplan_jax.closest.closest_from_pairs`,
-the tail of :func:`~softplan_jax.closest.curve_closest`, so the derivatives
+winning pair goes through :func:`~softplan_jax.geometry.closest.closest_from_pairs`,
+the tail of :func:`~softplan_jax.geometry.closest.curve_closest`, so the derivatives
 w.r.t. q (implicit function theorem, envelope theorem) are the full solver's.
 """
 
@@ -91,11 +91,11 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from .closest import (
+from ..base.numerics import evaluate_where
+from .closest import SolverOptions, closest_from_pairs
+from .closest_newton import (
     Segment,
-    SolverOptions,
     arc_distance2,
-    closest_from_pairs,
     first_order_converged,
     project_to_arc,
     reduced_newton_loop,
@@ -105,7 +105,6 @@ from .closest import (
 )
 from .curves import PolynomialCurve
 from .kinematics import segment_frames
-from ..base.numerics import evaluate_where
 
 __all__ = ["CurveData", "curve_data", "warm_curves"]
 
@@ -137,7 +136,7 @@ class CurveData(NamedTuple):
     Attributes:
       curvature: () a bound on |F_o''| over the whole range (rigorous for a
         PolynomialCurve, sampled with a safety factor for a ParametricCurve).
-      u_grid: (grid_u,) the full solver's u-samples (:func:`~softplan_jax.closest.u_samples`).
+      u_grid: (grid_u,) the full solver's u-samples (:func:`~softplan_jax.geometry.closest.u_samples`).
       C_grid: (grid_u, 3) F_o at them (for the fallback).
       size: () 1 + max |F_o| over u_grid (the scale of the rounding tolerance).
     """
@@ -321,7 +320,7 @@ def _fallback_fn(solver: SolverOptions):
 def _solve_failed(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, solver: SolverOptions) -> _Pairs:
     """The loop of :func:`_fallback` over any leading axes ``lead`` (``fail``:
     lead + (m, n); segs: lead + (n,); curves, data: lead + (m,)): the failed
-    pairs go through :func:`~softplan_jax.numerics.evaluate_where`, ``chunk``
+    pairs go through :func:`~softplan_jax.base.numerics.evaluate_where`, ``chunk``
     at a time (1 without leading axes, else ``FALLBACK_CHUNK``), and each keeps
     the better of its full and polished answers."""
     m, n = fail.shape[-2:]
@@ -354,7 +353,7 @@ def warm_curves(q, curves, data: CurveData, u_prev, fresh, active, solver: Solve
 
     Args:
       q: (n, 3) configuration (derivatives w.r.t. q as in
-        :func:`~softplan_jax.closest.curve_closest`).
+        :func:`~softplan_jax.geometry.closest.curve_closest`).
       curves: a curve stack with leading axis m (a stacked PolynomialCurve, or
         one curve with a leading axis 1 added to its array leaves).
       data: CurveData with leading axis m (:func:`curve_data`, vmapped).

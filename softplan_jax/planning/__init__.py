@@ -3,8 +3,10 @@
 * :mod:`.step` -- the gains, the field of eq. (9), the safe step, one planner step;
 * :mod:`.engine` -- the rollout loop (plan to the goal or track a moving one),
   paid by the step, and the batch loop that refills its lanes;
-* :mod:`.planner` -- the entry points :func:`plan` and :func:`plan_batch`,
-  compiled programs and results;
+* :mod:`.programs` -- :func:`rollout` (pure) and its compiled programs,
+  :data:`rollout_jit` (one scene) and :data:`rollout_batch` (a batch);
+* :mod:`.planner` -- the entry points :func:`plan` and :func:`plan_batch`
+  and their results;
 * :mod:`.tracking` -- :func:`track` and :func:`track_batch` for moving goals
   and obstacles;
 * :mod:`.presets` -- named calibrations (``"paper"``, ``"default"``);
@@ -12,18 +14,10 @@
 """
 
 from ..base.status import STATUS_NAMES, Status, status_name
-from .planner import (
-    PlanResult,
-    make_options,
-    plan,
-    plan_batch,
-    result_from_rollout,
-    rollout,
-    rollout_batch,
-    rollout_jit,
-)
-from .engine import Rollout
+from .planner import PlanResult, make_options, plan, plan_batch, result_from_rollout
 from .presets import PRESETS, Preset, apply_preset, preset
+from .programs import rollout, rollout_batch, rollout_jit
+from .records import Rollout
 from .step import (
     PAPER_STEP,
     GainFunction,

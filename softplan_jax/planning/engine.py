@@ -1,18 +1,18 @@
 """The rollout engine: one step loop for planning a path and for tracking a moving goal.
 
 A rollout steps from q at time t with the planner of paper eq. (9) and the safe
-step (:mod:`softplan_jax.step`), until it is done. A static scene
+step (:mod:`softplan_jax.planning.step`), until it is done. A static scene
 (:class:`~softplan_jax.scenarios.Scenario`) and a moving one
-(:class:`~softplan_jax.motion.MovingScenario`) run the same step, carry, escape
+(:class:`~softplan_jax.scenarios.motion.MovingScenario`) run the same step, carry, escape
 rule, status rule and result type; what differs is read off the scene at trace
 time:
 
 * the scene at step k: a static scene is itself; a moving one is
-  :func:`~softplan_jax.motion.scenario_at` at ``t_k = k dt``, its obstacles
-  travel at most ``S_j dt`` during a step (:func:`~softplan_jax.motion.speed_bounds`),
+  :func:`~softplan_jax.scenarios.motion.scenario_at` at ``t_k = k dt``, its obstacles
+  travel at most ``S_j dt`` during a step (:func:`~softplan_jax.scenarios.motion.speed_bounds`),
   which the safe step and the between-step proof subtract;
 * the attraction: paper eq. (9)'s F_e, with the goal's velocity fed forward
-  for a moving goal (:func:`~softplan_jax.step.tracking_attraction`);
+  for a moving goal (:func:`~softplan_jax.planning.step.tracking_attraction`);
 * when to stop, set by the options: with PlanOptions (planning) a rollout
   ends at the goal or at a stall with no escape left; with TrackOptions
   (tracking, a static scene or a moving one) it holds the goal to the horizon
@@ -20,8 +20,8 @@ time:
   recording the goal, the time and the error at every step.
 
 Step k looks at q_k: exact closest pairs to every obstacle (warm-started,
-:mod:`softplan_jax.warm_start`), the true clearance at q_k and during the
-motion from q_{k-1} (a search only where :func:`~softplan_jax.metrics.swept_clear`
+:mod:`softplan_jax.geometry.warm_start`), the true clearance at q_k and during the
+motion from q_{k-1} (a search only where :func:`~softplan_jax.geometry.clearance.swept_clear`
 does not prove the motion clear), the status, then while running the step to
 q_{k+1}. Escapes: a stall (no progress by ``stall_tolerance`` over
 ``stall_window`` steps) starts a random walk of ``escape_steps`` steps (the
@@ -55,86 +55,21 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.numerics import evaluate_where, safe_norm, tie
+from ..base.status import Status
+from ..geometry.clearance import between_steps, contact_tolerance, swept_clear
 from ..geometry.closest import ClosestPoint, SolverOptions, curve_closest
 from ..geometry.kinematics import tip_position
-from ..geometry.clearance import between_steps, contact_tolerance, swept_clear
-from ..scenarios.motion import MovingScenario, goal_velocity, moved_cells, moved_curves, scenario_at, speed_bounds
-from ..base.numerics import evaluate_where, safe_norm, tie
 from ..geometry.obstacles import placeholder_closest, radius_and_mask, true_closest, warm_cells, warm_closest, warm_state
-from ..base.status import Status
+from ..scenarios.motion import MovingScenario, goal_velocity, moved_cells, moved_curves, scenario_at, speed_bounds
+from .records import Record, Rollout, finish, record_zeros, setup
 from .step import attraction, next_q, tracking_attraction
 
-__all__ = ["Rollout", "Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "run", "run_lanes",
+__all__ = ["Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "run", "run_lanes",
            "check_engine_sizes"]
 
 DEFAULT_STEP_CHUNK = 8  # steps between two checks of "done": at most 7 steps computed past the end
 DEFAULT_LANES = 64  # scenes stepped side by side in a batch (benchmarks/engine.py)
-
-
-class Rollout(NamedTuple):
-    """A rollout, planned or tracked (arrays padded to max_steps + 1 along time).
-
-    Attributes:
-      q: (T+1, n, 3) configurations; frozen after the rollout finished.
-      tip: (T+1, 3).
-      clearance: (T+1, m) true clearance (surface to surface) to every obstacle
-        slot (padding slots: +inf); for a moving scene, to the obstacles at
-        the step's time.
-      between: (T+1, m) smallest clearance found during the motion from the
-        previous step (entry 0: the start's clearance); an ACHIEVED clearance,
-        so an upper bound on the true minimum over the motion. Where the
-        between-step search ran (``between_searched``) it is the search's
-        result (at most the clearance at both ends); where the motion bound
-        proved the motion clear (``PlanOptions.swept_proof``) it is the smaller
-        of the two ends' clearances, and the true minimum lies between
-        ``clearance[k-1] - motion_bound(q[k-1], q[k])[-1]`` (less the
-        obstacle's travel, for a moving scene; above the contact tolerance: no
-        collision) and this value.
-      status: () int, a :class:`~softplan_jax.status.Status` code.
-      iterations: () int, planner steps taken.
-      reached, collided: () bool (tracking: reached = within the goal
-        tolerance at some step).
-      min_clearance: () minimum over time, obstacles and between-step motion.
-      final_error: () |goal - tip| at the end.
-      step_scale: (T+1,) the safe step's alpha for the step from q_k (1 for the
-        plain step; 0 where no step was taken).
-      escapes: () int, random-walk escapes started.
-      converged: (T+1,) bool, every exact closest-point solve of a real
-        obstacle slot at q_k met its Newton tolerance.
-      fallbacks: (T+1,) int32, (segment, curve) pairs of real curve slots
-        that took the full closest-point solve at q_k: with the warm start
-        (``PlanOptions.warm_start``) the pairs whose certificate failed (all
-        at k = 0); without it every pair, or 0 where no exact solve ran.
-      between_searched: (T+1, m) bool, the between-step search ran for the
-        motion to q_k and obstacle slot j.
-      goal, time, error, reached_step, held_steps, held_to_end: tracking only
-        (None for a planned rollout): g(t_k) (T+1, 3), t_k = k dt (T+1,),
-        |g(t_k) - tip_k| (T+1,), the first step within the goal tolerance
-        (-1: never), the steps it was held from then (error <= hold
-        tolerance) and whether it was held to the end.
-    """
-
-    q: jax.Array
-    tip: jax.Array
-    clearance: jax.Array
-    between: jax.Array
-    status: jax.Array
-    iterations: jax.Array
-    reached: jax.Array
-    collided: jax.Array
-    min_clearance: jax.Array
-    final_error: jax.Array
-    step_scale: jax.Array
-    escapes: jax.Array
-    converged: jax.Array
-    fallbacks: jax.Array
-    between_searched: jax.Array
-    goal: jax.Array | None = None
-    time: jax.Array | None = None
-    error: jax.Array | None = None
-    reached_step: jax.Array | None = None
-    held_steps: jax.Array | None = None
-    held_to_end: jax.Array | None = None
 
 
 class Carry(NamedTuple):
@@ -156,26 +91,6 @@ class Carry(NamedTuple):
     warm: tuple  # the warm start's state (obstacles.warm_state), () without it
 
 
-class _Record(NamedTuple):
-    """What one step records (the per-step arrays of a Rollout)."""
-
-    q: jax.Array
-    tip: jax.Array
-    clearance: jax.Array
-    between: jax.Array
-    step_scale: jax.Array
-    converged: jax.Array
-    fallbacks: jax.Array
-    between_searched: jax.Array
-    goal: jax.Array | None = None
-    time: jax.Array | None = None
-    error: jax.Array | None = None
-
-
-# After the end, the state records stay at their last value and the event records are empty.
-_EVENTS = ("step_scale", "fallbacks", "between_searched")
-
-
 def check_engine_sizes(max_steps, step_chunk=DEFAULT_STEP_CHUNK, lanes=None) -> tuple:
     """Validate the engine's sizes on the host, before anything compiles: ``(max_steps,
     step_chunk, lanes)`` as ints (``lanes`` may be None). ValueError for anything but an
@@ -190,26 +105,6 @@ def check_engine_sizes(max_steps, step_chunk=DEFAULT_STEP_CHUNK, lanes=None) -> 
             None if lanes is None else whole("lanes", lanes))
 
 
-class _Setup(NamedTuple):
-    """Trace-time facts of one rollout: what moves and what ends it."""
-
-    moving: bool  # the scene moves (a MovingScenario)
-    scene: object  # the Scenario (at rest)
-    plan: object  # PlanOptions of the step
-    track: object  # TrackOptions (hold the goal to the horizon) or None (stop at the goal)
-    stop_at_goal: bool
-
-
-def _setup(world, options) -> _Setup:
-    """The mode is the options': PlanOptions plan (stop at the goal or at a stall), TrackOptions
-    track (hold the goal to the horizon), for a static scene as for a moving one."""
-    moving = isinstance(world, MovingScenario)
-    track = options if hasattr(options, "plan") else None
-    if moving and track is None:
-        raise ValueError("a moving scene is tracked: pass TrackOptions (see make_track_options)")
-    return _Setup(moving, world.scene if moving else world, track.plan if track else options, track, track is None)
-
-
 def _moving_cells(cells, moving: MovingScenario, t):
     if not cells or not moving.scene.curves.coeffs.shape[0]:
         return cells
@@ -218,7 +113,7 @@ def _moving_cells(cells, moving: MovingScenario, t):
 
 def init_carry(world, options, key) -> Carry:
     """The carry at step 0 (q_0 = the scene's start)."""
-    su = _setup(world, options)
+    su = setup(world, options)
     scene, plan = su.scene, su.plan
     _, mask = radius_and_mask(scene)
     q0 = scene.q0
@@ -250,9 +145,9 @@ def _warm(plan) -> bool:
 
 def prepare(world, options) -> tuple:
     """What a rollout computes once per scene, before its first step: the warm start's
-    per-curve data (:func:`~softplan_jax.obstacles.warm_cells`) and, for a moving scene,
-    its obstacles' speed bounds (:func:`~softplan_jax.motion.speed_bounds`)."""
-    su = _setup(world, options)
+    per-curve data (:func:`~softplan_jax.geometry.obstacles.warm_cells`) and, for a moving scene,
+    its obstacles' speed bounds (:func:`~softplan_jax.scenarios.motion.speed_bounds`)."""
+    su = setup(world, options)
     cells = warm_cells(su.scene, su.plan.solver) if _warm(su.plan) else ()
     return cells, (speed_bounds(world) if su.moving else ())
 
@@ -261,7 +156,7 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
     """The engine's step ``(carry, k) -> (carry, record)`` for this scene (static or
     moving), gains and options (PlanOptions: plan; TrackOptions: track);
     ``prepared``: :func:`prepare` of the scene (None: computed here)."""
-    su = _setup(world, options)
+    su = setup(world, options)
     scene, plan, track = su.scene, su.plan, su.track
     radius, mask = radius_and_mask(scene)
     q0 = scene.q0
@@ -419,84 +314,12 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
         )
         converged = jnp.all(jnp.where(mask, truth.converged, True))
         alpha = jnp.where(moved, alpha, 0.0).astype(dtype)
-        record = _Record(q, tip_position(q), c, cb, alpha, converged, fallbacks, searched)
+        record = Record(q, tip_position(q), c, cb, alpha, converged, fallbacks, searched)
         if track:
             record = record._replace(goal=sc.goal, time=t, error=err)
         return new, record
 
     return step
-
-
-def _record_zeros(world, options, T: int) -> _Record:
-    """Zero records of T steps (what :func:`make_step` records, stacked), without tracing a step."""
-    su = _setup(world, options)
-    q0 = su.scene.q0
-    n, dtype = q0.shape[0], q0.dtype
-    m = radius_and_mask(su.scene)[1].shape[0]
-
-    def z(shape, dt=dtype):
-        return jnp.zeros((T, *shape), dt)
-
-    rec = _Record(z((n, 3)), z((3,)), z((m,)), z((m,)), z(()), z((), bool), z((), jnp.int32), z((m,), bool))
-    if su.track:
-        rec = rec._replace(goal=z((3,)), time=z(()), error=z(()))
-    return rec
-
-
-def _freeze(records: _Record, end, still: bool):
-    """Records after step ``end``: the state records hold their value at ``end``, the events are
-    empty. ``still`` (a static scene): after the end nothing moves, so the clearance during the
-    "motion" to each later step is the clearance itself; in a moving scene the records stop at the
-    last step taken, the between-step clearance at its last motion's."""
-    T1 = records.q.shape[0]
-    alive = jnp.arange(T1, dtype=jnp.int32) <= end
-
-    def fix(name, x):
-        if x is None:
-            return None
-        a = alive.reshape((-1,) + (1,) * (x.ndim - 1))
-        if name in _EVENTS:
-            return jnp.where(a, x, jnp.zeros((), x.dtype))
-        last = records.clearance[end] if (still and name == "between") else x[end]
-        return jnp.where(a, x, last)
-
-    return _Record(*(fix(f, getattr(records, f)) for f in _Record._fields))
-
-
-def _finish(world, options, records: _Record, final: Carry) -> Rollout:
-    """The Rollout from a rollout's records (frozen after its end) and its last carry."""
-    su = _setup(world, options)
-    plan = su.plan
-    T = records.q.shape[0] - 1
-    end = final.iterations
-    r = _freeze(records, end, still=not su.moving)
-    min_clearance = jnp.minimum(jnp.min(r.clearance, initial=jnp.inf), jnp.min(r.between, initial=jnp.inf))
-    out = dict(q=r.q, tip=r.tip, clearance=r.clearance, between=r.between, iterations=final.iterations,
-               min_clearance=min_clearance, step_scale=r.step_scale, escapes=final.escapes, converged=r.converged,
-               fallbacks=r.fallbacks, between_searched=r.between_searched)
-    if su.stop_at_goal:
-        status = jnp.where(final.status == Status.RUNNING, Status.MAX_STEPS, final.status)
-        return Rollout(**out, status=status, reached=status == Status.REACHED, collided=status == Status.COLLIDED,
-                       final_error=safe_norm(su.scene.goal - r.tip[-1]))
-    # Tracking statistics over the steps taken (0..end).
-    steps = jnp.arange(T + 1, dtype=jnp.int32)
-    alive = steps <= end
-    within = (r.error < plan.goal_tolerance) & alive
-    reached = jnp.any(within)
-    reached_step = jnp.where(reached, jnp.argmax(within), -1).astype(jnp.int32)
-    after = alive & (steps >= reached_step) & reached
-    lost_at = jnp.where(after & (r.error > su.track.hold_tolerance), steps, T + 1)
-    first_loss = jnp.min(lost_at)
-    held_to_end = reached & (first_loss > end)
-    held_steps = jnp.where(reached, jnp.minimum(first_loss, end + 1) - reached_step, 0).astype(jnp.int32)
-    status = jnp.where(
-        final.status == Status.RUNNING,
-        jnp.where(held_to_end, Status.REACHED, jnp.where(reached, Status.LOST, Status.MAX_STEPS)),
-        final.status,
-    ).astype(jnp.int32)
-    return Rollout(**out, status=status, reached=reached, collided=status == Status.COLLIDED,
-                   final_error=r.error[end], goal=r.goal, time=r.time, error=r.error, reached_step=reached_step,
-                   held_steps=held_steps, held_to_end=held_to_end)
 
 
 def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
@@ -522,7 +345,7 @@ def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
     elif driver == "chunks":
         C = min(int(step_chunk), T1)
         n_chunks = math.ceil(T1 / C)
-        buf = tie(_record_zeros(world, options, n_chunks * C), carry0.q)
+        buf = tie(record_zeros(world, options, n_chunks * C), carry0.q)
 
         def cond(state):
             i, carry, _ = state
@@ -539,7 +362,7 @@ def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
         records = jax.tree_util.tree_map(lambda b: b[:T1], buf)
     else:
         raise ValueError(f"unknown driver {driver!r}; choose 'chunks' or 'scan' (a batch: run_lanes)")
-    return _finish(world, options, records, final)
+    return finish(world, options, records, final)
 
 
 def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFAULT_LANES,
@@ -574,7 +397,7 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFA
     w0, p0, carry0 = take(idx0)
     one = jax.tree_util.tree_map(lambda x: x[0], worlds)
     out = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape), x.dtype),
-                                 _record_zeros(one, options, T1))
+                                 record_zeros(one, options, T1))
     final0 = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape[1:]), x.dtype), carry0)
     state0 = (out, final0, idx0, jnp.zeros((L,), jnp.int32), (w0, p0, carry0), jnp.asarray(L, jnp.int32))
 
@@ -609,4 +432,4 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFA
         return jax.lax.scan(lane_step, state, None, length=C)[0]
 
     out, final, *_ = jax.lax.while_loop(cond, body, state0)
-    return jax.vmap(lambda w, rec, fin: _finish(w, options, rec, fin))(worlds, out, final)
+    return jax.vmap(lambda w, rec, fin: finish(w, options, rec, fin))(worlds, out, final)

@@ -5,14 +5,14 @@ what a run shows:
 
 * ``"paper"``: the calibration that reproduces the paper's QUALITATIVE
   findings on its scenes (Sim2: the 1- and 10-point models collide while the
-  curve method reaches; issue 10). Gains ``k_att = 1``, ``v_max = 0.1``,
+  curve method reaches). Gains ``k_att = 1``, ``v_max = 0.1``,
   ``dt = 1``, ``eta = 1e-3``, ``d0 = 0.15``, no repulsion cap
   (``rep_max = inf``: Khatib's field as printed), the plain pseudo-inverse
   (``damping = 0``: ``J^T (J J^T)^-1``, well defined because the start pose is
   bent: the tip Jacobian has full rank 3 there), start pose ``theta = 0.1``,
   ``phi = 0`` on every segment (the arm bent in the x-z plane; lengths kept),
   and the paper's
-  plain step :data:`softplan_jax.planner.PAPER_STEP` (no clearance bound, no
+  plain step :data:`softplan_jax.planning.planner.PAPER_STEP` (no clearance bound, no
   escapes). These values are a calibration, not the paper's: the paper states
   neither its gains nor its start pose.
 * ``"default"``: the library's defaults (:func:`softplan_jax.default_gains`,
@@ -31,8 +31,8 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
-from .planner import PAPER_STEP, Gains, default_gains
 from ..scenarios import Scenario
+from .step import PAPER_STEP, Gains, default_gains
 
 __all__ = ["Preset", "PRESETS", "preset", "apply_preset"]
 
@@ -108,7 +108,7 @@ def apply_preset(name: str, scenario: Scenario, dtype=None) -> tuple[Scenario, G
     Returns:
       ``(scenario, gains, options)``: the scenario with the preset's start pose
       (theta and phi of every segment set, lengths kept), the
-      :class:`~softplan_jax.planner.Gains`, and a dict of PlanOptions fields
+      :class:`~softplan_jax.planning.planner.Gains`, and a dict of PlanOptions fields
       to pass as ``sp.plan(scenario, method, n_points, gains=gains, **options)``.
     """
     p = preset(name)

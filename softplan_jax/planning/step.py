@@ -9,7 +9,7 @@ with ``V_e = goal - tip`` and ``V_sj = (obstacle point) - (closest arm point)``
 for obstacle j; ``J^+`` is the damped least-squares pseudo-inverse.
 
 * ``method="curve"`` (the paper's proposed method): a curve obstacle's closest
-  point comes from the exact solver of :mod:`softplan_jax.closest`.
+  point comes from the exact solver of :mod:`softplan_jax.geometry.closest`.
 * ``method="points"``: every curve is replaced by ``n_points`` points evenly
   spaced in u and handled by the N-point method (arm sampled at 10 points per
   segment, Jacobian at the arm sample nearest the obstacle).
@@ -17,12 +17,12 @@ Point-set obstacles always use the N-point method.
 
 The safe step (``PlanOptions.step = "safe"``, the default) scales the Euler step
 by :func:`safe_scale`'s ``alpha = min(1, (f (c - floor) - travel) / B)``, where
-``B`` is :func:`softplan_jax.kinematics.motion_bound` (a sound bound on how far
+``B`` is :func:`softplan_jax.geometry.kinematics.motion_bound` (a sound bound on how far
 any arm point moves during the step), ``c`` the clearance of the planner's
 obstacle model and ``travel`` how far a moving obstacle can come during the
 step (0 for a static scene): no arm point can reach an obstacle during the
 step (conservative advancement). The same rule certifies every motion of the
-global search (:mod:`softplan_jax.global_planner`). ``step = "plain"`` is the
+global search (:mod:`softplan_jax.search.tree`). ``step = "plain"`` is the
 paper's step, unscaled (the paper tables use it).
 """
 
@@ -35,10 +35,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.numerics import damped_pinv, safe_norm
+from ..geometry.clearance import contact_tolerance
 from ..geometry.closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
 from ..geometry.kinematics import motion_bound, points_jacobian, tip_position
-from ..geometry.clearance import contact_tolerance
-from ..base.numerics import damped_pinv, safe_norm
 from ..geometry.obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
 from ..scenarios import Scenario
 
@@ -86,7 +86,7 @@ class Gains(NamedTuple):
 
 class GainFunction(NamedTuple):
     """Gains with the repulsion as a tunable FUNCTION of clearance and of the arm
-    segment (a pytree of arrays; beyond the paper, tuned by :mod:`softplan_jax.smoothing`).
+    segment (a pytree of arrays; beyond the paper, tuned by :mod:`softplan_jax.tuning`).
 
     The first seven fields are those of :class:`Gains`, with the same meaning.
     The repulsion of paper eq. (9) for an obstacle whose closest arm point lies
@@ -231,21 +231,21 @@ class PlanOptions(NamedTuple):
       escape_steps: steps of one random walk.
       warm_start: in a rollout, carry each (segment, curve) pair's closest
         point from step to step, polish it and certify it the global minimum
-        (:mod:`softplan_jax.warm_start`); only pairs whose certificate fails
+        (:mod:`softplan_jax.geometry.warm_start`); only pairs whose certificate fails
         take the full solve. Same closest points as the full solver, fewer
         solves. Applies to the default solver (SolverOptions) only; False:
         the full solve at every step. :func:`planner_step` and the post-hoc
         checks always use the full solve.
       swept_proof: run the between-step search only for the (step, obstacle)
         motions that the motion bound does not prove clear
-        (:func:`softplan_jax.metrics.swept_clear`: the clearance at the start
-        of the motion minus :func:`~softplan_jax.kinematics.motion_bound`
+        (:func:`softplan_jax.geometry.clearance.swept_clear`: the clearance at the start
+        of the motion minus :func:`~softplan_jax.geometry.kinematics.motion_bound`
         stays above the contact tolerance); the statuses are the same, the
         search is skipped where it cannot find a collision (see
         ``Rollout.between``). False: search every motion (the earlier
         behaviour, for comparison).
       step_chunk: steps between two checks of "done" by the rollout engine
-        (:mod:`softplan_jax.engine`): a rollout stops computing within this many
+        (:mod:`softplan_jax.planning.engine`): a rollout stops computing within this many
         steps after it finished. Changes the cost, never the results.
     """
 

@@ -1,17 +1,17 @@
 """Tracking a moving goal among moving curves, collision-free by construction.
 
 The planner is the same step and the same loop as static planning
-(:mod:`softplan_jax.step`, :mod:`softplan_jax.engine`: paper eq. 9) on the
+(:mod:`softplan_jax.planning.step`, :mod:`softplan_jax.planning.engine`: paper eq. 9) on the
 scene at the step's time: at step k (time ``t_k = k dt``, dt the gains'
-integration step) the curves are where :func:`~softplan_jax.motion.scenario_at`
+integration step) the curves are where :func:`~softplan_jax.scenarios.motion.scenario_at`
 puts them and the goal is ``g(t_k)``. Beyond the static planner:
 
 * **Feed-forward** (``TrackOptions.feedforward``, default on): the tip velocity
   of eq. (9)'s attraction is ``k_att V_e + dg/dt``, saturated at ``v_max``
-  (:func:`tracking_attraction`); without it a proportional law lags a goal
+  (:func:`~softplan_jax.planning.step.tracking_attraction`); without it a proportional law lags a goal
   moving at speed w by ``w / k_att``.
 * **The clearance-bounded step with moving obstacles.** Obstacle j moves at
-  most ``S_j dt`` during a step (:func:`~softplan_jax.motion.speed_bounds`, a
+  most ``S_j dt`` during a step (:func:`~softplan_jax.scenarios.motion.speed_bounds`, a
   proof). The step's scale alpha keeps
 
       alpha * motion_bound(q_k, q_k + dt qdot) + S_j dt <= f (c_j - floor)   for every j,
@@ -23,7 +23,7 @@ puts them and the goal is ``g(t_k)``. Beyond the static planner:
   configuration proven clear, never with a collision reported as success.
 * **Between-step check.** The motion from (q_{k-1}, t_{k-1}) to (q_k, t_k) is
   proven clear where ``c_{k-1} - B - S_j dt`` exceeds the contact tolerance
-  (:func:`~softplan_jax.metrics.swept_clear` with the clearance reduced by the
+  (:func:`~softplan_jax.geometry.clearance.swept_clear` with the clearance reduced by the
   obstacle's travel); elsewhere (the N-point models) the exact clearance is
   evaluated at ``search_substeps`` instants in between, arm and curves
   interpolated together (a search, as the static between-step check: an
@@ -51,24 +51,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .engine import Rollout, check_engine_sizes, run
-from ..scenarios.motion import MovingScenario, goal_at
-from ..geometry.obstacles import radius_and_mask
-from .planner import (
-    Gains,
-    PlanOptions,
-    check_gains,
-    make_options,
-    prng_key,
-    rollout_batch,
-    rollout_jit,
-    run_batch,
-    strong_gains,
-)
 from ..base.status import status_name
-from .step import tracking_attraction as tracking_attraction  # re-exported: its old import path
+from ..geometry.obstacles import radius_and_mask
+from ..scenarios.motion import MovingScenario, goal_at
+from .engine import check_engine_sizes, run
+from .planner import check_gains, make_options, run_batch
+from .programs import prng_key, rollout_batch, rollout_jit, strong_gains
+from .records import Rollout
+from .step import Gains, PlanOptions
 
-__all__ = ["TrackOptions", "Track", "TrackResult", "tracking_attraction", "track_rollout", "track", "track_batch"]
+__all__ = ["TrackOptions", "make_track_options", "Track", "TrackResult", "track_rollout", "track", "track_batch"]
 
 
 class TrackOptions(NamedTuple):
@@ -114,8 +106,8 @@ Track = Rollout
 def track_rollout(moving: MovingScenario, gains: Gains, options: TrackOptions, max_steps: int, key=None, *,
                   driver: str = "scan") -> Rollout:
     """Roll the tracking planner out for ``max_steps`` steps (pure; :func:`track` is the
-    jitted entry point): :func:`softplan_jax.engine.run` on a moving scene. See the
-    module docstring; ``driver`` as :func:`~softplan_jax.planner.rollout`."""
+    jitted entry point): :func:`softplan_jax.planning.engine.run` on a moving scene. See the
+    module docstring; ``driver`` as :func:`~softplan_jax.planning.planner.rollout`."""
     key = jax.random.PRNGKey(0) if key is None else key
     return run(moving, gains, options, max_steps, key, driver=driver, step_chunk=options.plan.step_chunk)
 
@@ -128,7 +120,7 @@ def track_rollout(moving: MovingScenario, gains: Gains, options: TrackOptions, m
 def track_program(options: TrackOptions, max_steps: int, batched: bool):
     """The jitted tracking rollout ``(moving, gains, key) -> Rollout`` for these static settings
     (over a stack of moving scenarios and keys when ``batched``): the programs of
-    :data:`~softplan_jax.planner.rollout_jit` / :data:`~softplan_jax.planner.rollout_batch`."""
+    :data:`~softplan_jax.planning.planner.rollout_jit` / :data:`~softplan_jax.planning.planner.rollout_batch`."""
     if batched:
         return lambda moving, gains, keys: rollout_batch._call(moving, gains, options, max_steps, keys, None, None)
     return lambda moving, gains, key: rollout_jit._call(moving, gains, options, max_steps, key)
@@ -150,7 +142,7 @@ class TrackResult(NamedTuple):
       min_clearance: float, over steps and between steps.
       final_error: float, |g(t) - tip| at the last step.
       time, goal, error: (iterations + 1,) / (iterations + 1, 3) / (iterations + 1,).
-      q, tip, clearance: as :class:`~softplan_jax.planner.PlanResult`.
+      q, tip, clearance: as :class:`~softplan_jax.planning.planner.PlanResult`.
       moving: the MovingScenario (for plots and checks).
     """
 
@@ -196,7 +188,7 @@ def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gai
     seconds; jitted, compiles once per shape and option set).
 
     Args:
-      moving: a :class:`~softplan_jax.motion.MovingScenario`.
+      moving: a :class:`~softplan_jax.scenarios.motion.MovingScenario`.
       method, n_points, gains, seed, **options: as :func:`~softplan_jax.plan`.
       max_steps: steps of the horizon (the rollout does not stop at the goal).
       **options: :class:`TrackOptions` fields (hold_tolerance, feedforward,
@@ -249,7 +241,7 @@ def track_batch(movings: MovingScenario, method: str = "curve", n_points: int = 
     Arguments as :func:`track` and :func:`~softplan_jax.plan_batch` (``chunk``:
     scenarios per call, the last padded; ``progress``: a line per chunk on
     stderr; ``lanes``: scenes stepped side by side, see
-    :func:`~softplan_jax.engine.run_lanes`). Returns a batched :class:`Track`
+    :func:`~softplan_jax.planning.engine.run_lanes`). Returns a batched :class:`Track`
     (an engine Rollout with the tracking fields) of NumPy arrays.
     """
     _check_moving(movings, batched=True)

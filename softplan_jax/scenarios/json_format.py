@@ -2,8 +2,8 @@
 README (arm, goal, obstacles as polynomial curves, line segments or point sets),
 read with every malformed field named in a ValueError, and written atomically.
 
-Moving scenes (issue 23) add an optional ``"motion"`` object to a polynomial
-or line-segment obstacle (the fields of :func:`~softplan_jax.motion.curve_motion`:
+Moving scenes add an optional ``"motion"`` object to a polynomial
+or line-segment obstacle (the fields of :func:`~softplan_jax.scenarios.motion.curve_motion`:
 pivot, axis, amplitude, omega, phase, shift, velocity) and an optional
 top-level ``"goal_path"`` (``times``, ``points``, and ``attach``: the index in
 ``obstacles`` of the curve that carries the goal). :func:`load_moving_scenario`
@@ -96,7 +96,7 @@ def scenario_from_dict(data: dict, dtype=None) -> Scenario:
 
 
 def moving_from_dict(data: dict, dtype=None):
-    """Build a :class:`~softplan_jax.motion.MovingScenario` from the JSON structure
+    """Build a :class:`~softplan_jax.scenarios.motion.MovingScenario` from the JSON structure
     (a file without motion gives one where nothing moves); every malformed field
     raises a ValueError naming the field."""
     from .motion import curve_motion, goal_path, make_moving_scenario
@@ -340,7 +340,7 @@ def moving_to_dict(moving, name: str | None = None) -> dict:
 
 
 def load_moving_scenario(path, dtype=None):
-    """Read a scenario JSON file as a :class:`~softplan_jax.motion.MovingScenario`
+    """Read a scenario JSON file as a :class:`~softplan_jax.scenarios.motion.MovingScenario`
     (with its ``motion`` and ``goal_path`` fields; a static file: nothing moves)."""
     return _read_scenario_file(path, moving_from_dict, dtype)
 

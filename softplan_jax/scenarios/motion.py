@@ -1,4 +1,4 @@
-"""Moving obstacles and moving goals (issue 23; the paper's future work, §4).
+"""Moving obstacles and moving goals (the paper's future work, §4).
 
 A :class:`MovingScenario` is a :class:`~softplan_jax.scenarios.Scenario` (the
 scene at rest) plus
@@ -30,7 +30,7 @@ every interval of length h,
 omega`` and ``|theta'| <= A omega``, with ``r_max >= max_u |F_o(u) - p|`` from
 the convex hull of the curve's Bernstein control points on its u-range (a
 proof, not a sample). It is derived, never guessed: the clearance-bounded
-step of :mod:`softplan_jax.tracking` spends it.
+step of :mod:`softplan_jax.planning.tracking` spends it.
 
 Only polynomial curves move; point sets and :class:`ParametricCurve` obstacles
 stay where they are.
@@ -45,9 +45,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.validation import as_float_array, is_concrete
 from ..geometry.curves import PolynomialCurve
 from .scenario import Scenario
-from ..base.validation import as_float_array, is_concrete
 
 __all__ = [
     "CurveMotion",
@@ -245,7 +245,7 @@ def moved_curves(curves: PolynomialCurve, motion: CurveMotion, t) -> PolynomialC
 
 
 def moved_cells(cells, motion: CurveMotion, t):
-    """The warm start's per-curve data (:func:`~softplan_jax.warm_start.curve_data`,
+    """The warm start's per-curve data (:func:`~softplan_jax.geometry.warm_start.curve_data`,
     vmapped over the polynomial stack) at time t: the curvature bound and the
     u-grid are invariant under a rigid motion; the grid points move and the
     rounding scale ``1 + max |F_o|`` is recomputed from them."""
@@ -323,7 +323,7 @@ def curve_radius_bound(curves: PolynomialCurve, centre):
 
 def speed_bounds(moving: MovingScenario):
     """(m,) a bound on the speed of every point of every obstacle slot [m/s]
-    (slot order of :func:`~softplan_jax.obstacles.radius_and_mask`: polynomial
+    (slot order of :func:`~softplan_jax.geometry.obstacles.radius_and_mask`: polynomial
     curves, point sets, parametric curves; the last two are static: 0).
 
     ``|v| + omega (|s| + A r_max)`` per polynomial curve (module docstring).

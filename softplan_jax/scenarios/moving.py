@@ -1,4 +1,4 @@
-"""Moving scenes (issue 23): presets people would try, and a seeded random suite.
+"""Moving scenes: presets people would try, and a seeded random suite.
 
 Presets (:func:`moving_scenario`), all on the paper's arm (3 segments of
 length 1, the default start):
@@ -10,7 +10,7 @@ length 1, the default start):
   paper's, fixed.
 * ``"tree_fruit"``: the same swaying tree; the goal is a fruit hanging 0.12
   below branch 2 at u = 1 and moving with the branch (a goal on a moving
-  curve, :class:`~softplan_jax.motion.GoalPath` ``attach``).
+  curve, :class:`~softplan_jax.scenarios.motion.GoalPath` ``attach``).
 * ``"wire_sweep"``: a horizontal wire across the goal's side of the
   workspace (x = 0.9, y from 0.4 to 2.0) moves up and down through the arm's
   pose at the goal (1.2, 0.9, 1.4): height 1.2 + 0.8 sin(0.3 t). The arm gives

@@ -14,9 +14,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.validation import check_configuration
 from ..geometry.curves import PolynomialCurve
 from ..geometry.kinematics import backbone_points, tip_position
-from ..base.validation import check_configuration
 from .scenario import Scenario, default_start, make_scenario, stack_scenarios
 
 __all__ = ["random_scenarios"]

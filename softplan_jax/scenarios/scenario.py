@@ -13,7 +13,7 @@ one compilation:
 
 :func:`make_scenario` builds one scene, :func:`stack_scenarios` a batch of
 scenes of one padded shape. The layout of the three groups belongs to
-:mod:`softplan_jax.obstacles`; this module only stores it.
+:mod:`softplan_jax.geometry.obstacles`; this module only stores it.
 """
 
 from __future__ import annotations
@@ -26,9 +26,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..geometry.curves import ParametricCurve, PolynomialCurve, stack_curves
-from ..geometry.obstacles import obstacle_count, obstacle_samples  # obstacle_count re-exported: the layout belongs to obstacles
 from ..base.validation import as_float_array, check_configuration, check_finite, check_points
+from ..geometry.curves import ParametricCurve, PolynomialCurve, stack_curves
+from ..geometry.obstacles import (  # obstacle_count re-exported: the layout belongs to obstacles
+    obstacle_count,
+    obstacle_samples,
+)
 
 __all__ = [
     "Scenario",

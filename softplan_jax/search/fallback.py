@@ -1,15 +1,15 @@
 """Plan with the global fallback: the local planner first, then reachability and a certified search.
 
 :func:`plan_fallback` runs the potential-field planner of paper eq. (9)
-(:func:`~softplan_jax.planner.plan_batch`); for every scene that it leaves
+(:func:`~softplan_jax.planning.planner.plan_batch`); for every scene that it leaves
 ``stalled`` or at ``max_steps``:
 
-1. :func:`~softplan_jax.reach.reachability` decides whether a collision-free
+1. :func:`~softplan_jax.search.reach.reachability` decides whether a collision-free
    configuration puts the tip on the goal. If none is found the scene's status
    becomes ``unreachable``, with the reason (``beyond_reach`` and
    ``goal_in_obstacle`` are proofs; ``no_ik_solution`` means the multi-start
    IK found none) and the best tip distance.
-2. Otherwise :func:`~softplan_jax.global_planner.global_search` (RRT-Connect
+2. Otherwise :func:`~softplan_jax.search.tree.global_search` (RRT-Connect
    with certified motions) searches from configurations along the local
    planner's path to the certified goal configurations. The returned path is
    the local path up to the configuration the search left from, then the
@@ -37,15 +37,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..planning.batching import pad_batch
-from ..geometry.closest import DEFAULT_OPTIONS
-from .tree import global_search
-from ..geometry.kinematics import tip_position
-from ..geometry.clearance import contact_tolerance
-from ..planning.planner import PlanResult, make_options, plan, plan_batch
-from .reach import Reachability, ReachOptions, check_reach_options, clearances, reachability
-from ..scenarios import Scenario, stack_scenarios
 from ..base.status import Status, status_name
+from ..geometry.clearance import contact_tolerance
+from ..geometry.closest import DEFAULT_OPTIONS
+from ..geometry.kinematics import tip_position
+from ..planning.batching import pad_batch
+from ..planning.planner import PlanResult, make_options, plan, plan_batch
+from ..scenarios import Scenario, stack_scenarios
+from .reach import Reachability, ReachOptions, check_reach_options, clearances, reachability, scene_of
+from .tree import global_search
 
 __all__ = ["plan_fallback", "rescue"]
 
@@ -77,10 +77,6 @@ def _path_check_jit(solver, contact: float):
 _tips_jit = jax.jit(jax.vmap(tip_position))
 
 
-def _scene(scenarios: Scenario, b: int) -> Scenario:
-    return jax.tree_util.tree_map(lambda x: x[b], scenarios)
-
-
 def _start_roots(q_local: np.ndarray, count: int):
     """Indices of ``count`` configurations evenly spaced along the local path (start and end included)."""
     last = q_local.shape[0] - 1
@@ -97,7 +93,7 @@ def plan_fallback(scenarios: Scenario, method: str = "curve", n_points: int = 10
       scenarios: one Scenario or a batch (leading axis B).
       method, n_points, gains, max_steps, seed, **options: as :func:`~softplan_jax.plan`
         (the local planner's settings; ``options`` are :class:`~softplan_jax.PlanOptions` fields).
-      reach: :class:`~softplan_jax.reach.ReachOptions` of the IK and of the search.
+      reach: :class:`~softplan_jax.search.reach.ReachOptions` of the IK and of the search.
       chunk: scenes per compiled search call (vmapped; the last chunk is padded).
         Default 1: one scene at a time, the fastest on the CPU (module docstring).
       progress: one line per finished stage/chunk on stderr.
@@ -202,7 +198,7 @@ def _local_result(r, b: int, batch: Scenario) -> PlanResult:
     from ..planning.planner import result_from_rollout
 
     one = jax.tree_util.tree_map(lambda x: x[b], r)
-    return result_from_rollout(one, _scene(batch, b))
+    return result_from_rollout(one, scene_of(batch, b))
 
 
 def _search_all(batch, results, scenes, decided, rows, reach: ReachOptions, solver, contact, tolerance, seed, chunk,
@@ -243,7 +239,7 @@ def _search_all(batch, results, scenes, decided, rows, reach: ReachOptions, solv
             steps = int(out.steps[k])
             q_global = out.q[k][: steps + 1]
             q = np.concatenate([results[b].q[: k_root + 1], q_global[1:]])
-            results[b] = _with_path(results[b], q, k_root, _scene(host, b), check, tolerance, out.q.shape[1])
+            results[b] = _with_path(results[b], q, k_root, scene_of(host, b), check, tolerance, out.q.shape[1])
         if progress:
             done = min(a + size, len(scenes))
             _say(f"plan_fallback: global search {done}/{len(scenes)} scenes, {time.perf_counter() - t0:.1f} s")

@@ -42,13 +42,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.numerics import damped_pinv, safe_norm, solve_small
 from ..geometry.closest import DEFAULT_OPTIONS, SolverOptions
 from ..geometry.kinematics import points_jacobian, tip_position
-from ..base.numerics import damped_pinv, safe_norm, solve_small
 from ..geometry.obstacles import radius_and_mask, true_closest
 from ..scenarios import Scenario
 
-__all__ = ["ReachOptions", "Reachability", "REACH_REASONS", "reachability", "goal_configurations"]
+__all__ = ["ReachOptions", "Reachability", "REACH_REASONS", "reachability", "goal_configurations", "scene_of"]
 
 
 class ReachOptions(NamedTuple):
@@ -74,7 +74,7 @@ class ReachOptions(NamedTuple):
       tree_size: nodes per tree of the global search (RRT-Connect).
       iterations: the most RRT-Connect iterations.
       extend_distance: an extension moves towards its sample by at most this
-        motion bound (:func:`~softplan_jax.kinematics.motion_bound`).
+        motion bound (:func:`~softplan_jax.geometry.kinematics.motion_bound`).
       extend_substeps: conservative-advancement substeps of one extension.
       connect_substeps: substeps of one connection attempt.
       shortcut_attempts: random shortcuts tried on the found path.
@@ -329,8 +329,8 @@ def unreachable_proof(scenario: Scenario) -> str:
         return "beyond_reach"
     arm_r = float(scenario.arm_radius)
     # Polynomial curves: exact point-curve distance (roots of the stationarity polynomial).
-    from ..geometry.curves import PolynomialCurve
     from ..clouds import curve_distance  # exact: the roots of the stationarity polynomial and the ends
+    from ..geometry.curves import PolynomialCurve
 
     coeffs = np.asarray(scenario.curves.coeffs, np.float64)
     u_range = np.asarray(scenario.curves.u_range, np.float64)
@@ -348,7 +348,8 @@ def unreachable_proof(scenario: Scenario) -> str:
     return ""
 
 
-def _scene(scenarios: Scenario, b: int) -> Scenario:
+def scene_of(scenarios: Scenario, b: int) -> Scenario:
+    """Scene b of a stacked batch of scenes (every leaf indexed on its leading axis)."""
     return jax.tree_util.tree_map(lambda x: x[b], scenarios)
 
 
@@ -388,7 +389,7 @@ def reachability(scenario: Scenario, q_extra=None, *, seed=0, options: ReachOpti
     extra = q_extra if q_extra is not None else jnp.zeros((B, n, 3), scenes.q0.dtype)
     q, cert, c, err, best = jax.device_get(fn(scenes, keys, extra))
     host = jax.device_get(scenes)
-    proofs = [unreachable_proof(_scene(host, b)) for b in range(B)]
+    proofs = [unreachable_proof(scene_of(host, b)) for b in range(B)]
     reachable = np.array([bool(cert[b, 0]) and not proofs[b] for b in range(B)])
     reasons = tuple("" if reachable[b] else (proofs[b] or "no_ik_solution") for b in range(B))
     out = Reachability(reachable, reasons, best, q, cert, c, err)

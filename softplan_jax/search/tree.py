@@ -2,16 +2,16 @@
 
 When the potential-field planner (paper eq. 9) stalls or runs out of steps,
 :func:`global_search` looks for a path from where it stopped to one of the
-certified goal configurations of :mod:`softplan_jax.reach`:
+certified goal configurations of :mod:`softplan_jax.search.reach`:
 
 * **Certified motions.** Every motion is a straight line in q (phi moves the
   short way round: :func:`wrap_delta`), walked by conservative advancement:
   at q, the exact clearance c of every obstacle (paper §2.3, the closest-point
   solver whose convergence is certified) and the sound motion bound B of the
-  rest of the line (:func:`~softplan_jax.kinematics.motion_bound`) give the
+  rest of the line (:func:`~softplan_jax.geometry.kinematics.motion_bound`) give the
   fraction ``alpha = min(1, f (c - 2 contact) / B)`` of it that no arm point
   can cross an obstacle on: the local planner's safe step,
-  :func:`~softplan_jax.step.safe_scale`. A motion advances until it reaches its end, a solve does not
+  :func:`~softplan_jax.planning.step.safe_scale`. A motion advances until it reaches its end, a solve does not
   converge, or its substeps run out (near an obstacle the substeps shrink
   geometrically); what it reaches is proven collision-free, all the way.
 * **RRT-Connect** (Kuffner & LaValle 2000) with a tree at the start and a tree
@@ -29,10 +29,10 @@ certified goal configurations of :mod:`softplan_jax.reach`:
   new motions are certified.
 * **The returned path** walks the final polyline again by conservative
   advancement, with steps of at most ``step_motion`` of motion bound: every
-  step of it satisfies the swept proof of :func:`softplan_jax.metrics.swept_clear`
+  step of it satisfies the swept proof of :func:`softplan_jax.geometry.clearance.swept_clear`
   (the exact clearance at its start exceeds its motion bound plus the contact
   tolerance), so the path is collision-free by construction, and the tests
-  check it against the brute-force :func:`~softplan_jax.metrics.dense_trajectory_clearance`.
+  check it against the brute-force :func:`~softplan_jax.geometry.clearance.dense_trajectory_clearance`.
 """
 
 from __future__ import annotations
@@ -45,9 +45,9 @@ import jax.numpy as jnp
 
 from ..geometry.closest import SolverOptions
 from ..geometry.kinematics import motion_bound, tip_position
-from .reach import ReachOptions, clearances, random_configurations
-from ..scenarios import Scenario
 from ..planning.step import safe_scale
+from ..scenarios import Scenario
+from .reach import ReachOptions, clearances, random_configurations
 
 __all__ = ["wrap_delta", "advance", "global_search", "SearchResult"]
 
@@ -324,7 +324,7 @@ def global_search(scenario: Scenario, q_starts, n_starts, q_goals, n_goals, key,
         planner passed through); n_starts: () int, how many are real.
       q_goals: (G, n, 3) goal roots; n_goals: () int, how many are real (0: no search).
       key: PRNG key of the samples and shortcuts.
-      options: :class:`~softplan_jax.reach.ReachOptions` (static).
+      options: :class:`~softplan_jax.search.reach.ReachOptions` (static).
       solver: the exact solver's options (static); contact: the contact tolerance.
     """
     T = int(options.tree_size)

@@ -1,8 +1,9 @@
 """Tuning the gains of eq. (9) on a suite of scenes, and gains files.
 
-* :mod:`.smoothing` -- the tuner: Gaussian smoothing of the rollout score over a
-  box of gains (:class:`GainSpace`), its unbiased gradient estimate, and
-  :func:`tune_smoothed` (Adam on that estimate, with optax);
+* :mod:`.objective` -- the objective: Gaussian smoothing of the rollout score
+  over a box of gains (:class:`GainSpace`) and its unbiased gradient estimate;
+* :mod:`.tuner` -- the tuner, :func:`tune_smoothed` (stochastic gradient descent
+  on that estimate, with optax);
 * :mod:`.gains_file` -- tuned gains as JSON, with the obstacle model they were
   tuned for;
 * :mod:`.pathwise` -- the earlier pathwise-gradient tuner (``tune_gains``),
@@ -13,21 +14,20 @@
 
 import warnings as _warnings
 
-from . import pathwise
+from . import pathwise as pathwise
 from .gains_file import gains_from_dict, gains_to_dict, load_gains, save_gains
-from .smoothing import (
+from .objective import (
     GainSpace,
     ObjectiveEstimate,
     ScoreWeights,
     SmoothingSample,
-    TuneResult,
     estimate_objective,
     rollout_score,
     score_batch,
     smoothed_objective,
     smoothing_sample,
-    tune_smoothed,
 )
+from .tuner import TuneResult, tune_smoothed
 
 __all__ = [
     "GainSpace",

@@ -1,5 +1,5 @@
-"""Gains files: tuned :class:`~softplan_jax.planner.Gains` or
-:class:`~softplan_jax.planner.GainFunction` kept as JSON (format
+"""Gains files: tuned :class:`~softplan_jax.planning.planner.Gains` or
+:class:`~softplan_jax.planning.planner.GainFunction` kept as JSON (format
 ``softplan-gains/1``), with the obstacle model they were tuned for.
 
 ::
@@ -25,7 +25,7 @@
 
 Every malformed file is rejected with a ValueError that names the field, e.g.
 ``gains file field gains.d0: must be a finite positive number, got -1``;
-values are validated by :func:`softplan_jax.planner.check_gains`. Loading with
+values are validated by :func:`softplan_jax.planning.planner.check_gains`. Loading with
 ``method`` / ``n_points`` refuses a file tuned for another obstacle model.
 """
 
@@ -39,7 +39,8 @@ import re
 import jax.numpy as jnp
 import numpy as np
 
-from ..planning.planner import GainFunction, Gains, check_gains
+from ..planning.planner import check_gains
+from ..planning.step import GainFunction, Gains
 from ..scenarios.json_format import read_json_file, write_json_file
 
 __all__ = ["GAINS_FORMAT", "gains_to_dict", "gains_from_dict", "save_gains", "load_gains"]
@@ -84,7 +85,7 @@ def gains_to_dict(gains: Gains | GainFunction, method: str = "curve", n_points: 
 
     Args:
       gains: a :class:`Gains` or :class:`GainFunction` of concrete values
-        (validated by :func:`~softplan_jax.planner.check_gains`).
+        (validated by :func:`~softplan_jax.planning.planner.check_gains`).
       method: the obstacle model the gains were tuned for, "curve" or "points".
       n_points: N of the N-point model (meaningful for method "points").
       metadata: optional JSON object stored as given (how, on what, when tuned).

@@ -3,7 +3,7 @@ gains of paper eq. (9), which the paper sets by hand, tuned beyond the paper.
 
 The loss of one rollout (:func:`rollout_loss`) is differentiable in the gains:
 the planner step is smooth in the gains, the closest points carry implicit
-derivatives (:mod:`softplan_jax.closest`), and the status logic only freezes
+derivatives (:mod:`softplan_jax.geometry.closest`), and the status logic only freezes
 the state. It combines
 
 * ``w_path``: the mean tip error |V_e| over the steps (rewards reaching early),
@@ -27,7 +27,9 @@ import numpy as np
 import optax
 
 from ..base.compilation_cache import rollout_compiler_options
-from ..planning.planner import Gains, PlanOptions, check_gains, make_options, rollout
+from ..planning.planner import check_gains, make_options
+from ..planning.programs import rollout
+from ..planning.step import Gains, PlanOptions
 from ..scenarios import Scenario
 
 __all__ = ["LossWeights", "rollout_loss", "batch_loss", "tune_gains", "TuningResult"]

@@ -1,0 +1,139 @@
+"""What the ``softplan`` subcommands share: the exit codes, :class:`InputError`
+(bad user input: one line ``softplan: error: ...`` on stderr, exit code 2), the
+package version, warnings on stderr, the paper scenarios' names, the ``--gains``
+option resolved to gains and step options and recorded in the summary, the
+``--plot`` / ``--gif`` figures, number formats and the summary printed as text
+or JSON with its exit code.
+
+Nothing heavy at import: jax, numpy and matplotlib are imported inside the
+functions that need them, so that ``softplan --help`` is fast.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+
+__all__ = [
+    "EXIT_OK", "EXIT_BAD_INPUT", "EXIT_NOT_REACHED", "InputError", "package_version", "warn", "paper_names",
+    "fmt_seconds", "fmt_gain_values", "resolve_gains", "gains_report", "write_figures", "report",
+]
+
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+EXIT_NOT_REACHED = 3
+
+
+class InputError(Exception):
+    """Bad user input: reported as one line on stderr, exit code 2."""
+
+
+def package_version() -> str:
+    """The installed softplan_jax version (``0.0.0+unknown`` when not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("softplan_jax")
+    except PackageNotFoundError:
+        return "0.0.0+unknown"
+
+
+def warn(msg: str) -> None:
+    """One line ``softplan: warning: ...`` on stderr."""
+    print(f"softplan: warning: {msg}", file=sys.stderr, flush=True)
+
+
+def paper_names():
+    """The paper scenarios' names, sorted."""
+    from ..scenarios import PAPER_SCENARIOS
+
+    return sorted(PAPER_SCENARIOS)
+
+
+def fmt_seconds(t: float) -> str:
+    """A duration in s, ms or us."""
+    if t >= 1.0:
+        return f"{t:.2f} s"
+    if t >= 1e-3:
+        return f"{t * 1e3:.2f} ms"
+    return f"{t * 1e6:.1f} us"
+
+
+def fmt_gain_values(values: dict) -> str:
+    """The summary's ``gain_values`` as one line of text."""
+    def fmt(k, v):
+        if v is None:
+            return f"{k} none (no cap)"
+        if isinstance(v, list):
+            return f"{k} [{', '.join(f'{x:.4g}' for x in v)}]"
+        return f"{k} {v:.4g}"
+
+    return ", ".join(fmt(k, v) for k, v in values.items())
+
+
+def resolve_gains(args, scenario, method: str, n_points: int):
+    """``(scenario, gains, options, gain_values)`` for ``--gains``: a preset's start pose,
+    gains and step options, or a gains file's gains with the default preset's start pose
+    and options (ValueError for a bad or mismatched file). ``gain_values`` is the JSON
+    form of the gains (:func:`~softplan_jax.tuning.gains_file.gains_to_dict`; ``rep_max`` null
+    = no cap)."""
+    from ..planning.planner import check_gains
+    from ..planning.presets import apply_preset
+    from ..tuning.gains_file import gains_to_dict, load_gains
+
+    scenario, gains, extra = apply_preset("default" if args.gains_file else args.gains, scenario)
+    if args.gains_file:
+        dtype = scenario.q0.dtype
+        gains = load_gains(args.gains_file, method=method, n_points=n_points, dtype=dtype)
+        gains = check_gains(gains, dtype, scenario.q0.shape[-2])  # seg_weights against the arm's segments
+    return scenario, gains, extra, gains_to_dict(gains, method, n_points)["gains"]
+
+
+def gains_report(args, gain_values: dict) -> dict:
+    """The summary's record of the gains used."""
+    return {"gains": args.gains,
+            "gains_file": os.path.abspath(args.gains_file) if args.gains_file else None,
+            "gain_values": gain_values}
+
+
+def write_figures(args, summary: dict, make_plot, write_gif) -> None:
+    """``run --plot`` / ``--gif``: the figure from ``make_plot(plotting)`` saved to args.plot,
+    ``write_gif(plotting)`` for args.gif; their absolute paths into the summary."""
+    if args.plot is None and args.gif is None:
+        return
+    if "matplotlib.pyplot" not in sys.modules:
+        import matplotlib
+
+        matplotlib.use("Agg")  # the command never opens a window
+    import matplotlib.pyplot as plt
+
+    import softplan_jax.plotting as plotting
+
+    try:
+        if args.plot is not None:
+            fig = make_plot(plotting)
+            try:
+                fig.savefig(args.plot, dpi=120, bbox_inches="tight", pad_inches=0.2)
+            finally:
+                plt.close(fig)
+            summary["plot"] = os.path.abspath(args.plot)
+        if args.gif is not None:
+            write_gif(plotting)
+            summary["gif"] = os.path.abspath(args.gif)
+    except OSError as err:
+        raise InputError(f"cannot write output: {err}") from None
+
+
+def report(args, summary: dict, text, reached: bool) -> int:
+    """Print the summary (JSON, non-finite numbers as null, or ``text()``); the exit code."""
+    if args.json:
+        # Non-finite numbers (min clearance without obstacles is inf) become null.
+        clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()}
+        print(json.dumps(clean, indent=2))
+    else:
+        print(text())
+    if args.require_reached and not reached:
+        return EXIT_NOT_REACHED
+    return EXIT_OK

@@ -1,0 +1,351 @@
+"""``softplan run``: plan one scenario and print a summary.
+
+A static scene (a paper scenario or a JSON scenario file) is planned with the
+compiled rollout (the paper's eq. 9 step; :func:`~softplan_jax.planning.programs.rollout_jit`),
+then, where the local planner stalls or runs out of steps, rescued by the
+reachability test and the global search (unless ``--no-fallback``). A moving
+scene (a moving preset, or a JSON file with motion fields) is tracked among its
+moving obstacles (:mod:`softplan_jax.planning.tracking`). Both write the same
+figures, the same ``--out`` trajectory file and the same report.
+
+jax is imported inside :func:`cmd_run`, after the arguments are parsed, so that
+float64 (``jax_enable_x64``) can be switched on before any array exists.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+
+from .common import (
+    InputError,
+    fmt_gain_values,
+    fmt_seconds,
+    gains_report,
+    package_version,
+    paper_names,
+    report,
+    resolve_gains,
+    warn,
+    write_figures,
+)
+from .parser import check_run_args
+from .trajectory import TRAJECTORY_FORMAT, trajectory_record, write_trajectory
+
+__all__ = ["cmd_run"]
+
+
+def _load(args, dtype):
+    import warnings
+
+    from ..scenarios import load_scenario, paper_scenario
+
+    if args.scenario in paper_names():
+        return paper_scenario(args.scenario, dtype=dtype), args.scenario
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            scenario = load_scenario(args.scenario, dtype=dtype)
+        for w in caught:
+            warn(str(w.message))
+        return scenario, args.scenario
+    except OSError as err:  # unreadable file, permission denied, ...
+        raise InputError(f"cannot read scenario file {args.scenario}: {err.strerror or err}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"scenario file {args.scenario} is not UTF-8 text (is it a JSON file?)") from None
+
+
+def _moving_names():
+    from ..scenarios.moving import MOVING_SCENARIOS
+
+    return sorted(MOVING_SCENARIOS)
+
+
+def _is_moving_file(path: str) -> bool:
+    """The scenario file has motion fields (read once more by _load_moving for the errors)."""
+    from ..scenarios.json_format import is_moving_dict, read_json_file
+
+    try:
+        return is_moving_dict(read_json_file(path, "scenario"))
+    except ValueError:
+        return False  # the static loader reports the error
+
+
+def _plan_extra(args, extra: dict) -> dict:
+    """The planner options given on the command line (``softplan run``, static or moving), added
+    to ``extra`` (the gains' own options)."""
+    extra["repulsion"] = args.repulsion
+    for key in ("step", "escapes", "goal_tolerance"):
+        if getattr(args, key) is not None:
+            extra[key] = getattr(args, key)
+    return extra
+
+
+def _write_out(args, summary: dict, record: dict) -> None:
+    """Write ``--out`` (replacing a file only with --force, and saying so)."""
+    replaced = os.path.exists(args.out)
+    try:
+        write_trajectory(args.out, record)
+    except OSError as err:
+        raise InputError(f"cannot write output: {err}") from None
+    summary["out"] = os.path.abspath(args.out)
+    if replaced:  # allowed by --force; never silently
+        print(f"softplan: overwrote {args.out} (--force)", file=sys.stderr)
+
+
+def cmd_run(args) -> int:
+    """``softplan run``: plan a static scene, or track a moving one; the exit code."""
+    import jax
+
+    from ..base.compilation_cache import enable_compilation_cache
+
+    enable_compilation_cache()  # a second run loads the compiled rollout from disk
+    if not args.float32:
+        # float64 needs x64 on before any array is created.
+        jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp
+
+    from ..planning.planner import make_options, result_from_rollout
+    from ..planning.programs import rollout_jit
+
+    static_names = paper_names()
+    check_run_args(args, static_names + _moving_names())
+    dtype = jnp.float32 if args.float32 else jnp.float64
+    if args.scenario in _moving_names() or (args.scenario not in static_names and _is_moving_file(args.scenario)):
+        return _cmd_track(args, dtype)
+    for flag, value in (("--anticipation", args.anticipation), ("--hold-tolerance", args.hold_tolerance)):
+        if value is not None:
+            warn(f"{flag} applies to moving scenes only; {args.scenario} does not move, it is ignored")
+    try:
+        scenario, label = _load(args, dtype)
+        scenario, gains, extra, gain_values = resolve_gains(args, scenario, args.method, args.n_points)
+        options = make_options(args.method, args.n_points, **_plan_extra(args, extra))
+    except ValueError as err:
+        raise InputError(str(err)) from None
+    max_steps = int(args.max_steps)
+
+    if sys.stderr.isatty():
+        print("softplan: compiling the planner (once per scenario shape and option set) ...",
+              file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    # Traced program and XLA executable both cached on disk: a second run loads them.
+    run, loaded = rollout_jit.cached(scenario, gains, options, max_steps)
+    compile_time = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rollout = jax.block_until_ready(run(scenario, gains, args.seed))
+    run_time = time.perf_counter() - t0
+    result = result_from_rollout(rollout, scenario)
+    fallback_time = 0.0
+    if not args.no_fallback and result.status in ("stalled", "max_steps"):
+        from ..search.fallback import rescue
+
+        print(f"softplan: the local planner ended {result.status}; deciding reachability and searching globally "
+              "(the first time compiles for about a minute) ...", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        result = rescue(scenario, [result], options, seed=args.seed)[0]
+        fallback_time = time.perf_counter() - t0
+
+    summary = {
+        "scenario": label,
+        "method": args.method,
+        "n_points": args.n_points if args.method == "points" else None,
+        "repulsion": args.repulsion,
+        **gains_report(args, gain_values),
+        "step": options.step,
+        "escapes": int(rollout.escapes),
+        "dtype": str(jnp.dtype(scenario.q0.dtype)),
+        "status": result.status,
+        "planner": result.planner,
+        "reason": result.reason,
+        "global_start": result.global_start,
+        "best_error": result.best_error,
+        "fallback": not args.no_fallback,
+        "fallback_time_s": fallback_time,
+        "iterations": result.iterations,
+        "max_steps": max_steps,
+        "reached": result.reached,
+        "collided": result.collided,
+        "min_clearance": result.min_clearance,
+        "final_error": result.final_error,
+        "goal_tolerance": options.goal_tolerance,
+        "compile_time_s": compile_time,
+        "program_from_cache": loaded,
+        "run_time_s": run_time,
+        # The engine stops within step_chunk steps of the end: the cost follows the steps taken.
+        "time_per_step_s": run_time / max(int(rollout.iterations), 1),
+        "plot": None,
+        "gif": None,
+        "out": None,
+    }
+
+    title = (
+        f"{label} — {args.method} method"
+        + (f" (N = {args.n_points})" if args.method == "points" else "")
+        + f" — {result.status} after {result.iterations} iterations"
+        + (f" (global search from step {result.global_start})" if result.planner == "global" else "")
+        + (f" ({result.reason})" if result.reason else "")
+        + "\n"
+        f"min true clearance {result.min_clearance:.3f}, final tip error {result.final_error:.3f}"
+    )
+    write_figures(args, summary, lambda plotting: plotting.plot_snapshots(scenario, result, title=title),
+                   lambda plotting: plotting.animate(scenario, result, args.gif, title=title.split("\n")[0]))
+
+    if args.out is not None:
+        _write_out(args, summary, trajectory_record(result, scenario, summary))
+    return report(args, summary, lambda: _text_summary(summary), result.reached)
+
+
+def _cmd_track(args, dtype) -> int:
+    """``softplan run`` on a moving scene: track its goal among its moving obstacles (softplan_jax.track)."""
+    import jax
+
+    from ..planning.tracking import make_track_options, result_from_track, track_program
+    from ..scenarios.json_format import load_moving_scenario
+    from ..scenarios.moving import MOVING_OPTIONS, moving_scenario
+
+    label = args.scenario
+    try:
+        if args.scenario in _moving_names():
+            moving = moving_scenario(args.scenario, dtype=dtype)
+            preset = dict(MOVING_OPTIONS[args.scenario])
+        else:
+            moving = load_moving_scenario(args.scenario, dtype=dtype)
+            preset = {}
+        scenario, gains, extra, gain_values = resolve_gains(args, moving.scene, args.method, args.n_points)
+        moving = moving._replace(scene=scenario)
+        extra = _plan_extra(args, extra)
+        if args.anticipation is not None:
+            preset["anticipation"] = args.anticipation
+        if args.hold_tolerance is not None:
+            preset["hold_tolerance"] = args.hold_tolerance
+        options = make_track_options(args.method, args.n_points, **preset, **extra)
+    except OSError as err:
+        raise InputError(f"cannot read scenario file {args.scenario}: {err.strerror or err}") from None
+    except ValueError as err:
+        raise InputError(str(err)) from None
+    max_steps = int(args.max_steps)
+    from ..planning.programs import strong_gains
+
+    gains = strong_gains(gains, dtype)
+    print("softplan: a moving scene: tracking its goal for "
+          f"{max_steps} steps ({max_steps * float(gains.dt):g} s; compiling once) ...", file=sys.stderr, flush=True)
+    fn = track_program(options, max_steps, False)
+    key = jax.random.PRNGKey(int(args.seed))
+    # Twice: the first call compiles (or finds the program in jit's cache), the second is timed alone.
+    t0 = time.perf_counter()
+    jax.block_until_ready(fn(moving, gains, key))
+    first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    track = jax.block_until_ready(fn(moving, gains, key))
+    run_time = time.perf_counter() - t0
+    compile_time = max(first - run_time, 0.0)
+    result = result_from_track(track, moving, float(gains.dt))
+    summary = {
+        "scenario": label,
+        "moving": True,
+        "method": args.method,
+        "n_points": args.n_points if args.method == "points" else None,
+        "repulsion": args.repulsion,
+        **gains_report(args, gain_values),
+        "step": options.plan.step,
+        "anticipation_s": options.anticipation,
+        "hold_tolerance": options.hold_tolerance,
+        "dtype": str(jax.numpy.dtype(dtype)),
+        "status": result.status,
+        "iterations": result.iterations,
+        "max_steps": max_steps,
+        "horizon_s": max_steps * float(gains.dt),
+        "reached": result.reached,
+        "reached_at_s": None if result.reached_step is None else float(result.time[result.reached_step]),
+        "held_s": result.held_time,
+        "held_to_end": result.held_to_end,
+        "collided": result.collided,
+        "min_clearance": result.min_clearance,
+        "final_error": result.final_error,
+        "goal_tolerance": options.plan.goal_tolerance,
+        "compile_time_s": compile_time,
+        "run_time_s": run_time,
+        "time_per_step_s": run_time / max(result.iterations, 1),
+        "plot": None,
+        "gif": None,
+        "out": None,
+    }
+    title = (f"{label} (moving) — {args.method} method"
+             + (f" (N = {args.n_points})" if args.method == "points" else "") + f" — {result.status}")
+    write_figures(args, summary, lambda plotting: plotting.plot_tracking(result, title=title),
+                   lambda plotting: plotting.animate_tracking(result, args.gif, title=title))
+    if args.out is not None:
+        import numpy as np
+
+        record = {"format": TRAJECTORY_FORMAT, "softplan_jax_version": package_version(),
+                  **{k: np.asarray(getattr(result, k)) for k in ("q", "tip", "clearance", "goal", "time", "error")},
+                  **{k: v for k, v in summary.items() if k not in ("plot", "gif", "out", "gain_values")},
+                  "gain_values": {k: (math.inf if v is None else v) for k, v in summary["gain_values"].items()}}
+        _write_out(args, summary, record)
+
+    def text():
+        rows = [
+            ("scenario", f"{label} (moving obstacles; tracked)"),
+            ("method", args.method + (f" (N = {args.n_points})" if args.method == "points" else "")),
+            ("gains", summary["gains"]),
+            ("step", f"{summary['step']}, look-ahead {summary['anticipation_s']:g} s"),
+            ("dtype", summary["dtype"]),
+            ("status", result.status),
+            ("steps", f"{result.iterations} of {max_steps} ({summary['horizon_s']:g} s horizon)"),
+            ("reached", "no" if not result.reached else
+             f"at t = {summary['reached_at_s']:.2f} s; held {result.held_time:.2f} s"
+             + (" (to the end)" if result.held_to_end else f" (hold tolerance {options.hold_tolerance:g})")),
+            ("collided", "yes" if result.collided else "no"),
+            ("min true clearance", f"{result.min_clearance:.4f}"),
+            ("final tip error", f"{result.final_error:.4f} (goal tolerance {options.plan.goal_tolerance:g})"),
+            ("compile time", fmt_seconds(compile_time)),
+            ("run time", f"{fmt_seconds(run_time)} for {result.iterations} steps"),
+        ]
+        rows += [(k, summary[k]) for k in ("plot", "gif", "out") if summary[k]]
+        width = max(len(k) for k, _ in rows)
+        return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+    # --require-reached asks for success: reached and held to the end ("lost" is not).
+    return report(args, summary, text, result.status == "reached")
+
+
+def _text_summary(s: dict) -> str:
+    method = s["method"] + (f" (N = {s['n_points']} points per curve)" if s["method"] == "points" else "")
+    rows = [
+        ("scenario", s["scenario"]),
+        ("method", method),
+        ("repulsion", s["repulsion"]),
+        ("gains", s["gains"] + (" (gains file)" if s["gains_file"] else
+                                " (preset: the paper calibration)" if s["gains"] == "paper" else " (preset)")),
+        ("gain values", fmt_gain_values(s["gain_values"])),
+        ("step", ("safe (clearance-bounded)" if s["step"] == "safe" else "plain (the paper's)")
+         + f", {s['escapes']} escape(s) used"),
+        ("dtype", s["dtype"]),
+        ("status", s["status"] + (f" ({s['reason']})" if s["reason"] else "")),
+        ("planner", ("local (potential field, paper eq. 9)" if s["planner"] == "local" else
+                     f"global: the local path to step {s['global_start']}, then the certified global search")
+         + ("" if s["fallback"] else "; fallback off (--no-fallback)")),
+        ("iterations", f"{s['iterations']} (max steps {s['max_steps']} of the local planner)"),
+        ("reached", "yes" if s["reached"] else "no"),
+        ("collided", "yes" if s["collided"] else "no"),
+        ("min true clearance", f"{s['min_clearance']:.4f}"),
+        ("final tip error", f"{s['final_error']:.4f} (goal tolerance {s['goal_tolerance']:g})"
+         + (f"; best tip error of a collision-free IK configuration {s['best_error']:.4g}"
+            if s["best_error"] is not None else "")),
+        ("compile time", fmt_seconds(s["compile_time_s"])
+         + (" (traced program loaded from the cache)" if s["program_from_cache"] else "")),
+        ("run time", f"{fmt_seconds(s['run_time_s'])}"
+         + (f"; fallback {fmt_seconds(s['fallback_time_s'])}" if s["fallback_time_s"] else "")),
+        ("time per step", f"{fmt_seconds(s['time_per_step_s'])} "
+         "(run time / steps taken: the planner stops within a few steps of the end)"),
+    ]
+    if s["plot"]:
+        rows.append(("plot", s["plot"]))
+    if s["gif"]:
+        rows.append(("gif", s["gif"]))
+    if s["out"]:
+        rows.append(("trajectory", s["out"]))
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)

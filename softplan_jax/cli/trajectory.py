@@ -1,0 +1,112 @@
+"""The trajectory file of ``softplan run --out`` (format ``softplan-trajectory/1``):
+:func:`trajectory_record` gathers one run's arrays (configurations, tip and true
+clearance at every step) and metadata, :func:`write_trajectory` writes them as
+JSON (nested lists, non-finite numbers as null) or NPZ (one array per field, no
+pickles), chosen by the file's extension.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+
+from .common import package_version
+
+__all__ = ["TRAJECTORY_FORMAT", "TRAJECTORY_FORMATS", "trajectory_record", "write_trajectory"]
+
+
+TRAJECTORY_FORMAT = "softplan-trajectory/1"
+TRAJECTORY_FORMATS = (".json", ".npz")
+
+
+def trajectory_record(result, scenario, summary: dict) -> dict:
+    """The content of a ``run --out`` file: arrays and metadata of one run.
+
+    Args:
+      result: the run's PlanResult (trimmed to the steps taken).
+      scenario: the planned Scenario (for the goal).
+      summary: the run's summary (scenario label, method, options, times).
+
+    Returns:
+      dict with ``q`` (T, n, 3), ``tip`` (T, 3), ``clearance`` (T, m) (float
+      arrays, T = iterations + 1, m = the scenario's obstacles, the true
+      clearance at every step), ``goal`` (3,), and the scalars ``format``,
+      ``status``, ``iterations``, ``reached``, ``collided``, ``min_clearance``,
+      ``final_error``, ``planner`` ("local" or "global"), ``reason`` ("" or why the
+      goal was not reached), ``global_start`` (the step where the global search's
+      path leaves the local one, or None), ``best_error`` (the reachability IK's best
+      tip distance, or None) and the summary's metadata (``scenario``, ``method``,
+      ``n_points``, ``repulsion``, ``dtype``, ``max_steps``,
+      ``goal_tolerance``, ``compile_time_s``, ``run_time_s``, ``gains``: the
+      preset name or the gains file as given, ``gains_file``: its absolute
+      path or None), plus ``softplan_jax_version`` and ``gain_values``: the
+      gains used, a dict of floats (``rep_max`` inf: no cap) and, for a gain
+      function, lists (``rep_profile``, ``seg_weights``). In an NPZ file it is
+      flattened to ``gain_values.k_att``, ... arrays; in JSON inf is null.
+    """
+    import numpy as np
+
+    record = {
+        "format": TRAJECTORY_FORMAT,
+        "softplan_jax_version": package_version(),
+        "q": np.asarray(result.q),
+        "tip": np.asarray(result.tip),
+        "clearance": np.asarray(result.clearance),
+        "goal": np.asarray(scenario.goal),
+        "status": result.status,
+        "iterations": int(result.iterations),
+        "reached": bool(result.reached),
+        "collided": bool(result.collided),
+        "min_clearance": float(result.min_clearance),
+        "final_error": float(result.final_error),
+        "planner": result.planner,
+        "reason": result.reason,
+        "global_start": result.global_start,
+        "best_error": result.best_error,
+    }
+    for key in ("scenario", "method", "n_points", "repulsion", "dtype", "max_steps", "goal_tolerance",
+                "compile_time_s", "run_time_s", "gains", "gains_file"):
+        record[key] = summary[key]
+    record["gain_values"] = {k: (math.inf if v is None else v) for k, v in summary["gain_values"].items()}
+    return record
+
+
+def _json_ready(x):
+    """Arrays to nested lists, non-finite floats to None (strict JSON)."""
+    import numpy as np
+
+    if isinstance(x, np.ndarray):
+        return _json_ready(x.tolist())
+    if isinstance(x, dict):
+        return {k: _json_ready(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_ready(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def write_trajectory(path: str, record: dict) -> None:
+    """Write :func:`trajectory_record` as JSON or NPZ, by the extension of ``path``."""
+    import numpy as np
+
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".json":
+        with open(path, "w", encoding="utf-8") as fh:
+            json.dump({k: _json_ready(v) for k, v in record.items()}, fh, allow_nan=False)
+            fh.write("\n")
+    elif ext == ".npz":
+        # None (n_points of the curve method) has no array form: left out; a dict
+        # (gain_values) becomes one array per entry, "name.key" (no pickles).
+        flat = {}
+        for k, v in record.items():
+            if isinstance(v, dict):
+                flat.update({f"{k}.{sub}": w for sub, w in v.items()})
+            else:
+                flat[k] = v
+        arrays = {k: np.asarray(v) for k, v in flat.items() if v is not None}
+        with open(path, "wb") as fh:  # np.savez would append .npz to a name without it
+            np.savez(fh, **arrays)
+    else:
+        raise ValueError(f"unknown trajectory format {ext!r}; use .json or .npz")

@@ -1,0 +1,203 @@
+"""What a rollout returns: the :class:`Rollout` type, the per-step records, and the
+summary of a finished rollout (its status, its clearance, and for tracking the
+statistics of holding the goal).
+
+Records after the step where a rollout ended hold its last state (q, tip,
+clearances, goal, error: frozen; in a static scene the between-step clearance of
+the non-motions after the end is the clearance) and no events (step scale 0, no
+solver fallbacks, no between-step search). The mode of a rollout, plan or track,
+is its options' (:func:`setup`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from ..base.numerics import safe_norm
+from ..base.status import Status
+from ..geometry.obstacles import radius_and_mask
+from ..scenarios.motion import MovingScenario
+
+__all__ = ["Rollout", "Record", "Setup", "setup", "record_zeros", "freeze", "finish"]
+
+
+class Rollout(NamedTuple):
+    """A rollout, planned or tracked (arrays padded to max_steps + 1 along time).
+
+    Attributes:
+      q: (T+1, n, 3) configurations; frozen after the rollout finished.
+      tip: (T+1, 3).
+      clearance: (T+1, m) true clearance (surface to surface) to every obstacle
+        slot (padding slots: +inf); for a moving scene, to the obstacles at
+        the step's time.
+      between: (T+1, m) smallest clearance found during the motion from the
+        previous step (entry 0: the start's clearance); an ACHIEVED clearance,
+        so an upper bound on the true minimum over the motion. Where the
+        between-step search ran (``between_searched``) it is the search's
+        result (at most the clearance at both ends); where the motion bound
+        proved the motion clear (``PlanOptions.swept_proof``) it is the smaller
+        of the two ends' clearances, and the true minimum lies between
+        ``clearance[k-1] - motion_bound(q[k-1], q[k])[-1]`` (less the
+        obstacle's travel, for a moving scene; above the contact tolerance: no
+        collision) and this value.
+      status: () int, a :class:`~softplan_jax.base.status.Status` code.
+      iterations: () int, planner steps taken.
+      reached, collided: () bool (tracking: reached = within the goal
+        tolerance at some step).
+      min_clearance: () minimum over time, obstacles and between-step motion.
+      final_error: () |goal - tip| at the end.
+      step_scale: (T+1,) the safe step's alpha for the step from q_k (1 for the
+        plain step; 0 where no step was taken).
+      escapes: () int, random-walk escapes started.
+      converged: (T+1,) bool, every exact closest-point solve of a real
+        obstacle slot at q_k met its Newton tolerance.
+      fallbacks: (T+1,) int32, (segment, curve) pairs of real curve slots
+        that took the full closest-point solve at q_k: with the warm start
+        (``PlanOptions.warm_start``) the pairs whose certificate failed (all
+        at k = 0); without it every pair, or 0 where no exact solve ran.
+      between_searched: (T+1, m) bool, the between-step search ran for the
+        motion to q_k and obstacle slot j.
+      goal, time, error, reached_step, held_steps, held_to_end: tracking only
+        (None for a planned rollout): g(t_k) (T+1, 3), t_k = k dt (T+1,),
+        |g(t_k) - tip_k| (T+1,), the first step within the goal tolerance
+        (-1: never), the steps it was held from then (error <= hold
+        tolerance) and whether it was held to the end.
+    """
+
+    q: jax.Array
+    tip: jax.Array
+    clearance: jax.Array
+    between: jax.Array
+    status: jax.Array
+    iterations: jax.Array
+    reached: jax.Array
+    collided: jax.Array
+    min_clearance: jax.Array
+    final_error: jax.Array
+    step_scale: jax.Array
+    escapes: jax.Array
+    converged: jax.Array
+    fallbacks: jax.Array
+    between_searched: jax.Array
+    goal: jax.Array | None = None
+    time: jax.Array | None = None
+    error: jax.Array | None = None
+    reached_step: jax.Array | None = None
+    held_steps: jax.Array | None = None
+    held_to_end: jax.Array | None = None
+
+
+class Record(NamedTuple):
+    """What one step records (the per-step arrays of a Rollout)."""
+
+    q: jax.Array
+    tip: jax.Array
+    clearance: jax.Array
+    between: jax.Array
+    step_scale: jax.Array
+    converged: jax.Array
+    fallbacks: jax.Array
+    between_searched: jax.Array
+    goal: jax.Array | None = None
+    time: jax.Array | None = None
+    error: jax.Array | None = None
+
+
+# After the end, the state records stay at their last value and the event records are empty.
+EVENTS = ("step_scale", "fallbacks", "between_searched")
+
+
+class Setup(NamedTuple):
+    """Trace-time facts of one rollout: what moves and what ends it."""
+
+    moving: bool  # the scene moves (a MovingScenario)
+    scene: object  # the Scenario (at rest)
+    plan: object  # PlanOptions of the step
+    track: object  # TrackOptions (hold the goal to the horizon) or None (stop at the goal)
+    stop_at_goal: bool
+
+
+def setup(world, options) -> Setup:
+    """The mode is the options': PlanOptions plan (stop at the goal or at a stall), TrackOptions
+    track (hold the goal to the horizon), for a static scene as for a moving one."""
+    moving = isinstance(world, MovingScenario)
+    track = options if hasattr(options, "plan") else None
+    if moving and track is None:
+        raise ValueError("a moving scene is tracked: pass TrackOptions (see make_track_options)")
+    return Setup(moving, world.scene if moving else world, track.plan if track else options, track, track is None)
+
+
+def record_zeros(world, options, T: int) -> Record:
+    """Zero records of T steps (what :func:`~softplan_jax.planning.engine.make_step` records,
+    stacked), without tracing a step."""
+    su = setup(world, options)
+    q0 = su.scene.q0
+    n, dtype = q0.shape[0], q0.dtype
+    m = radius_and_mask(su.scene)[1].shape[0]
+
+    def z(shape, dt=dtype):
+        return jnp.zeros((T, *shape), dt)
+
+    rec = Record(z((n, 3)), z((3,)), z((m,)), z((m,)), z(()), z((), bool), z((), jnp.int32), z((m,), bool))
+    if su.track:
+        rec = rec._replace(goal=z((3,)), time=z(()), error=z(()))
+    return rec
+
+
+def freeze(records: Record, end, still: bool):
+    """Records after step ``end``: the state records hold their value at ``end``, the events are
+    empty. ``still`` (a static scene): after the end nothing moves, so the clearance during the
+    "motion" to each later step is the clearance itself; in a moving scene the records stop at the
+    last step taken, the between-step clearance at its last motion's."""
+    T1 = records.q.shape[0]
+    alive = jnp.arange(T1, dtype=jnp.int32) <= end
+
+    def fix(name, x):
+        if x is None:
+            return None
+        a = alive.reshape((-1,) + (1,) * (x.ndim - 1))
+        if name in EVENTS:
+            return jnp.where(a, x, jnp.zeros((), x.dtype))
+        last = records.clearance[end] if (still and name == "between") else x[end]
+        return jnp.where(a, x, last)
+
+    return Record(*(fix(f, getattr(records, f)) for f in Record._fields))
+
+
+def finish(world, options, records: Record, final) -> Rollout:
+    """The Rollout from a rollout's records (frozen after its end) and its last carry."""
+    su = setup(world, options)
+    plan = su.plan
+    T = records.q.shape[0] - 1
+    end = final.iterations
+    r = freeze(records, end, still=not su.moving)
+    min_clearance = jnp.minimum(jnp.min(r.clearance, initial=jnp.inf), jnp.min(r.between, initial=jnp.inf))
+    out = dict(q=r.q, tip=r.tip, clearance=r.clearance, between=r.between, iterations=final.iterations,
+               min_clearance=min_clearance, step_scale=r.step_scale, escapes=final.escapes, converged=r.converged,
+               fallbacks=r.fallbacks, between_searched=r.between_searched)
+    if su.stop_at_goal:
+        status = jnp.where(final.status == Status.RUNNING, Status.MAX_STEPS, final.status)
+        return Rollout(**out, status=status, reached=status == Status.REACHED, collided=status == Status.COLLIDED,
+                       final_error=safe_norm(su.scene.goal - r.tip[-1]))
+    # Tracking statistics over the steps taken (0..end).
+    steps = jnp.arange(T + 1, dtype=jnp.int32)
+    alive = steps <= end
+    within = (r.error < plan.goal_tolerance) & alive
+    reached = jnp.any(within)
+    reached_step = jnp.where(reached, jnp.argmax(within), -1).astype(jnp.int32)
+    after = alive & (steps >= reached_step) & reached
+    lost_at = jnp.where(after & (r.error > su.track.hold_tolerance), steps, T + 1)
+    first_loss = jnp.min(lost_at)
+    held_to_end = reached & (first_loss > end)
+    held_steps = jnp.where(reached, jnp.minimum(first_loss, end + 1) - reached_step, 0).astype(jnp.int32)
+    status = jnp.where(
+        final.status == Status.RUNNING,
+        jnp.where(held_to_end, Status.REACHED, jnp.where(reached, Status.LOST, Status.MAX_STEPS)),
+        final.status,
+    ).astype(jnp.int32)
+    return Rollout(**out, status=status, reached=reached, collided=status == Status.COLLIDED,
+                   final_error=r.error[end], goal=r.goal, time=r.time, error=r.error, reached_step=reached_step,
+                   held_steps=held_steps, held_to_end=held_to_end)

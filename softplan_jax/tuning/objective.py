@@ -1,0 +1,443 @@
+"""The Gaussian-smoothed rollout objective of gain tuning, and its score-function
+gradient: a gradient that predicts finite steps.
+
+Why not the pathwise gradient. A rollout of this planner is chaotic in its
+gains: closest points switch between local minima (the repulsion's direction
+jumps), the straight start pose makes phi's Jacobian singular, the Khatib
+field grows like 1/d^3 near contact, the clearance-bounded step creeps along
+obstacles, stalls start random walks and the status latches. Measured on 16
+random scenes at the default gains, escapes and stalls off and the state never
+frozen: the autodiff gradient of a 100-step loss has components of 1e9-1e11
+where central differences give 0.003-3, and the differences themselves change
+sign between h = 1e-2, 1e-3 and 1e-4. The pathwise gradient of the exact
+rollout exists almost everywhere and predicts nothing beyond a tiny
+neighbourhood (:func:`softplan_jax.tuning.rollout_loss` keeps it, for short
+horizons).
+
+The objective here. Parameters ``theta`` (a :class:`GainSpace`: log scalar
+gains, and optionally a repulsion profile and per-segment weights of a
+:class:`~softplan_jax.planning.step.GainFunction`) are perturbed per ROLLOUT, and the
+objective is the expectation over the perturbation and the scenes::
+
+    J(theta) = E_scene E_{eps ~ N(0, I)} [ L(decode(theta + sigma eps), scene) ]
+
+with ``L`` the per-rollout score of the library's own planner (safe step,
+escapes, collision checks; :func:`rollout_score`): the area under the tip's
+error curve (normalised by the start's error), plus 1 if the goal was not
+reached, plus 2 more if the arm collided -- so J is a smooth surrogate of the
+failure rate. J is a Gaussian convolution of a bounded function, hence smooth
+at the scale sigma whatever the rollout does, and its gradient has the
+score-function (likelihood-ratio) form, estimated with antithetic pairs::
+
+    grad J = E[ L(theta + sigma eps) eps ] / sigma
+           ~ 1/N sum_n (L(theta + sigma eps_n) - L(theta - sigma eps_n)) eps_n / (2 sigma)
+
+(Williams 1992; Salimans et al. 2017 for the antithetic form; Mohamed et al.
+2020, "Monte Carlo gradient estimation in machine learning", section 5).
+``sigma`` is one number or one per coordinate of theta (the smoothing
+distribution ``N(theta, diag(sigma^2))``; the formulas hold per coordinate).
+
+The pieces. :func:`smoothing_sample` rolls out 2N perturbed settings around a
+centre theta0 (antithetic pairs, one training scene each, ONE vmapped, jitted
+batch). :func:`smoothed_objective` is THE objective: the importance-weighted
+estimate of J from that sample, ``1/2N sum_k L_k N(x_k; theta, diag(sigma^2)) /
+N(x_k; theta0, diag(sigma^2))`` -- unbiased for J at every theta near theta0, smooth
+in theta, so ``jax.grad`` of it is exact for it and predicts its finite steps;
+at theta0 that gradient is the antithetic estimate above.
+:func:`estimate_objective` adds standard errors. ``tests/test_smoothing.py``
+checks the gradient against central differences of the same objective (every
+component within 10 %, three gain settings, one sigma and one per coordinate)
+and against central differences of J from FRESH rollouts at theta +- h (common
+random numbers; within three standard errors).
+
+The tuner that steps along these estimates, :func:`~softplan_jax.tuning.tuner.tune_smoothed`,
+is in :mod:`softplan_jax.tuning.tuner`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..base.compilation_cache import rollout_compiler_options
+from ..planning.planner import make_options
+from ..planning.programs import rollout
+from ..planning.step import GainFunction, Gains, PlanOptions
+from ..scenarios import Scenario
+
+__all__ = [
+    "GainSpace",
+    "ScoreWeights",
+    "rollout_score",
+    "score_batch",
+    "scores_jit",
+    "check_sigma",
+    "SmoothingSample",
+    "smoothing_sample",
+    "smoothed_objective",
+    "ObjectiveEstimate",
+    "estimate_objective",
+]
+
+SCALAR_GAINS = Gains._fields
+
+
+class GainSpace(NamedTuple):
+    """Which gains are tuned, and how they are parametrised (static, hashable).
+
+    ``theta`` (shape ``(size,)``) is laid out as: the logarithms of the scalar
+    gains ``names`` (they stay positive; a step is relative), then, with
+    ``knots >= 2``, the K log-multipliers ``rep_profile`` of the repulsion over
+    ``d / d0`` in [0, 1], then, with ``segments >= 1``, the n log-multipliers
+    ``seg_weights`` of each segment's repulsion (see
+    :class:`~softplan_jax.planning.step.GainFunction`). With neither, :meth:`decode`
+    returns :class:`~softplan_jax.planning.step.Gains`.
+
+    With ``stable_dt``, ``dt`` is not log-parametrised but as the logit of
+    ``r = dt k_att / 2``, its fraction of the Euler step's stability bound: within
+    ``v_max / k_att`` of the goal the attraction of eq. (9) is linear, so the
+    tip's error obeys ``e <- (1 - dt k_att) e`` (with ``J J^+`` close to the
+    identity away from singularities) and converges only for ``dt < 2 / k_att``
+    (1.0 at the default ``k_att = 2``). Beyond it the arm oscillates about its
+    goal: on random scenes success falls from 71-95 % at dt = 0.8 to 15-32 % at
+    dt = 1.1 (``benchmarks/tuning_validation/landscape.py``), a cliff in every
+    score, which a smoothing scale of 0.2 in log dt straddles from dt = 0.8. In
+    logit coordinates the bound lies at infinity, so neither a step nor the
+    smoothing's perturbations cross it.
+
+    Attributes:
+      names: scalar Gains fields tuned (log-parametrised; ``dt`` see ``stable_dt``).
+      knots: repulsion profile knots (0: none; else >= 2).
+      segments: per-segment repulsion weights (0: none; else the arm's n).
+      stable_dt: parametrise ``dt`` as ``logit(dt k_att / 2)`` (bool).
+    """
+
+    names: tuple = ("d0", "dt", "eta")
+    knots: int = 0
+    segments: int = 0
+    stable_dt: bool = False
+
+    @property
+    def size(self) -> int:
+        return len(self.names) + self.knots + self.segments
+
+    @property
+    def is_function(self) -> bool:
+        return self.knots > 0 or self.segments > 0
+
+    def check(self, n_segments: int | None = None) -> GainSpace:
+        names = tuple(self.names)
+        unknown = [k for k in names if k not in SCALAR_GAINS]
+        if unknown or len(set(names)) != len(names):
+            raise ValueError(f"GainSpace.names must be distinct Gains fields {list(SCALAR_GAINS)}; got {list(names)}")
+        if self.knots == 1 or self.knots < 0 or self.segments < 0:
+            raise ValueError(f"GainSpace needs knots 0 or >= 2 and segments >= 0; got {self.knots}, {self.segments}")
+        if self.segments and n_segments is not None and self.segments != n_segments:
+            raise ValueError(f"GainSpace.segments = {self.segments} for an arm of {n_segments} segments")
+        if self.size == 0:
+            raise ValueError("GainSpace tunes nothing: give names, knots or segments")
+        if not isinstance(self.stable_dt, (bool, np.bool_)):
+            raise ValueError(f"GainSpace.stable_dt must be a bool, got {self.stable_dt!r}")
+        return self._replace(names=names)
+
+    def base(self, gains, n_segments: int):
+        """``gains`` as the type this space decodes to (a GainFunction gets a zero
+        profile / weights where ``gains`` has none)."""
+        if not self.is_function:
+            return gains.scalars() if isinstance(gains, GainFunction) else gains
+        if isinstance(gains, GainFunction):
+            return gains
+        return GainFunction.from_gains(gains, max(self.knots, 2), self.segments or n_segments)
+
+    def encode(self, gains) -> jax.Array:
+        """theta of ``gains`` (a Gains or GainFunction; zeros where it has no profile).
+        With ``stable_dt``, a ``dt`` at or beyond ``2 / k_att`` encodes to +inf or nan."""
+
+        def coord(k):
+            v = jnp.asarray(getattr(gains, k))
+            if k == "dt" and self.stable_dt:
+                r = v * jnp.asarray(gains.k_att) / 2  # fraction of the stability bound 2 / k_att
+                return jnp.log(r) - jnp.log1p(-r)
+            return jnp.log(v)
+
+        parts = [jnp.stack([coord(k) for k in self.names])] if self.names else []
+        if self.knots:
+            p = gains.rep_profile if isinstance(gains, GainFunction) else None
+            parts.append(jnp.zeros((self.knots,), jnp.result_type(gains.k_att)) if p is None else p)
+        if self.segments:
+            w = gains.seg_weights if isinstance(gains, GainFunction) else None
+            parts.append(jnp.zeros((self.segments,), jnp.result_type(gains.k_att)) if w is None else w)
+        return jnp.concatenate(parts)
+
+    def decode(self, theta, base):
+        """The gains at ``theta``: ``base`` (as :meth:`base` returns it) with the tuned
+        entries replaced. Traceable; vmap over theta for many."""
+        nn = len(self.names)
+        stable = self.stable_dt and "dt" in self.names
+        g = base._replace(**{k: jnp.exp(theta[i]).astype(base.k_att.dtype) for i, k in enumerate(self.names)
+                             if not (stable and k == "dt")})
+        if stable:  # dt = (2 / k_att) sigmoid(theta_dt), with the (possibly tuned) k_att
+            g = g._replace(dt=(2 * jax.nn.sigmoid(theta[self.names.index("dt")]) / g.k_att).astype(g.k_att.dtype))
+        if self.knots:
+            g = g._replace(rep_profile=theta[nn : nn + self.knots].astype(base.k_att.dtype))
+        if self.segments:
+            g = g._replace(seg_weights=theta[nn + self.knots :].astype(base.k_att.dtype))
+        return g
+
+
+class ScoreWeights(NamedTuple):
+    """Weights of :func:`rollout_score` (floats).
+
+    Attributes:
+      progress: weight of the area under the tip-error curve, normalised by the
+        start's error (1: the tip never moved closer; near 0: reached at once).
+      unreached: added when the rollout did not reach the goal.
+      collided: added (on top of ``unreached``) when it collided.
+    """
+
+    progress: float = 1.0
+    unreached: float = 1.0
+    collided: float = 2.0
+
+
+def rollout_score(r, scenario: Scenario, weights: ScoreWeights = ScoreWeights()):
+    """The per-rollout score L of the smoothed objective (lower is better): a
+    failure indicator plus a progress term, bounded (at most about
+    ``progress + unreached + collided`` for an arm that never moves away from its
+    goal by more than its start error). ``r``: one (unbatched) Rollout."""
+    err = jnp.linalg.norm(scenario.goal - r.tip, axis=-1)
+    progress = jnp.mean(err) / jnp.maximum(err[0], jnp.finfo(err.dtype).tiny)
+    return (weights.progress * progress + weights.unreached * (~r.reached).astype(err.dtype)
+            + weights.collided * r.collided.astype(err.dtype))
+
+
+def _scores(thetas, space: GainSpace, base, scenarios: Scenario, keys, options: PlanOptions, max_steps: int,
+            weights: ScoreWeights):
+    """L of rollout b: scene ``scenarios[b]`` with gains ``decode(thetas[b])`` and escape
+    key ``keys[b]``; one vmapped batch."""
+
+    def one(theta, sc, key):
+        r = rollout(sc, space.decode(theta, base), options, max_steps, key)
+        return rollout_score(r, sc, weights), r.reached, r.collided
+
+    return jax.vmap(one)(thetas, scenarios, keys)
+
+
+_SCORES_JIT: dict = {}
+
+
+def score_batch(thetas, space: GainSpace, base, scenarios: Scenario, keys, options: PlanOptions, max_steps: int,
+                weights: ScoreWeights = ScoreWeights()):
+    """:func:`rollout_score` of a batch of rollouts, one per row: scene ``scenarios[b]`` (a
+    batched Scenario) with gains ``space.decode(thetas[b], base)`` and escape key ``keys[b]``
+    (one vmapped, jitted program per shape; the one :func:`smoothing_sample` runs).
+
+    Returns:
+      ``(scores (B,), reached (B,) bool, collided (B,) bool)``.
+    """
+    return scores_jit(options.method)(thetas, space, base, scenarios, keys, options, int(max_steps), weights)
+
+
+def scores_jit(method: str):
+    """``jax.jit(_scores)`` with the package's XLA options for the method (as the rollouts); the tuner
+    reads its cache size to tell compile time from run time."""
+    if method not in _SCORES_JIT:
+        _SCORES_JIT[method] = jax.jit(_scores, static_argnames=("space", "options", "max_steps", "weights"),
+                                      compiler_options=rollout_compiler_options(method))
+    return _SCORES_JIT[method]
+
+
+def check_sigma(sigma, size: int) -> np.ndarray:
+    """``sigma`` as a float64 array: shape () (one scale for every coordinate of theta)
+    or ``(size,)`` (one per coordinate), finite and > 0; else a ValueError."""
+    try:
+        s = np.asarray(sigma)
+        bad_type = s.dtype.kind not in "iuf"  # bools, strings, objects
+        s = s.astype(np.float64)
+    except (TypeError, ValueError):
+        bad_type = True
+    if bad_type or s.ndim > 1 or (s.ndim == 1 and s.shape != (size,)):
+        raise ValueError(f"sigma must be a number or {size} numbers (one per coordinate of theta), got {sigma!r}")
+    if not np.all(np.isfinite(s) & (s > 0)):
+        raise ValueError(f"sigma must be finite and > 0, got {sigma!r}")
+    return s
+
+
+def _draw(key, theta, scenarios: Scenario, pairs: int):
+    """The scenes, perturbations and escape keys of one sample: ``pairs`` scenes drawn
+    from the suite without replacement (the suite cycled in fresh permutations if it is
+    smaller), one eps per scene, the scene and its escape key shared by the pair's two signs."""
+    k_scene, k_eps, k_esc = jax.random.split(key, 3)
+    n_suite = scenarios.q0.shape[0]
+    reps = math.ceil(pairs / n_suite)
+    order = jnp.concatenate([jax.random.permutation(jax.random.fold_in(k_scene, i), n_suite) for i in range(reps)])
+    idx = order[:pairs]
+    eps = jax.random.normal(k_eps, (pairs, theta.shape[0]), theta.dtype)
+    esc = jax.random.split(k_esc, pairs)
+    return idx, eps, esc
+
+
+class SmoothingSample(NamedTuple):
+    """One sample of rollouts around ``theta0`` (see :func:`smoothing_sample`); a pytree.
+
+    Attributes:
+      theta0: (P,) the centre of the sample.
+      x: (2N, P) the perturbed parameters ``theta0 + sigma eps_n`` then
+        ``theta0 - sigma eps_n`` (antithetic pairs: row n and row N + n).
+      scores: (2N,) :func:`rollout_score` of each rollout.
+      reached, collided: (2N,) bool outcomes of each rollout.
+      sigma: () the smoothing scale, or (P,) one per coordinate of theta.
+      scenes: (N,) the suite's scene of each pair (its two rollouts).
+    """
+
+    theta0: jax.Array
+    x: jax.Array
+    scores: jax.Array
+    reached: jax.Array
+    collided: jax.Array
+    sigma: jax.Array
+    scenes: jax.Array
+
+
+def smoothing_sample(theta0, space: GainSpace, base, scenarios: Scenario, key, *, pairs: int = 32,
+                     sigma: float | Sequence[float] = 0.2, method: str = "curve", n_points: int = 10,
+                     max_steps: int = 100, weights: ScoreWeights = ScoreWeights(),
+                     options: PlanOptions | None = None, eps=None, scene_index=None) -> SmoothingSample:
+    """Roll out ``2 * pairs`` perturbed gain settings around ``theta0`` (one vmapped batch).
+
+    Args:
+      theta0: (P,) parameters of ``space`` (``space.encode(gains)``).
+      space: the :class:`GainSpace`.
+      base: the gains that theta modifies (``space.base(gains, n)``; fields not tuned
+        are taken from it).
+      scenarios: a batched Scenario, the training suite.
+      key: PRNG key of the draw (scenes, perturbations, escapes): the same key gives
+        the same draw (common random numbers: compare centres with one key).
+      pairs: N, antithetic pairs (2N rollouts): scene n and its escape key are shared
+        by ``theta0 + sigma eps_n`` and ``theta0 - sigma eps_n``.
+      sigma: smoothing scale, in theta's units (log-gains; log-multipliers): one number,
+        or P numbers, one per coordinate (the perturbations are ``sigma * eps``,
+        ``eps ~ N(0, I)``: the smoothing distribution is ``N(theta0, diag(sigma^2))``).
+      method, n_points, max_steps: the planner (``make_options(method, n_points)``: the
+        library's default planner, with its collision checks) and the rollout length.
+      weights: :class:`ScoreWeights`.
+      options: PlanOptions, overriding method / n_points.
+      eps: (N, P) perturbations to use instead of the key's (scenes and escape keys
+        still come from the key).
+      scene_index: (N,) ints, the suite's scenes to use instead of the key's draw
+        (scene n for pair n; perturbations and escape keys still come from the key).
+
+    Returns:
+      :class:`SmoothingSample`.
+    """
+    opts = options if options is not None else make_options(method, n_points)
+    dtype = scenarios.q0.dtype
+    theta0 = jnp.asarray(theta0, dtype)
+    if theta0.shape != (space.size,):
+        raise ValueError(f"theta must have shape ({space.size},) for {space}, got {theta0.shape}")
+    if not np.all(np.isfinite(np.asarray(theta0))):
+        raise ValueError(f"theta must be finite, got {np.asarray(theta0)}")
+    sigma = check_sigma(sigma, space.size)
+    if isinstance(pairs, bool) or not isinstance(pairs, (int, np.integer)) or pairs < 2:
+        raise ValueError(f"pairs must be an int >= 2 (standard errors need two pairs), got {pairs!r}")
+    if scenarios.q0.ndim != 3 or scenarios.q0.shape[0] < 1:
+        raise ValueError("scenarios must be a non-empty batched Scenario (random_scenarios, stack_scenarios)")
+    idx, draw_eps, esc = _draw(key, theta0, scenarios, int(pairs))
+    eps = draw_eps if eps is None else jnp.asarray(eps, dtype)
+    if scene_index is not None:
+        idx = np.asarray(scene_index)
+        if idx.shape != (int(pairs),) or idx.dtype.kind not in "iu":
+            raise ValueError(f"scene_index must be {pairs} ints, got {idx.dtype} of shape {idx.shape}")
+        if idx.min() < 0 or idx.max() >= scenarios.q0.shape[0]:
+            raise ValueError(f"scene_index must index the suite's {scenarios.q0.shape[0]} scenes, got "
+                             f"{idx.min()}..{idx.max()}")
+        idx = jnp.asarray(idx)
+    if eps.shape != (int(pairs), space.size):
+        raise ValueError(f"eps must have shape ({pairs}, {space.size}), got {eps.shape}")
+    sigma = jnp.asarray(sigma, dtype)
+    x = jnp.concatenate([theta0 + sigma * eps, theta0 - sigma * eps])
+    scenes = jax.tree_util.tree_map(lambda a: jnp.concatenate([a[idx], a[idx]]), scenarios)
+    keys = jnp.concatenate([esc, esc])
+    L, reached, collided = scores_jit(opts.method)(x, space, base, scenes, keys, opts, int(max_steps), weights)
+    return SmoothingSample(theta0, x, L, reached, collided, sigma, idx)
+
+
+def smoothed_objective(theta, sample: SmoothingSample):
+    """The smoothed objective J at ``theta``, estimated from one sample (pure, jittable,
+    differentiable: THE tuning objective; see the module docstring).
+
+    Importance-weighted (likelihood-ratio) estimate with the sample's fixed rollouts::
+
+        J(theta) ~ 1/(2N) sum_k L_k N(x_k; theta, diag(sigma^2)) / N(x_k; theta0, diag(sigma^2))
+
+    unbiased for the Gaussian-smoothed objective at every theta (the weights are the
+    density ratio), smooth in theta, equal to the sample mean of the scores at
+    ``theta0``; its gradient there (``jax.grad``) is the antithetic score-function
+    estimate ``1/N sum_n (L(theta0 + sigma eps_n) - L(theta0 - sigma eps_n)) eps_n / (2 sigma)``
+    (per coordinate, with one sigma per coordinate).
+    Far from ``theta0`` (beyond about sigma) the weights degenerate: draw a new sample.
+
+    Args:
+      theta: (P,) parameters.
+      sample: a :class:`SmoothingSample`.
+
+    Returns:
+      () the estimate of J(theta).
+    """
+    s2 = sample.sigma**2
+    if jnp.ndim(sample.sigma) == 0:
+        log_w = (jnp.sum((sample.x - sample.theta0) ** 2, -1) - jnp.sum((sample.x - theta) ** 2, -1)) / (2 * s2)
+    else:  # one scale per coordinate: N(x; theta, diag(sigma^2))
+        log_w = jnp.sum(((sample.x - sample.theta0) ** 2 - (sample.x - theta) ** 2) / (2 * s2), -1)
+    return jnp.mean(sample.scores * jnp.exp(log_w))
+
+
+class ObjectiveEstimate(NamedTuple):
+    """The objective and its gradient at a sample's centre, with standard errors (NumPy).
+
+    Attributes:
+      value: the estimate of J(theta0) (mean of the 2N scores).
+      grad: (P,) ``jax.grad(smoothed_objective)`` at theta0 (the antithetic
+        score-function estimate).
+      value_se, grad_se: standard errors over the N antithetic pairs.
+      success: fraction of the 2N rollouts that reached without collision.
+      collided: fraction that collided.
+      rollouts: 2N.
+    """
+
+    value: float
+    grad: np.ndarray
+    value_se: float
+    grad_se: np.ndarray
+    success: float
+    collided: float
+    rollouts: int
+
+
+_value_and_grad = jax.jit(jax.value_and_grad(smoothed_objective))
+
+
+def estimate_objective(sample: SmoothingSample) -> ObjectiveEstimate:
+    """:class:`ObjectiveEstimate` of a sample: J and its gradient at the sample's centre."""
+    value, grad = _value_and_grad(sample.theta0, sample)
+    L = np.asarray(sample.scores, np.float64)
+    n = L.shape[0] // 2
+    sigma = np.asarray(sample.sigma, np.float64)  # () or (P,)
+    e = (np.asarray(sample.x[:n], np.float64) - np.asarray(sample.theta0, np.float64)) / sigma
+    per_value = 0.5 * (L[:n] + L[n:])
+    per_grad = ((L[:n] - L[n:]) / 2.0)[:, None] * (e / sigma)
+    ok = np.asarray(sample.reached) & ~np.asarray(sample.collided)
+    return ObjectiveEstimate(
+        value=float(value),
+        grad=np.asarray(grad, np.float64),
+        value_se=float(per_value.std(ddof=1) / math.sqrt(n)),
+        grad_se=per_grad.std(0, ddof=1) / math.sqrt(n),
+        success=float(ok.mean()),
+        collided=float(np.asarray(sample.collided).mean()),
+        rollouts=2 * n,
+    )
