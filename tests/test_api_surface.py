@@ -190,7 +190,7 @@ def test_old_module_paths_still_import_with_a_deprecation_warning():
 
     code = ("import warnings, importlib; warnings.simplefilter('error', DeprecationWarning)\n"
             "import softplan_jax\n"
-            "for old in %r:\n"
+            f"for old in {sorted(OLD_MODULES)!r}:\n"
             "    try:\n"
             "        importlib.import_module('softplan_jax.' + old)\n"
             "    except DeprecationWarning as w:\n"
@@ -203,7 +203,7 @@ def test_old_module_paths_still_import_with_a_deprecation_warning():
             "from softplan_jax.motion import MovingScenario\n"
             "import softplan_jax.closest as c, softplan_jax.geometry.closest as g\n"
             "assert c.closest_point is g.closest_point and plan is softplan_jax.plan\n"
-            "print('ok')\n") % (sorted(OLD_MODULES),)
+            "print('ok')\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=subprocess_env(),
                          cwd=REPO, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stdout + out.stderr

@@ -1,7 +1,7 @@
 """Closest point arm <-> curve (paper section 2.3): the accuracy suite.
 
-Every case (``benchmarks/closest_cases.py``: ~1000 main cases, the paper's
-obstacles, a helix) is compared with ``benchmarks/oracle.py`` (dense grids + L-BFGS-B +
+Every case (``softplan_jax/testing/closest_cases.py``: ~1000 main cases, the paper's
+obstacles, a helix) is compared with ``softplan_jax/testing/oracle.py`` (dense grids + L-BFGS-B +
 bounded Brent on the edges + corners + Newton polish, plain NumPy/SciPy),
 which is itself checked here against closed-form answers first.
 

@@ -1,6 +1,6 @@
 """PCC kinematics (paper section 2.1-2.2) against the NumPy oracle.
 
-Values are compared with ``benchmarks/oracle.py`` (independent NumPy code from the
+Values are compared with ``softplan_jax/testing/oracle.py`` (independent NumPy code from the
 paper's formulas); first derivatives with the oracle's complex-step Jacobian
 (exact to rounding) AND with central finite differences; second derivatives
 with finite differences of Jacobians.  theta = 0 exactly and tiny theta are

@@ -2,7 +2,7 @@
 
 References, all independent of the library's code paths: the rigid motion
 and its speed by NumPy/SciPy (``scipy.linalg.expm`` of the axis' cross-product
-matrix), the closest point by the oracle (benchmarks/oracle.py) on the moved
+matrix), the closest point by the oracle (softplan_jax/testing/oracle.py) on the moved
 curve, the clearance between steps by a brute force over the oracle's
 kinematics and dense samples of the moving curve in space AND time.
 

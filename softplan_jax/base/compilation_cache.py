@@ -46,7 +46,7 @@ import tempfile
 __all__ = ["compilation_cache_dir", "enable_compilation_cache", "load_or_export", "rollout_compiler_options"]
 
 # XLA CPU options of the rollout programs, measured by
-# benchmarks/xla_options.py (results/xla_options.md), float64, checked rollouts:
+# benchmarks/xla_options.py (results/xla_options.md; git history at b850131), float64, checked rollouts:
 # - xla_cpu_experimental_ynn_fusion_type="" (every rollout): no XNNPACK (YNN) fusions; the
 #   planner's small (..., 3) arrays gain nothing from them and pay layout copies. Median
 #   run time per step -8 % single (tree), -33 % batched (64 random scenes); compile no slower.

@@ -46,7 +46,7 @@ and curve) every piece passes once ``tan(alpha)`` exceeds a fixed fraction
 curve runs nearly parallel to the arm. Cost: ``2 NODES`` point-to-arc
 distances per pair and step, in square roots and divisions only
 (:func:`~softplan_jax.geometry.closest.arc_distance2`: the certificate needs the
-values, not the minimisers; measured in ``benchmarks/kernel.py``: 18.6 ->
+values, not the minimisers; measured in ``benchmarks/kernel.py`` (git history, b850131): 18.6 ->
 7.5 µs of the tree's step with project_to_arc's trigonometry gone), pair
 fallbacks 0.4-0.6 % with 8 nodes per side against 3 % with 16 even cells
 (``benchmarks/warm_start.py``).
@@ -111,7 +111,7 @@ __all__ = ["CurveData", "curve_data", "warm_curves"]
 # Cut points of the lower bound per side of u* (window edge and range end included).
 NODES = 8
 # Newton iterations polishing the previous step's u* (the full solver: 4 starts x 8).
-# Measured (benchmarks/kernel.py, benchmarks/warm_start.py, 200 random scenes): 4, 3, 2
+# Measured (benchmarks/kernel.py at b850131, benchmarks/warm_start.py, 200 random scenes): 4, 3, 2
 # iterations give pair fallback rates 0.53 %, 0.63 %, 1.5 % and batched steps of
 # 30, 27, 25 us. 3: with 2, a start off by 0.01 of the curve's range (about one large
 # planner step) often needs the fallback (tests/test_warm_start.py: 11 of 48 cases
@@ -295,7 +295,7 @@ def _fallback_fn(solver: SolverOptions):
     solves per failure of its worst member (measured: 8 of 44 µs per
     scenario-step, batch of 64). The rule instead folds the batch axis into
     the array and solves only the failed pairs of all members, ``FALLBACK_CHUNK``
-    at a time (``benchmarks/kernel.py``, batch of 64: 39 -> 31 µs per
+    at a time (``benchmarks/kernel.py`` at b850131, batch of 64: 39 -> 31 µs per
     scenario-step). Nested ``vmap`` folds one axis per level. custom_vmap has
     no reverse-mode rule; none is needed, as every input is stop_gradient-ed
     (the JVP of a rollout sees only symbolic-zero tangents here).

@@ -123,11 +123,11 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
     noise by about the learning rate at every update, a random walk; on a
     validation seed (``random_scenarios(2, 256)``, never the held-out one) adam
     ended 10-20 points of success lower for N = 10
-    (``benchmarks/tuning_validation/``).
+    (``benchmarks/tuning_validation/`` in git history at b850131).
 
     The defaults are conservative (log-gains, one sigma 0.2, step 0.1). The
     recipe ``benchmarks/tuning.py`` uses, chosen on that validation seed
-    (``benchmarks/tuning_validation/val10.py``), is
+    (``benchmarks/tuning_validation/val10.py``, b850131), is
     ``space=GainSpace(("d0", "dt"), stable_dt=True), sigma=(0.3, 0.7),
     natural=True, learning_rate=3.75, max_step=0.3`` from the centre of the
     grid's box: log d0's landscape is steep and lopsided and its gradient noisy,
@@ -146,7 +146,7 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
     gain so far out that every rollout fails and the objective is flat, with
     nothing to bring it back. On the validation seed the clip (0.3) was the
     better guard for the recipe above; the grid's box cost a point
-    (``benchmarks/tuning_validation/val7.py``).
+    (``benchmarks/tuning_validation/val7.py``, b850131).
 
     Args:
       scenarios: the training suite (a batched Scenario, e.g.
@@ -174,7 +174,7 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
         again. False: each update draws its ``pairs`` scenes independently
         (:func:`smoothing_sample`'s draw). Perturbations and escape keys are the
         same either way. For the recipe above it did not narrow the spread over
-        tuner seeds on the validation seed (``benchmarks/tuning_validation/val9.py``).
+        tuner seeds on the validation seed (``benchmarks/tuning_validation/val9.py``, b850131).
       natural: step along the natural gradient ``sigma**2 * grad J`` (per coordinate)
         instead of ``grad J``: the gradient with respect to the mean of the smoothing
         distribution ``N(theta, diag(sigma^2))`` in the metric of its Fisher information
