@@ -1197,7 +1197,7 @@ def speed(name: str, method: str, n_points: int, max_steps: int, jax_repeats: in
         row.update(
             rollout_max_steps=max_steps, rollout_total_s=total, rollout_per_step_s=per,
             rollout_compile_s=compile_s, ratio_rollout=numpy_med / per,
-            rollout_iterations=it, rollout_status=sp.planner.status_name(r.status),
+            rollout_iterations=it, rollout_status=sp.planning.status_name(r.status),
             rollout_vs_numpy_max_diff=float(np.max(np.abs(np.asarray(r.q[:T]) - npr.q[:T]))),
             rollout_vs_numpy_steps=T - 1,
         )

@@ -35,6 +35,7 @@ from . import planning as planning
 from . import scenarios as scenarios
 from . import search as search
 from . import tuning as tuning
+from ._compat import OLD_MODULES as _OLD_MODULES
 from ._compat import install as _install_old_module_paths
 from .base.compilation_cache import enable_compilation_cache
 from .base.status import Status
@@ -139,6 +140,8 @@ def __getattr__(name):
                        stacklevel=2)
         return getattr(_importlib.import_module(f"{__name__}.{where}"), name)
     if name in _LAZY_MODULES:
+        return _importlib.import_module(f"{__name__}.{name}")
+    if name in _OLD_MODULES:  # a flat module of before the layers: forwarded, with a DeprecationWarning
         return _importlib.import_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 

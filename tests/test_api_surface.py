@@ -203,6 +203,7 @@ def test_old_module_paths_still_import_with_a_deprecation_warning():
             "from softplan_jax.motion import MovingScenario\n"
             "import softplan_jax.closest as c, softplan_jax.geometry.closest as g\n"
             "assert c.closest_point is g.closest_point and plan is softplan_jax.plan\n"
+            "assert softplan_jax.curves.line_segment is softplan_jax.line_segment  # a flat module as an attribute\n"
             "print('ok')\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=subprocess_env(),
                          cwd=REPO, timeout=120)
