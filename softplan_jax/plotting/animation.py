@@ -84,6 +84,7 @@ def _check_gif_args(name: str, path, fps, max_frames) -> str:
         raise ValueError(f"max_frames must be >= 2, got {max_frames!r}")
     return path
 
+
 def _frame_steps(iterations: int, max_frames) -> np.ndarray:
     """The steps shown of 0 .. ``iterations``: at most ``max_frames``, evenly spaced, the first and the last."""
     return np.unique(np.round(np.linspace(0, iterations, min(iterations + 1, int(max_frames)))).astype(int))
