@@ -130,7 +130,7 @@ _MOVED = {
     "compilation_cache_dir": "base.compilation_cache",
 }
 
-_LAZY_MODULES = ("plotting", "cli", "base")
+_LAZY_MODULES = ("plotting", "cli")  # imported on first use: matplotlib, argparse
 
 
 def __getattr__(name):
