@@ -12,7 +12,8 @@ options, ``--max-steps`` steps:
 
 1. **Tracking** by the curve model and the N-point models (N = 10, 50) under
    the same motion, paired on the same scenes: statuses (reached = reached and
-   held to the end, lost, max_steps = never reached, too_fast, collided), rates
+   held to the end, held = left and regained by the end, lost = left and not
+   regained, max_steps = never reached, too_fast, collided), rates
    with Wilson 95 % intervals, McNemar tests of curve against each N.
    Collisions by the rollout's own checks (exact clearance at every step,
    between steps the swept proof with the obstacles' travel, else a search).
@@ -45,7 +46,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-STATUSES = ("reached", "lost", "max_steps", "too_fast", "collided", "non_finite")
+STATUSES = ("reached", "held", "lost", "max_steps", "too_fast", "collided", "non_finite")
 
 
 def parse_args(argv=None):
@@ -280,16 +281,16 @@ def _figures(sp, table, n, fig_dir, quick, T):
     out = {}
     fig, ax = plt.subplots(figsize=(8, 4))
     labels = list(table)
-    shown = ("reached", "lost", "max_steps", "too_fast", "collided")
-    colors = {"reached": "#1b9e77", "lost": "#7570b3", "max_steps": "#bbbbbb", "too_fast": "#e6ab02",
-              "collided": "#d95f02"}
-    width = 0.16
+    shown = ("reached", "held", "lost", "max_steps", "too_fast", "collided")
+    colors = {"reached": "#1b9e77", "held": "#66a61e", "lost": "#7570b3", "max_steps": "#bbbbbb",
+              "too_fast": "#e6ab02", "collided": "#d95f02"}
+    width = 0.13
     for i, s in enumerate(shown):
         vals = [table[lab]["counts"][s] / n for lab in labels]
         lo_hi = [wilson(table[lab]["counts"][s], n) for lab in labels]
         err = np.array([[v - lo for v, (lo, hi) in zip(vals, lo_hi, strict=True)],
                         [hi - v for v, (lo, hi) in zip(vals, lo_hi, strict=True)]])
-        x = np.arange(len(labels)) + (i - 2) * width
+        x = np.arange(len(labels)) + (i - 2.5) * width
         ax.bar(x, vals, width, color=colors[s], label=s, yerr=err, capsize=2)
     ax.set_xticks(np.arange(len(labels)), labels)
     ax.set_ylabel(f"share of {n} moving scenes")
@@ -322,13 +323,15 @@ def _markdown(rep, pct_interval, wilson, names):
         "",
         "## Tracking, paired on the same scenes",
         "",
-        "| model | reached and held | lost | never reached | too_fast | collided | median held | min clearance |",
-        "|---|---|---|---|---|---|---|---|",
+        "| model | reached and held | held (regained) | lost | never reached | too_fast | collided | median held "
+        "| min clearance |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for label, row in rep["table"].items():
         c = row["counts"]
         held = "–" if row["median_held_s"] is None else f"{row['median_held_s']:.1f} s"
-        lines.append(f"| {label} | {pct_interval(c['reached'], n)} | {pct_interval(c['lost'], n)} | "
+        lines.append(f"| {label} | {pct_interval(c['reached'], n)} | {pct_interval(c['held'], n)} | "
+                     f"{pct_interval(c['lost'], n)} | "
                      f"{pct_interval(c['max_steps'], n)} | {pct_interval(c['too_fast'], n)} | "
                      f"{pct_interval(c['collided'], n)} | {held} | {row['min_clearance']:.2e} |")
     lines += ["", "Paired (reached and held), curve against each N-point model:", ""]

@@ -50,6 +50,8 @@ SCRIPTS = {
     "throughput": [[]],
     "devices": [[]],
     "baselines": [["save", "--fallback"]],
+    "sweep_scale": [[]],
+    "compile_by_degree": [[]],
 }
 
 

@@ -7,6 +7,8 @@ sub-namespaces, one per layer of the package, read top-down:
 * :mod:`softplan_jax.cli` -- the ``softplan`` command;
 * :mod:`softplan_jax.plotting` -- figures and animations (matplotlib);
 * :mod:`softplan_jax.tuning` -- tuning the gains on a suite, gains files;
+* :mod:`softplan_jax.sweeps` -- sweeps at scale: a seeded random suite of any
+  size planned in chunks, in constant memory, streamed to disk, resumable;
 * :mod:`softplan_jax.search` -- reachability and the certified global fallback;
 * :mod:`softplan_jax.planning` -- the planner of paper eq. (9), its rollout
   engine, planning and tracking;
@@ -20,7 +22,7 @@ sub-namespaces, one per layer of the package, read top-down:
 
 :mod:`softplan_jax.moving` gathers what moving scenes and tracking need.
 Names that used to be at the top level still work, with a ``DeprecationWarning``
-that names their new place (see docs/api.md).
+that names their new place (see the API reference, docs/api/).
 """
 
 import importlib as _importlib
@@ -34,10 +36,12 @@ from . import moving as moving
 from . import planning as planning
 from . import scenarios as scenarios
 from . import search as search
+from . import sweeps as sweeps
 from . import tuning as tuning
 from ._compat import OLD_MODULES as _OLD_MODULES
 from ._compat import install as _install_old_module_paths
-from .base.compilation_cache import enable_compilation_cache
+from .base.compilation_cache import disable_compilation_cache, enable_compilation_cache
+from .base.compilation_cache import enable_default_cache as _enable_default_cache
 from .base.status import Status
 from .geometry.closest import closest_point
 from .geometry.curves import ParametricCurve, PolynomialCurve, line_segment
@@ -54,6 +58,9 @@ from .search.fallback import plan_fallback
 from .tuning.gains_file import load_gains, save_gains
 
 _install_old_module_paths()
+# jax's persistent compilation cache on for the planner's programs, unless the user set one or
+# opted out (SOFTPLAN_JAX_NO_CACHE=1; see softplan_jax.base.compilation_cache).
+_enable_default_cache()
 
 try:
     __version__ = _version("softplan_jax")
@@ -99,6 +106,7 @@ __all__ = [
     "save_gains",
     "load_gains",
     "enable_compilation_cache",
+    "disable_compilation_cache",
     "__version__",
 ]
 

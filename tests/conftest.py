@@ -56,10 +56,12 @@ session.enable()
 SHARED = {
     "planner": ["test_planner", "test_engine", "test_safe_step", "test_smoothing", "test_moving", "test_notebooks"],
     "cli": ["test_warm_start", "test_cli", "test_presets", "test_gains_file"],
+    # test_sweep's fallback runs test_reach's search programs (same padded shape and options).
+    "reach": ["test_reach", "test_sweep"],
 }
 # Units in this order (largest first, so that the other worker's smaller units fill
 # the time the largest takes); units not listed follow in collection order.
-FIRST = ["planner", "cli", "test_benchmarks", "test_closest", "test_batch", "test_fitting", "test_kinematics"]
+FIRST = ["planner", "cli", "reach", "test_benchmarks", "test_closest", "test_batch", "test_fitting", "test_kinematics"]
 
 
 def _unit(module: str) -> str:

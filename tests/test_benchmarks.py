@@ -117,7 +117,7 @@ def test_paper_tables_quick(paper_run):
     assert all(os.path.exists(p) for p in report["figures"])
 
 
-@pytest.mark.slow
+@pytest.mark.bench
 def test_batch_sweep_quick(tmp_path):
     d = tmp_path
     cmd = [sys.executable, os.path.join(BENCH, "batch_sweep.py"), "--quick", "--out", str(d / "sweep1"), "--figure",
@@ -178,11 +178,11 @@ def test_run_all_rejects_unknown_scripts(capsys):
 
 
 # Scripts whose quick run no other test below runs: `NAME.py --quick --out DIR/NAME` in a subprocess.
-QUICK_ONLY = ["baselines", "closest", "devices", "engine", "numpy_baseline", "paper_presets", "speed_targets",
-              "throughput", "warm_start"]
+QUICK_ONLY = ["baselines", "closest", "compile_by_degree", "devices", "engine", "numpy_baseline", "paper_presets",
+              "speed_targets", "sweep_scale", "throughput", "warm_start"]
 
 
-@pytest.mark.slow
+@pytest.mark.bench
 @pytest.mark.parametrize("name", QUICK_ONLY)
 def test_quick_run_writes_its_report(tmp_path, name):
     prefix = tmp_path / name
@@ -412,7 +412,7 @@ def test_safe_step_wilson_interval_matches_the_formula():
     assert abs(lo) < 1e-12 and abs(hi - 0.00383) < 1e-5
 
 
-@pytest.mark.slow
+@pytest.mark.bench
 def test_safe_step_quick_run_writes_its_report(tmp_path):
     import safe_step
 
@@ -427,7 +427,7 @@ def test_safe_step_quick_run_writes_its_report(tmp_path):
     assert "Wilson" in (tmp_path / "ss.md").read_text()
 
 
-@pytest.mark.slow
+@pytest.mark.bench
 def test_science_quick_run(tmp_path):
     """The whole science pipeline at toy sizes: tuning, held-out, paired tests, figures, files."""
     import json
@@ -497,7 +497,7 @@ def test_tuning_benchmark_rejects_bad_arguments():
     assert tuning_bench.fn_kwargs(args, GainSpace(tuning_bench.TUNED))["sigma"] == (0.3, 0.7, 0.3)
 
 
-@pytest.mark.slow
+@pytest.mark.bench
 def test_tuning_benchmark_quick_run(tmp_path):
     """The whole comparison at toy sizes: every tuner, held-out records, paired tests, figures, files."""
     import json
@@ -531,7 +531,7 @@ def test_reach_benchmark_rejects_bad_arguments():
             reach_bench.parse_args(argv)
 
 
-@pytest.mark.slow
+@pytest.mark.bench
 def test_reach_benchmark_quick_run(tmp_path):
     """The whole benchmark at toy sizes (20 local steps, so that the search runs): files, checks, figures."""
     import json
@@ -562,7 +562,7 @@ def test_moving_benchmark_rejects_bad_arguments():
             moving_bench.parse_args(argv)
 
 
-@pytest.mark.slow
+@pytest.mark.bench
 def test_moving_benchmark_quick_run(tmp_path):
     """The whole benchmark at toy sizes: the table, the independent checks, the timing, the figures."""
     import json

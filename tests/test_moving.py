@@ -261,12 +261,13 @@ def test_an_obstacle_too_fast_to_avoid_ends_too_fast_not_collided():
     assert S * float(sp.default_gains().dt) > 0.8 * (r.clearance[-1].min() - 2e-6)
 
 
+@pytest.mark.slow  # float32 tracking programs of their own (~40 s of compilation); CI's slow step
 def test_float32_smoke(random_moving):
     """float32: the fruit preset and two random moving scenes, no contact by brute force."""
     m = sp.moving_scenario("tree_fruit", dtype=jnp.float32)
     r = sp.track(m, max_steps=STEPS)
     assert r.q.dtype == np.float32
-    assert not r.collided and r.status in ("reached", "lost"), r.status
+    assert not r.collided and r.status in ("reached", "held", "lost"), r.status
     assert np.all(np.isfinite(r.q)) and r.min_clearance > 0
     assert _brute_min_clearance(r, substeps=2, curve_samples=200) > 0
     for moving in random_moving[:2]:
@@ -377,13 +378,15 @@ def test_cli_plays_a_moving_preset(tmp_path, capsys, monkeypatch):
     assert np.ptp(record["goal"], axis=0).max() > 0.01
     assert main(["run", "tree_fruit", "--anticipation", "-1"]) == 2
     assert main(["run", "tree_fruit", "--hold-tolerance", "0"]) == 2
-    # --require-reached: success only ("reached": reached and held to the end); "lost" fails.
+    # --require-reached: success only ("reached", or "held": back on the goal at the end); "lost" fails.
     assert main(["run", "tree_fruit", "--max-steps", str(STEPS), "--require-reached"]) == 0
     import softplan_jax.planning.tracking as tracking
 
     held = tracking.result_from_track
     monkeypatch.setattr(tracking, "result_from_track", lambda *a: held(*a)._replace(status="lost"))
     assert main(["run", "tree_fruit", "--max-steps", str(STEPS), "--require-reached"]) == 3
+    monkeypatch.setattr(tracking, "result_from_track", lambda *a: held(*a)._replace(status="held"))
+    assert main(["run", "tree_fruit", "--max-steps", str(STEPS), "--require-reached"]) == 0
 
 
 def test_animation_draws_the_moving_obstacles(tmp_path):

@@ -1,5 +1,8 @@
-"""The notebooks run top to bottom in a fresh Jupyter kernel, and their first
-cell is the Colab install cell, harmless anywhere else.
+"""The notebooks run top to bottom in a fresh Jupyter kernel. Their first cell
+is the title with an "Open in Colab" link; the next is the Colab install
+cell, harmless anywhere else: on Colab it installs
+from the repository that pyproject.toml names (``[project.urls] Repository``,
+written into the notebooks, with the Colab links, by ``notebooks/colab_links.py``).
 
 The kernel is this interpreter (``sys.executable -m ipykernel_launcher``),
 described by a kernel spec written to a temporary directory, so that a user's
@@ -93,6 +96,7 @@ def test_parameter_cell_matches_the_small_values(name):
     assert _assigned_names(cell.source) == _assigned_names(SMALL[name]), (cell.source, SMALL[name])
 
 
+@pytest.mark.slow  # a kernel per notebook (about 2.5 min of the default suite's time); CI's slow step runs them
 @pytest.mark.parametrize("name", NOTEBOOKS)
 def test_notebook_runs_top_to_bottom(name, tmp_path):
     """Executed top to bottom at small sizes (the parameter cell replaced by SMALL[name])."""
@@ -145,8 +149,9 @@ def test_committed_notebook_has_outputs(name):
 
 def _install_cell(name):
     nb = _read(name)
-    first = nb.cells[0]
-    assert first.cell_type == "code", f"{name}: the first cell must be the (code) install cell"
+    assert nb.cells[0].cell_type == "markdown", f"{name}: the first cell must be the title (with the Colab link)"
+    first = next(c for c in nb.cells if c.cell_type == "code")  # the install cell, right below the title
+    assert nb.cells.index(first) == 1, f"{name}: the install cell must follow the title cell"
     src = first.source
     lines = [line for line in src.splitlines() if line.strip() and not line.lstrip().startswith("#")]
     assert lines[0].startswith("REPO_URL = "), f"{name}: the install cell must start by defining REPO_URL"
@@ -221,14 +226,53 @@ def test_install_cell_is_harmless_outside_colab(name, tmp_path):
     assert result["x64"], f"{name}: the install cell did not enable float64"
 
 
+def _pyproject_repository():
+    """``[project.urls] Repository`` of pyproject.toml (read here independently of notebooks/colab_links.py)."""
+    import tomllib
+
+    with open(NOTEBOOK_DIR.parent / "pyproject.toml", "rb") as fh:
+        return tomllib.load(fh)["project"]["urls"]["Repository"]
+
+
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_install_source_and_colab_link_follow_pyproject(name):
+    """REPO_URL is the project's Repository URL, and the title cell links to the notebook on Colab."""
+    repo = _pyproject_repository()
+    assert repo.startswith("https://github.com/"), repo
+    src = _install_cell(name)
+    assert src.splitlines()[0].startswith(f'REPO_URL = "{repo}"'), (
+        f"{name}: REPO_URL is not pyproject.toml's Repository {repo}: run python notebooks/colab_links.py")
+    owner_repo = repo.removeprefix("https://github.com/").removesuffix(".git").strip("/")
+    link = f"https://colab.research.google.com/github/{owner_repo}/blob/main/notebooks/{name}"
+    title = _read(name).cells[0]
+    assert title.cell_type == "markdown" and title.source.startswith("# "), f"{name}: cell 0 must be the title"
+    assert f"[![Open In Colab](https://colab.research.google.com/assets/colab-badge.svg)]({link})" in title.source, (
+        f"{name}: no Open in Colab link to {link}: run python notebooks/colab_links.py")
+
+
+def test_colab_links_tool_agrees():
+    """notebooks/colab_links.py --check finds the notebooks in step (the tool and the test above agree)."""
+    proc = subprocess.run([sys.executable, str(NOTEBOOK_DIR / "colab_links.py"), "--check"], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
 @pytest.mark.parametrize("name", NOTEBOOKS)
 def test_install_cell_installs_from_repo_url_on_colab(name, tmp_path):
     src = _install_cell(name)
-    # The unedited placeholder: a clear error, nothing installed.
-    result = _run_cell(src, "colab", tmp_path / "placeholder")
+    # As committed, no edit: pip install of exactly the project's repository, with this interpreter.
+    result = _run_cell(src, "colab", tmp_path / "committed")
+    assert len(result["launched"]) == 1, result
+    cmd = result["launched"][0]
+    assert cmd.startswith(f"{sys.executable} -m pip install"), cmd
+    assert cmd.endswith(f"git+{_pyproject_repository()}"), cmd
+    assert result["error"] and result["error"].startswith("Refused"), result
+    # No repository in the metadata (REPO_URL empty): a clear error, nothing installed.
+    emptied = src.replace(src.splitlines()[0], 'REPO_URL = ""', 1)
+    result = _run_cell(emptied, "colab", tmp_path / "empty")
     assert result["launched"] == [], result
-    assert result["error"] and "REPO_URL" in result["error"], result
-    # An edited URL: pip install of exactly that URL, with this interpreter.
+    assert result["error"] and "REPO_URL" in result["error"] and "[project.urls]" in result["error"], result
+    # Another URL written in: pip install of exactly that URL.
     url = "https://example.org/someone/softplan_jax"
     edited = src.replace(src.splitlines()[0], f'REPO_URL = "{url}"', 1)
     result = _run_cell(edited, "colab", tmp_path / "edited")

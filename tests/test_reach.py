@@ -177,7 +177,7 @@ def test_unreachable_goal_gets_a_status_not_a_path():
     r = sp.plan_fallback(s, max_steps=200)
     assert r.status == "unreachable" and r.reason == "beyond_reach" and not r.reached
     assert r.planner == "local"
-    assert r.best_error == pytest.approx(10.0 - 3 * 1.05, abs=1e-3)
+    assert r.iterations == 0 and r.best_error is None  # proven on the host: returned before planning
     assert np.isfinite(r.q).all() and not r.collided
 
 

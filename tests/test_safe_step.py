@@ -12,7 +12,7 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.geometry.clearance import apply_collision_checks
-from softplan_jax.planning.planner import make_options
+from softplan_jax.planning.planner import make_options, result_from_rollout
 from softplan_jax.planning.programs import rollout_batch, rollout_jit
 from softplan_jax.testing import oracle
 
@@ -187,13 +187,20 @@ def test_escapes_are_reproducible_and_reach_more():
 
 
 def test_nan_clearance_is_a_failure_not_clear():
-    """A curve whose points are NaN (built past the constructor's check): the
-    clearance is NaN, and the rollout ends non-finite, never reached or clear."""
+    """A curve whose points are NaN (built past the constructor's, make_scenario's and plan's
+    checks, straight into the rollout): the clearance is NaN, and the rollout ends non-finite,
+    never reached or clear."""
     good = sp.line_segment([0.5, -1.0, 1.5], [0.5, 1.0, 1.5])
     bad = sp.PolynomialCurve.tree_unflatten(None, [good.coeffs * jnp.nan, good.u_range, good.radius])
-    sc = sp.make_scenario([1.0, 0.0, 2.0], [bad], **PAD)
+    with pytest.raises(ValueError, match="not finite"):
+        sp.make_scenario([1.0, 0.0, 2.0], [bad], **PAD)
+    sc = sp.make_scenario([1.0, 0.0, 2.0], [good], **PAD)
+    sc = sc._replace(curves=sp.PolynomialCurve.tree_unflatten(
+        None, [sc.curves.coeffs.at[0].multiply(jnp.nan), sc.curves.u_range, sc.curves.radius]))
+    with pytest.raises(ValueError, match="scenario.curves"):
+        sp.plan(sc, max_steps=200)
     for step, extra in (("safe", {}), ("plain", sp.PAPER_STEP)):
-        r = sp.plan(sc, max_steps=200, **extra)
+        r = result_from_rollout(rollout_jit(sc, sp.default_gains(), sp.make_options(**extra), 200), sc)
         assert r.status == "non_finite", (step, r.status)
         assert not r.reached and not r.collided
         assert np.isnan(r.min_clearance)  # never reported as a finite (clear) clearance

@@ -326,6 +326,7 @@ def test_bad_suites_and_theta(suite):
         smoothing_sample(jnp.array([0.0, jnp.nan, 0.0]), space, base, suite, jax.random.PRNGKey(0))
 
 
+@pytest.mark.slow  # a float32 objective and gradient of their own (~20 s of compilation); CI's slow step
 def test_float32_straight_arm_gradient_is_finite():
     """float32 smoke test: the default start is the straight arm (theta = 0 on every
     segment); the smoothed objective's value and gradient are finite."""

@@ -2,13 +2,23 @@
 paper's method: it keeps compiled rollouts on disk, so the second run of a
 script, notebook or ``softplan run`` skips the XLA compilation).
 
-``softplan run`` turns it on by itself; in scripts and notebooks call
-:func:`enable_compilation_cache` once, before the first plan. The directory is
+On by default: ``import softplan_jax`` calls :func:`enable_default_cache`, so
+that a script's or notebook's second run loads the planner's compiled programs
+from disk instead of compiling them again (the README's quick start: about
+three times faster from the second run). The directory is
 ``$SOFTPLAN_CACHE_DIR/jax`` if set, else ``$XDG_CACHE_HOME/softplan_jax/jax``
-(default ``~/.cache/softplan_jax/jax``). ``SOFTPLAN_COMPILATION_CACHE=0`` turns
-it off. A cache directory the user already gave jax (the
-``JAX_COMPILATION_CACHE_DIR`` environment variable or
-``jax.config.update("jax_compilation_cache_dir", ...)``) is kept as it is.
+(default ``~/.cache/softplan_jax/jax``). jax keeps the programs that took at
+least ``jax_persistent_cache_min_compile_time_secs`` (default 1 s) to compile:
+the planner's rollouts and searches, and any such program of the same process.
+
+Turning it off: ``SOFTPLAN_JAX_NO_CACHE=1`` (or ``SOFTPLAN_COMPILATION_CACHE=0``)
+in the environment before the import, or :func:`disable_compilation_cache`
+after it (before the first plan; it also stops ``softplan run``'s traced
+programs below). A cache the user configured is never touched: a directory
+already given to jax (the ``JAX_COMPILATION_CACHE_DIR`` environment variable or
+``jax.config.update("jax_compilation_cache_dir", ...)`` before the import; a
+later update simply wins, as jax reads the setting at its first compilation),
+and ``jax_enable_compilation_cache=False``.
 
 jax's cache skips XLA's compilation but not the tracing and lowering of the
 rollout in Python, which cost more than the rest of a second ``softplan run``
@@ -43,7 +53,8 @@ import hashlib
 import os
 import tempfile
 
-__all__ = ["compilation_cache_dir", "enable_compilation_cache", "load_or_export", "rollout_compiler_options"]
+__all__ = ["compilation_cache_dir", "enable_compilation_cache", "enable_default_cache", "disable_compilation_cache",
+           "load_or_export", "rollout_compiler_options"]
 
 # XLA CPU options of the rollout programs, measured by
 # benchmarks/xla_options.py (results/xla_options.md; git history at b850131), float64, checked rollouts:
@@ -62,10 +73,23 @@ CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 CURVE_CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 
+_OFF = ("0", "false", "no", "off")
+# The directory enable_default_cache gave jax (None: it set none), and whether
+# disable_compilation_cache was called in this process.
+_DEFAULT_DIR: str | None = None
+_DISABLED = False
+
+
+def _turned_off() -> bool:
+    return (_DISABLED or os.environ.get("SOFTPLAN_COMPILATION_CACHE", "1").strip().lower() in _OFF
+            or os.environ.get("SOFTPLAN_JAX_NO_CACHE", "0").strip().lower() not in ("", *_OFF))
+
+
 def compilation_cache_dir() -> str | None:
     """The directory softplan_jax uses for compiled programs (None: turned off by
-    ``SOFTPLAN_COMPILATION_CACHE=0``)."""
-    if os.environ.get("SOFTPLAN_COMPILATION_CACHE", "1").strip().lower() in ("0", "false", "no", "off"):
+    ``SOFTPLAN_JAX_NO_CACHE=1``, ``SOFTPLAN_COMPILATION_CACHE=0`` or
+    :func:`disable_compilation_cache`)."""
+    if _turned_off():
         return None
     root = os.environ.get("SOFTPLAN_CACHE_DIR")
     if not root:
@@ -102,6 +126,42 @@ def enable_compilation_cache(directory: str | None = None) -> str | None:
         return None
     jax.config.update("jax_compilation_cache_dir", directory)
     return directory
+
+
+def enable_default_cache() -> str | None:
+    """What ``import softplan_jax`` does: :func:`enable_compilation_cache` unless the
+    user turned the cache off (``SOFTPLAN_JAX_NO_CACHE=1``, ``SOFTPLAN_COMPILATION_CACHE=0``,
+    ``jax_enable_compilation_cache=False``) or gave jax a directory of their own (kept).
+    Returns the directory jax now uses (None: none)."""
+    global _DEFAULT_DIR
+    import jax
+
+    if jax.config.jax_compilation_cache_dir or _turned_off() or not jax.config.jax_enable_compilation_cache:
+        return jax.config.jax_compilation_cache_dir or None
+    _DEFAULT_DIR = enable_compilation_cache()
+    return _DEFAULT_DIR
+
+
+def disable_compilation_cache() -> bool:
+    """Turn softplan_jax's caches off in this process: the directory that
+    ``import softplan_jax`` gave jax (not one the user set) and ``softplan run``'s
+    traced programs. Call it before the first plan (jax opens its cache at its
+    first compilation). Returns whether jax's cache directory was unset."""
+    global _DISABLED, _DEFAULT_DIR
+    import jax
+
+    _DISABLED = True
+    if _DEFAULT_DIR is None or jax.config.jax_compilation_cache_dir != _DEFAULT_DIR:
+        return False
+    jax.config.update("jax_compilation_cache_dir", None)
+    _DEFAULT_DIR = None
+    try:  # a cache jax already opened (a compilation happened): closed, opened again only with a directory
+        from jax.experimental.compilation_cache import compilation_cache as jax_cache
+
+        jax_cache.reset_cache()
+    except Exception:  # noqa: BLE001 - a jax without it: the setting alone
+        pass
+    return True
 
 
 _SOURCE_HASH: str | None = None

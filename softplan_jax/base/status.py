@@ -1,8 +1,9 @@
 """Rollout statuses: how a planning run ended (reached the goal, collided,
 stalled in a local minimum of the potential field of paper eq. 9, ran out of
-steps, or met a non-finite number; or, with the global fallback, the goal was
-found unreachable; or, tracking a moving goal, an obstacle moved too fast to
-stay provably clear of, or the goal was reached and then lost).
+steps, or met a non-finite number; the start pose was already in collision;
+the goal was proven unreachable; or, tracking a moving goal, an obstacle moved
+too fast to stay provably clear of, or the goal was reached, left, and then
+held again at the end or lost).
 """
 
 from __future__ import annotations
@@ -27,16 +28,27 @@ class Status(enum.IntEnum):
     UNREACHABLE = 6
     TOO_FAST = 7
     LOST = 8
+    START_COLLIDED = 9
+    HELD = 10
 
     @property
     def label(self) -> str:
         """The report name: "running", "reached", "collided", "stalled", "max_steps", "non_finite",
-        "unreachable" (set by :func:`~softplan_jax.plan_fallback` only: no collision-free
-        configuration puts the tip on the goal, see :mod:`softplan_jax.search.reach`); with moving
-        obstacles (:func:`~softplan_jax.track`) also "too_fast" (an obstacle could reach the arm
-        within one step whatever the arm did: stopped at the last configuration proven clear) and
-        "lost" (the moving goal was reached, then not held)."""
-        return "non_finite" if self is Status.NONFINITE else self.name.lower()
+        "start_in_collision" (the start pose's exact clearance is already at or below the contact
+        tolerance: nothing was planned; ``collided`` is true), "unreachable" (no collision-free
+        configuration puts the tip on the goal: proven on the host before planning by
+        :func:`~softplan_jax.plan` -- the goal beyond the arm's reach or inside an obstacle --, or
+        decided by :func:`~softplan_jax.plan_fallback`, see :mod:`softplan_jax.search.reach`); with
+        moving obstacles (:func:`~softplan_jax.track`) also "too_fast" (an obstacle could reach
+        the arm within one step whatever the arm did: stopped at the last configuration proven
+        clear), "held" (the moving goal was reached, left the hold tolerance, and was regained:
+        within the hold tolerance at the last step) and "lost" (reached, left, and not within the
+        hold tolerance at the last step)."""
+        if self is Status.NONFINITE:
+            return "non_finite"
+        if self is Status.START_COLLIDED:
+            return "start_in_collision"
+        return self.name.lower()
 
 
 STATUS_NAMES = {int(s): s.label for s in Status}

@@ -23,7 +23,34 @@ __all__ = [
     "check_points",
     "check_radius",
     "check_cloud",
+    "max_coordinate",
+    "check_scale",
+    "MAX_ANGLE",
 ]
+
+# Largest |theta|, |phi| of a configuration [rad]: beyond it the planner's products of
+# lengths and angles lose every digit (and overflow for extreme values).
+MAX_ANGLE = 1e6
+
+
+def max_coordinate(dtype) -> float:
+    """The largest coordinate, length or radius the planner takes in ``dtype``: 1e-4 sqrt(max),
+    so that squared distances and their sums never overflow (1.3e150 in float64, 1.8e15 in
+    float32)."""
+    return float(np.sqrt(np.finfo(np.dtype(dtype)).max)) * 1e-4
+
+
+def check_scale(x, name: str, dtype, what: str = "coordinates") -> None:
+    """A ValueError (message starting with ``name``) when a concrete ``x`` holds a value beyond
+    :func:`max_coordinate` of ``dtype`` (inf allowed only where the caller filtered it)."""
+    if not is_concrete(x):
+        return
+    arr = np.abs(np.asarray(x, np.float64))
+    if arr.size and float(np.max(arr)) > max_coordinate(dtype):
+        raise ValueError(
+            f"{name} has {what} up to {float(np.max(arr)):.3g}, beyond the {max_coordinate(dtype):.2g} that "
+            f"{np.dtype(dtype).name} planning takes (squared distances would overflow); rescale the scene"
+        )
 
 
 def is_concrete(x) -> bool:
@@ -37,6 +64,8 @@ def as_float_array(x, name: str):
         return x if jnp.issubdtype(x.dtype, jnp.floating) else x.astype(float)
     try:
         arr = jnp.asarray(x)
+    except OverflowError:  # a Python int beyond 64 bits
+        raise ValueError(f"{name} holds an integer too large for an array (beyond 64 bits)") from None
     except (TypeError, ValueError) as err:
         raise ValueError(f"{name} must be a numeric array, got {type(x).__name__}: {err}") from None
     if not (jnp.issubdtype(arr.dtype, jnp.floating) or jnp.issubdtype(arr.dtype, jnp.integer)):
@@ -65,6 +94,11 @@ def check_configuration(q):
         raise ValueError("q must describe at least one segment (n >= 1); got n = 0")
     if is_concrete(q):
         check_finite(q, "q")
+        check_scale(np.asarray(q)[:, 0], "q", q.dtype, "segment lengths")
+        angles = np.abs(np.asarray(q, np.float64)[:, 1:])
+        if angles.size and float(angles.max()) > MAX_ANGLE:
+            raise ValueError(f"q has angles theta/phi up to {float(angles.max()):.3g} rad, beyond {MAX_ANGLE:g} rad: "
+                             "give angles in radians, reduced modulo 2 pi")
         lengths = np.asarray(q)[:, 0]
         if np.any(lengths <= 0):
             bad = [int(k) for k in np.nonzero(lengths <= 0)[0]]
@@ -130,6 +164,10 @@ def check_radius(radius, name: str = "radius"):
     return radius
 
 
+# Largest |coordinate| of a cloud to fit: squared distances of larger ones overflow float64 (1.8e308).
+_CLOUD_MAX_COORDINATE = 1e150
+
+
 def check_cloud(points, name: str = "points") -> np.ndarray:
     """Validate a point cloud: a finite (N, 3) array of numbers, not all one point.
 
@@ -147,6 +185,13 @@ def check_cloud(points, name: str = "points") -> np.ndarray:
         raise ValueError(f"{name} is empty: a point cloud needs points")
     arr = arr.astype(np.float64)
     bad = ~np.all(np.isfinite(arr), axis=1)
+    if not bad.any() and arr.size:
+        big = float(np.max(np.abs(arr)))
+        if big > _CLOUD_MAX_COORDINATE:
+            raise ValueError(
+                f"{name} has coordinates up to {big:.3g}: a fit squares distances, which overflow float64 "
+                f"beyond about {_CLOUD_MAX_COORDINATE:.0e}; rescale the cloud (e.g. to metres) first"
+            )
     if bad.any():
         rows = np.nonzero(bad)[0]
         shown = ", ".join(str(int(r)) for r in rows[:10]) + (", ..." if rows.size > 10 else "")

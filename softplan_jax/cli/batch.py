@@ -115,7 +115,7 @@ def cmd_batch(args) -> int:
         "dtype": str(jnp.dtype(dtype)),
         "status_counts": {STATUS_NAMES[int(k)]: int((status == k).sum()) for k in np.unique(status)},
         "success_rate": float(reached.mean()),
-        "collision_rate": float((status == Status.COLLIDED).mean()),
+        "collision_rate": float(np.isin(status, (Status.COLLIDED, Status.START_COLLIDED)).mean()),
         "mean_iterations_reached": float(r.iterations[reached].mean()) if reached.any() else None,
         "min_clearance": float(np.min(r.min_clearance)),
         "generation_time_s": generation_time,

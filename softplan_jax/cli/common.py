@@ -79,16 +79,25 @@ def resolve_gains(args, scenario, method: str, n_points: int):
     and options (ValueError for a bad or mismatched file). ``gain_values`` is the JSON
     form of the gains (:func:`~softplan_jax.tuning.gains_file.gains_to_dict`; ``rep_max`` null
     = no cap)."""
+    import warnings
+
     from ..planning.planner import check_gains
     from ..planning.presets import apply_preset
     from ..tuning.gains_file import gains_to_dict, load_gains
 
     scenario, gains, extra = apply_preset("default" if args.gains_file else args.gains, scenario)
-    if args.gains_file:
-        dtype = scenario.q0.dtype
-        gains = load_gains(args.gains_file, method=method, n_points=n_points, dtype=dtype)
-        gains = check_gains(gains, dtype, scenario.q0.shape[-2])  # seg_weights against the arm's segments
-    return scenario, gains, extra, gains_to_dict(gains, method, n_points)["gains"]
+    with warnings.catch_warnings(record=True) as caught:  # the gains' soundness warnings, as warning lines
+        warnings.simplefilter("always")
+        if args.gains_file:
+            dtype = scenario.q0.dtype
+            gains = load_gains(args.gains_file, method=method, n_points=n_points, dtype=dtype)
+        # seg_weights against the arm's segments; damping 0 against the start pose (one scene)
+        q0 = scenario.q0 if scenario.q0.ndim == 2 else None
+        gains = check_gains(gains, scenario.q0.dtype, scenario.q0.shape[-2], q0)
+        values = gains_to_dict(gains, method, n_points)["gains"]
+    for w in {str(w.message): w for w in caught if issubclass(w.category, UserWarning)}:  # each once
+        warn(" ".join(w.split()))
+    return scenario, gains, extra, values
 
 
 def gains_report(args, gain_values: dict) -> dict:
@@ -100,7 +109,8 @@ def gains_report(args, gain_values: dict) -> dict:
 
 def write_figures(args, summary: dict, make_plot, write_gif) -> None:
     """``run --plot`` / ``--gif``: the figure from ``make_plot(plotting)`` saved to args.plot,
-    ``write_gif(plotting)`` for args.gif; their absolute paths into the summary."""
+    ``write_gif(plotting, path)`` for args.gif (written to a temporary path, then renamed);
+    their absolute paths into the summary."""
     if args.plot is None and args.gif is None:
         return
     if "matplotlib.pyplot" not in sys.modules:
@@ -111,16 +121,22 @@ def write_figures(args, summary: dict, make_plot, write_gif) -> None:
 
     import softplan_jax.plotting as plotting
 
+    from .interrupt import atomic_output  # each figure whole or not at all, also on Ctrl-C
+
     try:
         if args.plot is not None:
             fig = make_plot(plotting)
             try:
-                fig.savefig(args.plot, dpi=120, bbox_inches="tight", pad_inches=0.2)
+                with atomic_output(args.plot) as tmp:
+                    fig.savefig(tmp, dpi=120, bbox_inches="tight", pad_inches=0.2)
             finally:
                 plt.close(fig)
             summary["plot"] = os.path.abspath(args.plot)
         if args.gif is not None:
-            write_gif(plotting)
+            print(f"softplan: rendering {args.gif} (up to 200 frames; tens of seconds) ...", file=sys.stderr,
+                  flush=True)
+            with atomic_output(args.gif) as tmp:
+                write_gif(plotting, tmp)
             summary["gif"] = os.path.abspath(args.gif)
     except OSError as err:
         raise InputError(f"cannot write output: {err}") from None

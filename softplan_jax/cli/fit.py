@@ -83,8 +83,11 @@ def cmd_fit(args) -> int:
 
         fig = plot_cloud_fit(points, fit, title=f"{os.path.basename(cloud)}: {len(cf.fits)} curve(s), "
                              f"max residual {cf.max_residual:.3g}")
+        from .interrupt import atomic_output
+
         try:
-            fig.savefig(args.plot, dpi=120, bbox_inches="tight")
+            with atomic_output(args.plot) as tmp:  # whole or not at all, also on Ctrl-C
+                fig.savefig(tmp, dpi=120, bbox_inches="tight")
         except OSError as err:
             raise InputError(f"cannot write output: {err}") from None
         finally:

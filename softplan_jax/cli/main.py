@@ -13,6 +13,9 @@ own scenes from the shell.
     softplan fit CLOUD [--out JSON] [--goal X Y Z] [--degree D] [--max-degree D]
                        [--max-residual R] [--radius R] [--inflate] [--single]
                        [--plot PNG] [--force] [--json]
+    softplan sweep --n N --out DIR [--chunk C] [--seed S] [--method curve|points]
+                   [--max-steps N] [--gains PRESET|FILE] [--fallback] [--trajectories K|all]
+                   [--force] [--json] [--no-progress] [--float32]
 
 SCENARIO is a paper scenario name (``sim1``, ``sim2``, ``tree``) or the path of
 a JSON scenario file (a file literally named like a paper scenario: write
@@ -40,19 +43,22 @@ is given (then the summary says it was overwritten).
 Exit codes: 0 success (for ``run``: planning finished, whatever its status —
 reached, stalled, collided or max_steps; the status is in the summary);
 2 bad input (unknown scenario, missing or malformed file, bad option value,
-output path that cannot be written), with one line ``softplan: error: ...`` on
-stderr; 3 ``run --require-reached`` and the goal was not reached.
+output path that cannot be written, a size too large for memory), with one
+line ``softplan: error: ...`` on stderr; 3 ``run --require-reached`` and the
+run did not succeed (any status but "reached", or "held" for a moving goal);
+130 interrupted (Ctrl-C: one line ``softplan: interrupted`` on stderr, no
+output file left behind).
 
 ``run`` keeps compiled rollouts in jax's persistent compilation cache
 (``~/.cache/softplan_jax/jax``; see :mod:`softplan_jax.base.compilation_cache`;
-``SOFTPLAN_COMPILATION_CACHE=0`` turns it off), so a second run of the same
-scenario shape does not compile again.
+``SOFTPLAN_JAX_NO_CACHE=1`` or ``SOFTPLAN_COMPILATION_CACHE=0`` turns it off), so a
+second run of the same scenario shape does not compile again.
 
 jax is imported inside the commands, after :func:`main` has parsed the
 arguments, so ``--help`` is fast and float64 (``jax_enable_x64``) can be
 switched on before any array exists.
 
-The command is one module per subcommand: :mod:`.run`, :mod:`.batch`,
+The command is one module per subcommand: :mod:`.run`, :mod:`.batch`, :mod:`.sweep`,
 :mod:`.fit`, :mod:`.scenario_list` (``softplan scenarios``) and :mod:`.export`;
 :mod:`.parser` holds the argument parser and the checks of the arguments,
 :mod:`.trajectory` the ``run --out`` file format and :mod:`.common` what the
@@ -67,15 +73,23 @@ from .batch import cmd_batch
 from .common import EXIT_BAD_INPUT, InputError
 from .export import cmd_export
 from .fit import cmd_fit
+from .interrupt import EXIT_INTERRUPTED, interrupt_guard
 from .parser import build_parser
 from .run import cmd_run
 from .scenario_list import cmd_scenarios
+from .sweep import cmd_sweep
 
 __all__ = ["main"]
 
 
 def main(argv=None) -> int:
-    """Entry point of the ``softplan`` command; returns the exit code."""
+    """Entry point of the ``softplan`` command; returns the exit code (Ctrl-C: the
+    process ends with 130, see :mod:`.interrupt`)."""
+    with interrupt_guard():
+        return _main(argv)
+
+
+def _main(argv) -> int:
     parser = build_parser()
     try:
         try:
@@ -93,14 +107,17 @@ def main(argv=None) -> int:
             return cmd_fit(args)
         if args.command == "batch":
             return cmd_batch(args)
+        if args.command == "sweep":
+            return cmd_sweep(args)
         return cmd_export(args)
-    except InputError as err:
+    except (InputError, ValueError) as err:
+        # A ValueError is the library's answer to bad input (a size that cannot fit, a bad seed, ...).
         msg = " ".join(str(err).split())  # one line
         print(f"softplan: error: {msg}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # outside the guard's reach (not the main thread): one line all the same
         print("softplan: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 """The ``softplan`` command line: :func:`build_parser` (the subcommands ``run``,
-``scenarios``, ``export``, ``fit`` and ``batch`` with their options and help),
+``scenarios``, ``export``, ``fit``, ``batch`` and ``sweep`` with their options and help),
 and the checks of the arguments made on the host before any planning (output
 paths, figure formats, ``--gains``, the options of ``run`` and of a
 multi-process ``batch``). A bad argument raises :class:`~.common.InputError`.
@@ -89,8 +89,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--float32", action="store_true",
                      help="plan in float32 (default float64)")
     run.add_argument("--require-reached", action="store_true",
-                     help="exit with code 3 unless the status is 'reached' (a moving goal: reached and "
-                     "held to the end; 'lost' fails)")
+                     help="exit with code 3 unless the run succeeded: status 'reached' (a moving goal: "
+                     "also 'held', the tip back on the goal at the end); every other status fails, "
+                     "'lost', 'max_steps', 'stalled', 'collided', 'unreachable' included")
 
     scen = sub.add_parser("scenarios", help="list the paper scenarios",
                           description="List the paper's scenarios (names for 'softplan run').")
@@ -104,6 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--force", action="store_true", help="overwrite PATH if it exists")
     _add_fit_parser(sub)
     _add_batch_parser(sub)
+    _add_sweep_parser(sub)
     return parser
 
 
@@ -154,6 +156,46 @@ def _add_batch_parser(sub) -> None:
     batch.add_argument("--force", action="store_true", help="let --out replace an existing FILE")
     batch.add_argument("--json", action="store_true", help="print the summary as JSON")
     batch.add_argument("--float32", action="store_true", help="plan in float32 (default float64)")
+
+
+def _add_sweep_parser(sub) -> None:
+    sweep = sub.add_parser(
+        "sweep",
+        help="plan a seeded random suite of any size in constant memory, streamed to a folder, resumable",
+        description="Plan N scenes of the sweep suite (softplan_jax.sweeps: random_scenarios drawn in blocks of 64, "
+        "scene i the same in every sweep with the same seed) in chunks of one shape; one summary row per scene "
+        "(status, iterations, clearance, path length, final error, planner) written to OUT per chunk, atomically, "
+        "as CSV, merged into OUT/scenes.csv at the end, with OUT/sweep.json (seed, versions, options) and "
+        "OUT/summary.json. The same command again continues a killed sweep where it stopped.",
+        epilog="Exit codes: 0 planning finished; 2 bad input (also: OUT holds a sweep with other arguments, "
+        "or files that are not a sweep's, unless --force). The scenes differ from 'softplan batch' (whose "
+        "scene i depends on --n).",
+    )
+    sweep.add_argument("--n", type=int, required=True, help="number of scenes, >= 1")
+    sweep.add_argument("--out", required=True, metavar="DIR", help="the sweep folder (new, empty, or this sweep's)")
+    sweep.add_argument("--seed", type=int, default=0, help="seed of the scenes, the escapes and the fallback (default 0)")
+    sweep.add_argument("--chunk", type=int, default=256, metavar="C", help="scenes per planner call, >= 1 (default 256)")
+    sweep.add_argument("--obstacles", type=int, nargs=2, default=(1, 8), metavar=("LO", "HI"),
+                       help="curves per scene, drawn from LO..HI (default 1 8)")
+    sweep.add_argument("--slots", type=int, default=8, metavar="K", help="curve slots, >= HI (default 8)")
+    sweep.add_argument("--method", choices=("curve", "points"), default="curve", help="default: curve")
+    sweep.add_argument("--n-points", type=int, default=None, metavar="N",
+                       help="N of the N-point model, >= 1 (method points only; default 10)")
+    sweep.add_argument("--max-steps", type=int, default=600, metavar="N", help="most planner steps, >= 1 (default 600)")
+    sweep.add_argument("--gains", default="default", metavar="PRESET|FILE",
+                       help="gain preset (default, paper) or a gains file, as for 'softplan batch'")
+    sweep.add_argument("--fallback", action="store_true",
+                       help="run the global fallback (reachability, certified search) on the scenes the local "
+                       "planner leaves stalled or at max steps; the summary reports local and global shares")
+    sweep.add_argument("--trajectories", default=None, metavar="K|all",
+                       help="keep the paths of scenes 0..K-1 (or all) in DIR/trajectories/*.npz (default: none)")
+    sweep.add_argument("--devices", type=int, default=None, metavar="K",
+                       help="use the first K local devices (default: all)")
+    sweep.add_argument("--force", action="store_true",
+                       help="remove the sweep already in DIR (or write beside other files) and start anew")
+    sweep.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
+    sweep.add_argument("--json", action="store_true", help="print the summary as JSON")
+    sweep.add_argument("--float32", action="store_true", help="plan in float32 (default float64)")
 
 
 def _add_fit_parser(sub) -> None:

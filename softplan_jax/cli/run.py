@@ -107,8 +107,10 @@ def cmd_run(args) -> int:
         jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
 
-    from ..planning.planner import make_options, result_from_rollout
-    from ..planning.programs import rollout_jit
+    from ..planning.planner import make_options, result_from_rollout, unreachable_result
+    from ..planning.programs import prng_key, rollout_jit
+    from ..planning.records import check_rollout_memory
+    from ..scenarios.scenario import unreachable_reason
 
     static_names = paper_names()
     check_run_args(args, static_names + _moving_names())
@@ -122,27 +124,37 @@ def cmd_run(args) -> int:
         scenario, label = _load(args, dtype)
         scenario, gains, extra, gain_values = resolve_gains(args, scenario, args.method, args.n_points)
         options = make_options(args.method, args.n_points, **_plan_extra(args, extra))
+        max_steps = int(args.max_steps)
+        check_rollout_memory(scenario, options, max_steps)  # before anything is allocated
+        prng_key(args.seed)  # a seed out of range: bad input before anything compiles
     except ValueError as err:
         raise InputError(str(err)) from None
-    max_steps = int(args.max_steps)
-
-    if sys.stderr.isatty():
-        print("softplan: compiling the planner (once per scenario shape and option set) ...",
+    compile_time = run_time = fallback_time = 0.0
+    loaded, escapes, local_steps = False, 0, 0
+    reason = unreachable_reason(scenario)
+    if reason:  # proven on the host: nothing to plan
+        print(f"softplan: the goal is proven unreachable ({reason.replace('_', ' ')}); nothing to plan",
               file=sys.stderr, flush=True)
-    t0 = time.perf_counter()
-    # Traced program and XLA executable both cached on disk: a second run loads them.
-    run, loaded = rollout_jit.cached(scenario, gains, options, max_steps)
-    compile_time = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    rollout = jax.block_until_ready(run(scenario, gains, args.seed))
-    run_time = time.perf_counter() - t0
-    result = result_from_rollout(rollout, scenario)
-    fallback_time = 0.0
+        result = unreachable_result(scenario, options, reason)
+    else:
+        # Progress on stderr: the compilation is the long part of a first run.
+        print("softplan: compiling the planner (once per scenario shape and option set; later runs load it "
+              "from the cache) ...", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        # Traced program and XLA executable both cached on disk: a second run loads them.
+        run, loaded = rollout_jit.cached(scenario, gains, options, max_steps)
+        compile_time = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        rollout = jax.block_until_ready(run(scenario, gains, args.seed))
+        run_time = time.perf_counter() - t0
+        result = result_from_rollout(rollout, scenario)
+        escapes, local_steps = int(rollout.escapes), int(rollout.iterations)
     if not args.no_fallback and result.status in ("stalled", "max_steps"):
         from ..search.fallback import rescue
 
         print(f"softplan: the local planner ended {result.status}; deciding reachability and searching globally "
-              "(the first time compiles for about a minute) ...", file=sys.stderr, flush=True)
+              "(its programs compile once, about a minute; later runs load them from the cache) ...",
+              file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         result = rescue(scenario, [result], options, seed=args.seed)[0]
         fallback_time = time.perf_counter() - t0
@@ -154,7 +166,7 @@ def cmd_run(args) -> int:
         "repulsion": args.repulsion,
         **gains_report(args, gain_values),
         "step": options.step,
-        "escapes": int(rollout.escapes),
+        "escapes": escapes,
         "dtype": str(jnp.dtype(scenario.q0.dtype)),
         "status": result.status,
         "planner": result.planner,
@@ -174,7 +186,7 @@ def cmd_run(args) -> int:
         "program_from_cache": loaded,
         "run_time_s": run_time,
         # The engine stops within step_chunk steps of the end: the cost follows the steps taken.
-        "time_per_step_s": run_time / max(int(rollout.iterations), 1),
+        "time_per_step_s": run_time / max(local_steps, 1),
         "plot": None,
         "gif": None,
         "out": None,
@@ -190,7 +202,7 @@ def cmd_run(args) -> int:
         f"min true clearance {result.min_clearance:.3f}, final tip error {result.final_error:.3f}"
     )
     write_figures(args, summary, lambda plotting: plotting.plot_snapshots(scenario, result, title=title),
-                   lambda plotting: plotting.animate(scenario, result, args.gif, title=title.split("\n")[0]))
+                   lambda plotting, path: plotting.animate(scenario, result, path, title=title.split("\n")[0]))
 
     if args.out is not None:
         _write_out(args, summary, trajectory_record(result, scenario, summary))
@@ -201,6 +213,8 @@ def _cmd_track(args, dtype) -> int:
     """``softplan run`` on a moving scene: track its goal among its moving obstacles (softplan_jax.track)."""
     import jax
 
+    from ..planning.programs import prng_key
+    from ..planning.records import check_rollout_memory
     from ..planning.tracking import make_track_options, result_from_track, track_program
     from ..scenarios.json_format import load_moving_scenario
     from ..scenarios.moving import MOVING_OPTIONS, moving_scenario
@@ -221,18 +235,19 @@ def _cmd_track(args, dtype) -> int:
         if args.hold_tolerance is not None:
             preset["hold_tolerance"] = args.hold_tolerance
         options = make_track_options(args.method, args.n_points, **preset, **extra)
+        max_steps = int(args.max_steps)
+        check_rollout_memory(moving, options, max_steps)  # before anything is allocated
+        key = prng_key(args.seed)
     except OSError as err:
         raise InputError(f"cannot read scenario file {args.scenario}: {err.strerror or err}") from None
     except ValueError as err:
         raise InputError(str(err)) from None
-    max_steps = int(args.max_steps)
     from ..planning.programs import strong_gains
 
     gains = strong_gains(gains, dtype)
     print("softplan: a moving scene: tracking its goal for "
           f"{max_steps} steps ({max_steps * float(gains.dt):g} s; compiling once) ...", file=sys.stderr, flush=True)
     fn = track_program(options, max_steps, False)
-    key = jax.random.PRNGKey(int(args.seed))
     # Twice: the first call compiles (or finds the program in jit's cache), the second is timed alone.
     t0 = time.perf_counter()
     jax.block_until_ready(fn(moving, gains, key))
@@ -275,7 +290,7 @@ def _cmd_track(args, dtype) -> int:
     title = (f"{label} (moving) — {args.method} method"
              + (f" (N = {args.n_points})" if args.method == "points" else "") + f" — {result.status}")
     write_figures(args, summary, lambda plotting: plotting.plot_tracking(result, title=title),
-                   lambda plotting: plotting.animate_tracking(result, args.gif, title=title))
+                   lambda plotting, path: plotting.animate_tracking(result, path, title=title))
     if args.out is not None:
         import numpy as np
 
@@ -307,8 +322,9 @@ def _cmd_track(args, dtype) -> int:
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
-    # --require-reached asks for success: reached and held to the end ("lost" is not).
-    return report(args, summary, text, result.status == "reached")
+    # --require-reached asks for success: the tip on the goal at the end, "reached" (held from the
+    # first reach) or "held" (left and regained); "lost", "max_steps", "collided", ... are not.
+    return report(args, summary, text, result.status in ("reached", "held"))
 
 
 def _text_summary(s: dict) -> str:

@@ -12,6 +12,7 @@ import math
 import os
 
 from .common import package_version
+from .interrupt import atomic_output
 
 __all__ = ["TRAJECTORY_FORMAT", "TRAJECTORY_FORMATS", "trajectory_record", "write_trajectory"]
 
@@ -89,9 +90,17 @@ def _json_ready(x):
 
 def write_trajectory(path: str, record: dict) -> None:
     """Write :func:`trajectory_record` as JSON or NPZ, by the extension of ``path``."""
-    import numpy as np
 
     ext = os.path.splitext(path)[1].lower()
+    if ext not in TRAJECTORY_FORMATS:
+        raise ValueError(f"unknown trajectory format {ext!r}; use .json or .npz")
+    with atomic_output(path) as tmp:  # whole or not at all, also on Ctrl-C
+        _write(tmp, ext, record)
+
+
+def _write(path: str, ext: str, record: dict) -> None:
+    import numpy as np
+
     if ext == ".json":
         with open(path, "w", encoding="utf-8") as fh:
             json.dump({k: _json_ready(v) for k, v in record.items()}, fh, allow_nan=False)
@@ -108,5 +117,3 @@ def write_trajectory(path: str, record: dict) -> None:
         arrays = {k: np.asarray(v) for k, v in flat.items() if v is not None}
         with open(path, "wb") as fh:  # np.savez would append .npz to a name without it
             np.savez(fh, **arrays)
-    else:
-        raise ValueError(f"unknown trajectory format {ext!r}; use .json or .npz")

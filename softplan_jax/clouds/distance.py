@@ -1,118 +1,23 @@
 """Exact distance from points to a polynomial curve, on the host (NumPy).
 
-The closest point of ``F(u) = sum_k c_k u**k`` to a point p solves the
-stationarity condition ``(F(u) - p) . F'(u) = 0`` (paper eq. 14 with the arm
-point fixed at p), a polynomial of degree 2d - 1 in u.
-:func:`closest_parameters` takes its roots (all points at once) and both ends
-of the range as candidates and keeps the nearest: the global minimum, to
-rounding. :func:`project_newton` is the cheap local version (safeguarded Newton
-from warm starts) for the inner loop of a fit's refinement.
 :func:`curve_distance` gives the distances to a
-:class:`~softplan_jax.PolynomialCurve` over its whole ``u_range``.
+:class:`~softplan_jax.PolynomialCurve` over its whole ``u_range``. The solvers
+behind it live in :mod:`softplan_jax.geometry.point_curve`:
+:func:`closest_parameters` (the roots of the stationarity polynomial, paper
+eq. 14 with the arm point fixed: the global minimum to rounding) and
+:func:`project_newton` (safeguarded Newton from warm starts, the inner loop of
+a fit's refinement); they are re-exported here for the fitting modules.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numpy.polynomial import polynomial as _poly
 
 from ..base.validation import check_points
 from ..geometry.curves import PolynomialCurve
+from ..geometry.point_curve import closest_parameters, project_newton
 
 __all__ = ["curve_distance", "closest_parameters", "project_newton"]
-
-
-def _trim(coeffs: np.ndarray) -> np.ndarray:
-    """Drop highest-degree columns that are zero in all three rows (padding)."""
-    K = coeffs.shape[1]
-    while K > 1 and not np.any(coeffs[:, K - 1]):
-        K -= 1
-    return coeffs[:, :K]
-
-
-def closest_parameters(coeffs: np.ndarray, points: np.ndarray, lo: float, hi: float, chunk: int = 20000):
-    """Exact closest parameter on ``F(u) = sum_k coeffs[:, k] u**k``, u in [lo, hi].
-
-    The stationarity condition (F(u) - p) . F'(u) = 0 (paper eq. 14 with the
-    arm point fixed at p) is a polynomial of degree 2d - 1 in u; its roots
-    (eigenvalues of the companion matrix, all points at once) and both ends
-    are the candidates, and the one nearest p wins. Rounding in a root moves
-    the distance only to second order, and the minimum is over actual
-    distances, so the answer is the global minimum to rounding.
-
-    Args:
-      coeffs: (3, K) float64.
-      points: (N, 3) float64.
-
-    Returns:
-      (u (N,), distance (N,)).
-    """
-    coeffs = _trim(np.asarray(coeffs, np.float64))
-    points = np.asarray(points, np.float64)
-    d = coeffs.shape[1] - 1
-    if d == 0:
-        dist = np.linalg.norm(points - coeffs[:, 0], axis=1)
-        return np.full(points.shape[0], 0.5 * (lo + hi)), dist
-    deriv = np.stack([_poly.polyder(c) for c in coeffs])  # (3, d)
-    # G(u) = sum_a F_a F'_a - sum_a p_a F'_a(u): degree 2d - 1, top coefficient point-independent.
-    A = sum(np.convolve(coeffs[a], deriv[a]) for a in range(3))  # length 2d
-    A = np.pad(A, (0, 2 * d - A.shape[0]))
-    m = 2 * d - 1
-    us, ds = [], []
-    for start in range(0, points.shape[0], chunk):
-        P = points[start : start + chunk]
-        n = P.shape[0]
-        G = np.broadcast_to(A, (n, 2 * d)).copy()
-        G[:, :d] -= P @ deriv  # (n, d)
-        cand = [np.full((n, 1), lo), np.full((n, 1), hi)]
-        lead = G[:, -1]
-        if m >= 1 and np.all(np.abs(lead) > 0):
-            if m == 1:
-                roots = (-G[:, 0] / lead)[:, None]
-            else:
-                comp = np.zeros((n, m, m))
-                comp[:, 1:, :-1] = np.eye(m - 1)
-                comp[:, :, -1] = -G[:, :m] / lead[:, None]
-                roots = np.linalg.eigvals(comp).real
-            cand.append(np.clip(roots, lo, hi))
-        U = np.concatenate(cand, axis=1)  # (n, c)
-        F = np.stack([_poly.polyval(U, coeffs[a]) for a in range(3)], axis=-1)  # (n, c, 3)
-        d2 = np.sum((F - P[:, None, :]) ** 2, axis=-1)
-        k = np.argmin(d2, axis=1)
-        us.append(U[np.arange(n), k])
-        ds.append(np.sqrt(d2[np.arange(n), k]))
-    return np.concatenate(us), np.concatenate(ds)
-
-
-def project_newton(coeffs: np.ndarray, points: np.ndarray, u0: np.ndarray, lo: float, hi: float, iters: int = 6):
-    """Closest parameters by safeguarded Newton on (F(u) - p) . F'(u) = 0 from
-    warm starts u0, each step kept only where it brings the point closer (so
-    the distance never exceeds that at u0). Local, cheap; the refinement's
-    inner loop uses it, every reported residual uses :func:`closest_parameters`.
-
-    Returns (u (N,), distance (N,))."""
-    c1 = np.stack([_poly.polyder(c) for c in coeffs]) if coeffs.shape[1] > 1 else np.zeros((3, 1))
-    c2 = np.stack([_poly.polyder(c) for c in c1]) if c1.shape[1] > 1 else np.zeros((3, 1))
-
-    def ev(c, u):
-        return np.stack([_poly.polyval(u, c[a]) for a in range(3)], axis=1)
-
-    u = np.clip(u0, lo, hi)
-    r = ev(coeffs, u) - points
-    f = np.sum(r * r, axis=1)
-    for _ in range(iters):
-        F1, F2 = ev(c1, u), ev(c2, u)
-        g = np.sum(r * F1, axis=1)
-        h = np.sum(F1 * F1, axis=1) + np.sum(r * F2, axis=1)
-        h = np.where(h > 0, h, np.sum(F1 * F1, axis=1) + 1e-300)
-        u_t = np.clip(u - g / h, lo, hi)
-        r_t = ev(coeffs, u_t) - points
-        f_t = np.sum(r_t * r_t, axis=1)
-        better = f_t < f
-        u = np.where(better, u_t, u)
-        r = np.where(better[:, None], r_t, r)
-        f = np.where(better, f_t, f)
-    return u, np.sqrt(f)
 
 
 def curve_distance(curve: PolynomialCurve, points):

@@ -112,14 +112,28 @@ class CurveFit(NamedTuple):
         return [self.curve]
 
 
+# Highest degree a fit takes. The least squares are in the power basis on u in [-1, 1], whose
+# conditioning grows like (1 + sqrt 2)^d: about 5e7 at d = 20, 1e23 at d = 60, where the fitted
+# coefficients (up to 1e19 for a cloud of size 1) cancel to garbage in float64.
+MAX_FIT_DEGREE = 20
+_DEGREE_ADVICE = (f"a fit takes degree <= {MAX_FIT_DEGREE}: beyond it the power-basis least squares lose "
+                  "float64 precision (conditioning about (1 + sqrt 2)^degree); let fit_curves split the cloud "
+                  "into several curves, or fit pieces of it separately")
+
+
 def check_degree(degree, max_degree: int):
-    """The degree as an int, or None to choose it by BIC (then ``max_degree`` is checked); else a ValueError."""
+    """The degree as an int, or None to choose it by BIC (then ``max_degree`` is checked); else a
+    ValueError (also above :data:`MAX_FIT_DEGREE`, saying why)."""
     if degree is not None:
         if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or degree < 1:
             raise ValueError(f"degree must be an integer >= 1 (or None to choose it), got {degree!r}")
+        if degree > MAX_FIT_DEGREE:
+            raise ValueError(f"degree = {degree} is too high: {_DEGREE_ADVICE}")
         return int(degree)
     if isinstance(max_degree, bool) or not isinstance(max_degree, (int, np.integer)) or max_degree < 1:
         raise ValueError(f"max_degree must be an integer >= 1, got {max_degree!r}")
+    if max_degree > MAX_FIT_DEGREE:
+        raise ValueError(f"max_degree = {max_degree} is too high: {_DEGREE_ADVICE}")
     return None
 
 
@@ -307,12 +321,12 @@ def fit_polynomial_curve(points, degree: int = 3, radius=0.0, *, ordered: bool =
     Returns:
       PolynomialCurve with coeffs (3, degree + 1) and u_range (0, 1).
     """
+    degree = check_degree(degree, MAX_FIT_DEGREE)
+    if degree is None:
+        raise ValueError("degree must be an integer >= 1, got None")
     if not ordered:
-        return fit_curve(points, int(degree), radius=radius).curve
+        return fit_curve(points, degree, radius=radius).curve
     points = check_points(points)
-    degree = int(degree)
-    if degree < 1:
-        raise ValueError(f"degree must be >= 1, got {degree}")
     if points.shape[0] < degree + 1:
         raise ValueError(
             f"fitting degree {degree} needs at least {degree + 1} points; got {points.shape[0]}"

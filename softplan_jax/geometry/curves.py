@@ -19,7 +19,9 @@ scalar ``u``. ``radius`` is the obstacle's thickness, used for clearance only.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
+from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -29,8 +31,10 @@ from ..base.validation import (
     as_float_array,
     check_finite,
     check_radius,
+    check_scale,
     check_u_range,
     is_concrete,
+    max_coordinate,
 )
 
 # Samples of a ParametricCurve checked for finite values at construction.
@@ -42,15 +46,72 @@ __all__ = [
     "line_segment",
     "stack_curves",
     "curve_points",
+    "taylor_coefficients",
+    "check_curve_scale",
 ]
 
 
+# Degrees up to this are evaluated by Horner's rule written out term by term (one
+# multiply-add per coefficient in the traced program); higher degrees by one product
+# with the power basis (:func:`_powers`), whose program does not grow with the degree.
+# The two agree to rounding; the split keeps the low-degree scenes (the paper's, random
+# suites, fits up to their default max_degree 8) on the same arithmetic as before.
+HORNER_MAX_DEGREE = 8
+
+
 def _polyval(coeffs, u):
-    """sum_k coeffs[..., k] u**k by Horner's rule; coeffs (..., K)."""
+    """sum_k coeffs[..., k] u**k for a scalar u; coeffs (..., K)."""
+    K = coeffs.shape[-1]
+    if K > HORNER_MAX_DEGREE + 1:
+        return coeffs @ _powers(jnp.asarray(u, coeffs.dtype), K)
     acc = coeffs[..., -1]
-    for k in range(coeffs.shape[-1] - 2, -1, -1):
+    for k in range(K - 2, -1, -1):
         acc = acc * u + coeffs[..., k]
     return acc
+
+
+def check_curve_scale(coeffs, u_range, radius, dtype, name: str = "coeffs") -> None:
+    """A ValueError (starting with ``name``) when a concrete polynomial curve reaches values
+    beyond :func:`~softplan_jax.base.validation.max_coordinate` of ``dtype`` over its range:
+    ``sum_k |a_k| R^k`` (R = max |u| over the range) for the curve and its first two
+    derivatives, the u-range itself and the radius. Squared distances to it would overflow."""
+    if not (is_concrete(coeffs) and is_concrete(u_range)):
+        return
+    c = np.abs(np.asarray(coeffs, np.float64))
+    R = float(np.max(np.abs(np.asarray(u_range, np.float64)), initial=0.0))
+    check_scale(u_range, "u_range", dtype, "values")
+    check_scale(radius, "radius", dtype, "values")
+    k = np.arange(c.shape[-1], dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        powers = R ** k  # R^k, k = 0 .. K-1 (0^0 = 1)
+        bounds = [np.sum(c * powers, axis=-1),
+                  np.sum((c * k)[..., 1:] * powers[:-1], axis=-1),
+                  np.sum((c * k * (k - 1))[..., 2:] * powers[:-2], axis=-1)]
+    limit = max_coordinate(dtype)
+    for order, b in enumerate(bounds):
+        worst = float(np.max(b, initial=0.0))
+        if not worst <= limit:  # NaN (inf * 0) counts as too large
+            what = ("values", "first derivative", "second derivative")[order]
+            if not np.isfinite(worst):
+                raise ValueError(f"{name}: the curve's coefficients or u_range are not finite (NaN or inf)")
+            raise ValueError(f"{name}: over its u_range the curve reaches {what} up to about {worst:.3g}, beyond the "
+                             f"{limit:.2g} that {np.dtype(dtype).name} planning takes (squared distances would "
+                             "overflow); rescale the curve or its parameter range")
+
+
+@partial(jax.custom_jvp, nondiff_argnums=(1,))
+def _powers(x, K: int):
+    """(K,) the powers x^0 .. x^(K - 1) of a scalar by a cumulative product: one
+    reduce_window whatever K (a derivative rule of the same size: d x^k = k x^(k-1) dx)."""
+    return jnp.concatenate([jnp.ones((1,), x.dtype), jnp.cumprod(jnp.full((K - 1,), x))])
+
+
+@_powers.defjvp
+def _powers_jvp(K, primals, tangents):
+    (x,), (dx,) = primals, tangents
+    p = _powers(x, K)
+    k = jnp.arange(1, K, dtype=p.dtype)
+    return p, jnp.concatenate([jnp.zeros((1,), p.dtype), k * p[:-1]]) * dx
 
 
 def _polyder(coeffs):
@@ -61,6 +122,18 @@ def _polyder(coeffs):
     k = jnp.arange(1, K, dtype=coeffs.dtype)
     d = coeffs[..., 1:] * k
     return jnp.concatenate([d, jnp.zeros_like(coeffs[..., :1])], axis=-1)
+
+
+def taylor_coefficients(coeffs, c):
+    """Coefficients of ``p(c + t)`` in t, lowest first, for ``p(u) = sum_k coeffs[..., k] u**k``:
+    ``t_j = sum_{k >= j} C(k, j) c^(k - j) coeffs[..., k]`` (the Taylor shift), one matrix
+    product whatever the degree. coeffs (..., K), c a scalar; returns (..., K)."""
+    K = coeffs.shape[-1]
+    j, k = np.indices((K, K))
+    upper = k >= j
+    binom = np.where(upper, np.vectorize(math.comb)(np.maximum(k, j), j), 0).astype(float)
+    pw = _powers(jnp.asarray(c, coeffs.dtype), K)[np.where(upper, k - j, 0)]  # (j, k): c^(k - j)
+    return coeffs @ (jnp.asarray(binom, coeffs.dtype) * pw).T
 
 
 @jax.tree_util.register_pytree_node_class
@@ -91,6 +164,7 @@ class PolynomialCurve:
             )
         radius = check_radius(radius)
         dtype = jnp.result_type(coeffs.dtype, u_range.dtype)
+        check_curve_scale(coeffs, u_range, radius, dtype)
         self.coeffs = coeffs.astype(dtype)
         self.u_range = u_range.astype(dtype)
         self.radius = jnp.broadcast_to(radius, coeffs.shape[:-2]).astype(dtype)
@@ -122,6 +196,24 @@ class PolynomialCurve:
     def second_derivative(self, u):
         """d^2F_o/du^2, (3,)."""
         return _polyval(_polyder(_polyder(self.coeffs)), u)
+
+    def second_derivative_bound(self, a, b):
+        """A bound on |F_o''| over [a, b] (one curve): the Taylor expansion of F_o'' at
+        the centre c, term by term, ``sum_j |F_o^(2+j)(c)| (h/2)^j / j!`` (h = b - a;
+        exact for degree <= 2, where F_o'' is constant). The derivatives at c come from
+        the Taylor coefficients of F_o at c (:func:`taylor_coefficients`, one matrix
+        product), so the program's size does not grow with the degree."""
+        c, r = 0.5 * (a + b), 0.5 * (b - a)
+        bound = jnp.sqrt(jnp.sum(self.second_derivative(c) ** 2))
+        K = self.coeffs.shape[-1]
+        if K <= 3:
+            return bound
+        # |F_o^(2+j)(c)| / j! = (j + 2)(j + 1) |t_{j+2}|, t the Taylor coefficients at c, j >= 1.
+        t = taylor_coefficients(self.coeffs, c)[..., 3:]  # (3, K - 3): j = 1 .. K - 3
+        j = np.arange(1, K - 2)
+        weight = jnp.asarray((j + 2.0) * (j + 1.0), t.dtype)
+        r_pow = _powers(r, K - 2)[1:]  # r^j, j = 1 .. K - 3
+        return bound + jnp.sum(weight * jnp.sqrt(jnp.sum(t * t, axis=-2)) * r_pow)
 
     def astype(self, dtype):
         return PolynomialCurve.tree_unflatten(

@@ -29,6 +29,7 @@ import numpy as np
 
 from .closest import ClosestPoint, SolverOptions, curve_closest
 from .curves import curve_points
+from .point_curve import point_curve_distance
 from .point_sets import point_set_closest, points_closest
 from .warm_start import curve_data, warm_curves
 
@@ -45,6 +46,7 @@ __all__ = [
     "warm_state",
     "warm_closest",
     "obstacle_samples",
+    "point_obstacle_distances",
     "obstacle_labels",
 ]
 
@@ -300,6 +302,33 @@ def obstacle_labels(scenario) -> list[str]:
         + [f"points {k + 1}" for k in range(n_p)]
         + [f"parametric {k + 1}" for k in range(len(scenario.parametric))]
     )
+
+
+def point_obstacle_distances(scenario, p, parametric_samples: int = 2049) -> list[dict]:
+    """The distance from one point p (3,) to every real obstacle (host side, NumPy), in slot
+    order: ``dict(kind, distance, radius, slot, exact)``. Polynomial curves: the exact
+    point-curve distance (:func:`~softplan_jax.geometry.point_curve.point_curve_distance`);
+    point sets: the nearest point; parametric curves: ``parametric_samples`` samples
+    less half their largest spacing (never above the true distance, ``exact`` False: a
+    function has no closed form)."""
+    p = np.asarray(p, np.float64)
+    out = []
+    coeffs = np.asarray(scenario.curves.coeffs, dtype=np.float64)
+    u_range = np.asarray(scenario.curves.u_range, dtype=np.float64)
+    radius = np.asarray(scenario.curves.radius, dtype=np.float64)
+    for k in np.nonzero(np.asarray(scenario.curve_mask))[0]:
+        out.append(dict(kind="curve", distance=point_curve_distance(coeffs[k], u_range[k], p),
+                        radius=float(radius[k]), slot=int(k), exact=True))
+    for o in obstacle_samples(scenario, parametric_samples):
+        if o["kind"] == "points":
+            d = float(np.min(np.linalg.norm(o["pts"] - p, axis=-1)))
+            out.append(dict(kind="points", distance=d, radius=o["radius"], slot=o["slot"], exact=True))
+        elif o["slot"] >= coeffs.shape[0]:  # parametric
+            pts = o["pts"]
+            d = float(np.min(np.linalg.norm(pts - p, axis=-1)))
+            d -= 0.5 * float(np.max(np.linalg.norm(np.diff(pts, axis=0), axis=-1), initial=0.0))
+            out.append(dict(kind="parametric", distance=d, radius=o["radius"], slot=o["slot"], exact=False))
+    return out
 
 
 def obstacle_samples(scenario, samples: int) -> list[dict]:

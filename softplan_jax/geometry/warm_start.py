@@ -147,21 +147,6 @@ class CurveData(NamedTuple):
     size: jax.Array
 
 
-def _polynomial_curvature_bound(curve: PolynomialCurve, a, b):
-    """A bound on |F_o''| over [a, b] for a polynomial curve: the Taylor expansion of
-    F_o'' at the centre c, term by term, ``sum_j |F_o^(2+j)(c)| (h/2)^j / j!`` (h = b - a;
-    exact for degree <= 2, where F_o'' is constant)."""
-    c, r = 0.5 * (a + b), 0.5 * (b - a)
-    derivative = curve.second_derivative
-    bound = jnp.zeros_like(c)
-    fact = 1.0
-    for j in range(max(curve.coeffs.shape[-1] - 2, 0)):
-        bound = bound + jnp.sqrt(jnp.sum(derivative(c) ** 2)) * r**j / fact
-        derivative = jax.jacfwd(derivative)
-        fact *= j + 1
-    return bound
-
-
 def curve_data(curve, solver: SolverOptions) -> CurveData:
     """The warm start's per-curve data for ONE curve (computed once per scenario).
 
@@ -175,7 +160,7 @@ def curve_data(curve, solver: SolverOptions) -> CurveData:
     curve = jax.tree_util.tree_map(jax.lax.stop_gradient, curve)
     lo, hi = curve.u_range[0], curve.u_range[1]
     if isinstance(curve, PolynomialCurve):
-        curvature = _polynomial_curvature_bound(curve, lo, hi)
+        curvature = curve.second_derivative_bound(lo, hi)
     else:
         u = jnp.linspace(0.0, 1.0, PARAMETRIC_SAMPLES, dtype=lo.dtype) * (hi - lo) + lo
         acc = jax.vmap(curve.second_derivative)(u)
@@ -218,7 +203,7 @@ def _piece_bounds(seg: Segment, curve, data: CurveData, u_i, half):
     a, b = jnp.minimum(t[:, :-1], t[:, 1:]), jnp.maximum(t[:, :-1], t[:, 1:])
     kappa = data.curvature
     if isinstance(curve, PolynomialCurve):
-        local = jax.vmap(lambda a, b: _polynomial_curvature_bound(curve, a, b))(a.reshape(-1), b.reshape(-1))
+        local = jax.vmap(curve.second_derivative_bound)(a.reshape(-1), b.reshape(-1))
         kappa = jnp.minimum(kappa, local.reshape(a.shape))
     return jnp.sqrt(jnp.maximum(q, 0.0)) - 0.125 * kappa * (b - a) ** 2, outside, t
 

@@ -12,7 +12,7 @@ Several hosts (``jax.distributed``): ``devices="global"`` makes the mesh of
 EVERY process's devices (``jax.devices()``), so the same ``shard_map`` program
 runs over all hosts; each process passes the same suite, puts only its own
 devices' shards on them (:func:`shard_batch`), and gets the whole result back
-(:func:`gather`). See the README's "Many scenarios, several devices".
+(:func:`gather`). See the documentation's Performance page, "Many scenarios, several devices".
 """
 
 from __future__ import annotations

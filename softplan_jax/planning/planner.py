@@ -13,24 +13,31 @@ only where the motion bound does not prove the motion clear
 
 from __future__ import annotations
 
+import functools
 import math
 import time
+import warnings
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.status import status_name
-from ..geometry.obstacles import radius_and_mask
+from ..base.status import Status, status_name
+from ..geometry.clearance import contact_tolerance
+from ..geometry.closest import DEFAULT_OPTIONS
+from ..geometry.kinematics import tip_jacobian, tip_position
+from ..geometry.obstacles import radius_and_mask, true_closest
 from ..scenarios import Scenario
+from ..scenarios.scenario import check_scenario, unreachable_reason
 from .batching import Progress, batch_mesh, gather, is_global, pad_batch, round_chunk, shard_batch
-from .engine import check_engine_sizes
-from .programs import batch_keys, rollout_batch, rollout_jit, start_configuration, strong_gains
-from .records import Rollout
+from .engine import DEFAULT_LANES, check_engine_sizes
+from .programs import batch_keys, prng_key, rollout_batch, rollout_jit, start_configuration, strong_gains
+from .records import Rollout, check_rollout_memory
 from .step import GainFunction, Gains, PlanOptions, check_options, default_gains
 
-__all__ = ["PlanResult", "make_options", "check_gains", "plan", "result_from_rollout", "plan_batch", "run_batch"]
+__all__ = ["PlanResult", "make_options", "check_gains", "plan", "unreachable_result", "result_from_rollout",
+           "plan_batch", "run_batch"]
 
 
 class PlanResult(NamedTuple):
@@ -43,8 +50,10 @@ class PlanResult(NamedTuple):
       min_clearance: float, minimum true clearance over the motion.
       q: (iterations + 1, n, 3) configurations, start first.
       tip: (iterations + 1, 3) tip positions.
-      status: "reached", "collided", "stalled", "max_steps", "non_finite" or
-        (with the fallback) "unreachable".
+      status: "reached", "collided", "start_in_collision" (the start pose is
+        in collision: nothing planned), "stalled", "max_steps", "non_finite" or
+        "unreachable" (proven before planning: the goal beyond the arm's reach
+        or inside an obstacle, with ``reason``; or decided by the fallback).
       clearance: (iterations + 1, m) true clearance per step and real obstacle.
       final_error: float, |goal - tip| at the end.
       planner: "local" (the path is the potential-field planner's) or "global"
@@ -79,19 +88,37 @@ def make_options(method="curve", n_points=10, **kwargs) -> PlanOptions:
     unknown = set(kwargs) - set(PlanOptions._fields)
     if unknown:
         raise ValueError(f"unknown planner option(s) {sorted(unknown)}; known: {list(PlanOptions._fields)}")
-    return check_options(PlanOptions(method=method, n_points=int(n_points), **kwargs))
+    return check_options(PlanOptions(method=method, n_points=n_points, **kwargs))
 
 
-def check_gains(gains: Gains | GainFunction | None, dtype, n_segments: int | None = None):
+# Largest k_att * dt of a sound explicit Euler step of the attraction (see check_gains).
+EULER_BOUND = 2.0
+
+
+def check_gains(gains: Gains | GainFunction | None, dtype, n_segments: int | None = None, q0=None):
     """Validate gains on the host: a :class:`Gains` or :class:`GainFunction` of finite
     positive scalars (``damping`` may be 0, ``rep_max`` inf) and, for a GainFunction,
     finite ``rep_profile`` (K >= 2) and ``seg_weights`` (``n_segments``, when given);
-    returned as arrays of ``dtype``. None gives :func:`default_gains`."""
+    returned as arrays of ``dtype``. None gives :func:`default_gains`.
+
+    Soundness: ``k_att * dt >= 2`` is past the stability bound of the explicit Euler step
+    (within ``v_max / k_att`` of the goal the attraction is linear and the tip's error obeys
+    ``e <- (1 - k_att dt) e``, which grows for ``k_att dt > 2``): a UserWarning saying so.
+    ``damping = 0`` is the plain pseudo-inverse ``J^T (J J^T)^-1``, which does not exist where
+    the Jacobian loses rank: with a start pose ``q0`` whose tip Jacobian is singular (a
+    straight arm bending in one plane) a ValueError."""
     if gains is None:
         return default_gains(dtype)
     if not isinstance(gains, (Gains, GainFunction)):
         raise ValueError(f"gains must be a Gains or a GainFunction, got {type(gains).__name__}")
-    vals = {k: np.asarray(v) for k, v in gains._asdict().items()}
+    vals = {}
+    for k, v in gains._asdict().items():
+        if np.asarray(v).dtype == bool:
+            raise ValueError(f"gain {k} must be a number, got {v!r}")
+        try:
+            vals[k] = np.asarray(v, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"gain {k} must be a number (a finite float), got {v!r}") from None
     for k in Gains._fields:
         v = vals[k]
         if v.shape != () or not np.isfinite(v) or v <= 0:
@@ -105,6 +132,19 @@ def check_gains(gains: Gains | GainFunction | None, dtype, n_segments: int | Non
             raise ValueError(f"seg_weights must be a finite (n,) array, got shape {w.shape}")
         if n_segments is not None and w.shape[0] != int(n_segments):
             raise ValueError(f"seg_weights has {w.shape[0]} entries for an arm of {n_segments} segments")
+    k_dt = float(vals["k_att"] * vals["dt"])
+    if k_dt >= EULER_BOUND:
+        warnings.warn(f"gain dt = {float(vals['dt']):g} with k_att = {float(vals['k_att']):g}: k_att * dt = {k_dt:g} "
+                      f">= {EULER_BOUND:g}, past the stability bound of the explicit Euler step (dt < 2 / k_att = "
+                      f"{EULER_BOUND / float(vals['k_att']):g}): near the goal the tip's error e <- (1 - k_att dt) e "
+                      "grows instead of shrinking, so the arm oscillates about the goal and may never settle on it",
+                      UserWarning, stacklevel=3)
+    if q0 is not None and vals["damping"] == 0:
+        s = np.linalg.svd(np.asarray(tip_jacobian(jnp.asarray(q0)), np.float64), compute_uv=False)
+        if s[-1] <= 1e-9 * s[0]:
+            raise ValueError("gain damping = 0 (the plain pseudo-inverse J^T (J J^T)^-1) does not exist at this "
+                             "start pose: its tip Jacobian has rank < 3 (a straight arm bending in one plane); use "
+                             "damping > 0 (default 0.05) or bend the start pose (the paper preset: theta 0.1)")
     return type(gains)(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
 
 
@@ -127,17 +167,51 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
         escapes, goal_tolerance, repulsion, stall_window, solver, ...).
 
     Returns:
-      :class:`PlanResult`.
+      :class:`PlanResult`. A goal proven unreachable on the host
+      (:func:`~softplan_jax.scenarios.scenario.unreachable_reason`: beyond the arm's reach,
+      or inside an obstacle) returns at once, status "unreachable" with the reason, the start
+      pose alone (:func:`unreachable_result`); a start pose in collision ends at step 0 with
+      status "start_in_collision".
     """
-    if not isinstance(scenario, Scenario):
-        raise ValueError(f"scenario must be a Scenario (see make_scenario), got {type(scenario).__name__}")
-    if scenario.q0.ndim != 2:
+    if isinstance(scenario, Scenario) and getattr(scenario.q0, "ndim", 2) == 3:
         raise ValueError("plan takes one scenario; use plan_batch for a batch")
+    check_scenario(scenario, batched=False)
     T = check_engine_sizes(max_steps)[0]
     opts = make_options(method, n_points, **options)
-    g = check_gains(gains, scenario.q0.dtype, scenario.q0.shape[0])
+    g = check_gains(gains, scenario.q0.dtype, scenario.q0.shape[0], scenario.q0)
+    prng_key(seed)  # a bad seed is a ValueError before anything compiles
+    reason = unreachable_reason(scenario)
+    if reason:
+        return unreachable_result(scenario, opts, reason)
     r = rollout_jit(scenario, g, opts, T, seed)
     return result_from_rollout(r, scenario)
+
+
+@functools.cache
+def _start_clearance_program(solver):
+    def clearance(q, scenario):
+        cp = true_closest(q, scenario, solver)
+        radius, mask = radius_and_mask(scenario)
+        return jnp.where(mask, cp.distance - scenario.arm_radius - radius, jnp.inf)
+
+    return jax.jit(clearance)
+
+
+def unreachable_result(scenario: Scenario, options: PlanOptions, reason: str) -> PlanResult:
+    """The result of a scene whose goal is proven unreachable (``reason``: "beyond_reach" or
+    "goal_in_obstacle"), without planning: the start pose alone (iterations 0), its exact
+    clearance (the true closest points, as a rollout's record), status "unreachable"."""
+    q0 = scenario.q0
+    solver = options.solver if options.method == "curve" else DEFAULT_OPTIONS
+    clearance = np.asarray(_start_clearance_program(solver)(q0, scenario))
+    _, mask = radius_and_mask(scenario)
+    c = clearance[np.asarray(mask)]
+    tip = np.asarray(tip_position(q0))
+    min_c = float(np.min(c, initial=np.inf))
+    return PlanResult(
+        reached=False, iterations=0, collided=bool(min_c <= contact_tolerance(options, q0.dtype)),
+        min_clearance=min_c, q=np.asarray(q0)[None], tip=tip[None], status=status_name(Status.UNREACHABLE),
+        clearance=c[None], final_error=float(np.linalg.norm(np.asarray(scenario.goal) - tip)), reason=reason)
 
 
 def result_from_rollout(r: Rollout, scenario: Scenario) -> PlanResult:
@@ -171,7 +245,7 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
         ``jax.random.split(key(seed), B)[b]`` whatever the chunk. Or one key per
         scenario (B raw keys (B, 2), or B typed keys): then scenario b uses
         ``seed[b]`` (a share of a larger suite keeps the suite's keys, see the
-        README's "Many scenarios, several devices").
+        documentation's Performance page, "Many scenarios, several devices").
       chunk: scenarios per call (None: the whole batch in one call). Rounded up
         to a multiple of the device count; the last chunk is padded with copies
         of the last scenario, so every call has the same shape and compiles
@@ -205,8 +279,11 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
     to rounding (not bit for bit); a rollout that amplifies rounding (a
     near-tie of the stall test or of the contact test) can end differently.
     """
-    if not isinstance(scenarios, Scenario) or scenarios.q0.ndim != 3:
+    if not isinstance(scenarios, Scenario) or getattr(scenarios.q0, "ndim", 0) != 3:
         raise ValueError("plan_batch takes a batched Scenario (see stack_scenarios)")
+    check_scenario(scenarios, batched=True)
+    if scenarios.q0.shape[0] == 0:
+        raise ValueError("plan_batch: the batch holds no scenario")
     opts = make_options(method, n_points, **options)
     dtype = scenarios.q0.dtype
     g = strong_gains(check_gains(gains, dtype, scenarios.q0.shape[-2]), dtype)
@@ -229,6 +306,7 @@ def run_batch(worlds, gains, options, max_steps: int, seed=0, *, chunk: int | No
     n_dev = 1 if mesh is None else mesh.size
     batch = start_configuration(worlds).shape[0]
     size = round_chunk(chunk, batch, n_dev)
+    check_rollout_memory(worlds, options, T, batch, min(size, lanes or DEFAULT_LANES))
     n_chunks = math.ceil(batch / size)
     bar = Progress(n_chunks, batch, n_dev, label=label) if progress else None
     spread = is_global(mesh)  # several processes: results are gathered on every host

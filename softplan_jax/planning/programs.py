@@ -20,7 +20,7 @@ from ..base.compilation_cache import load_or_export, rollout_compiler_options
 from ..scenarios import Scenario
 from .batching import BATCH_AXIS, batch_mesh, pad_batch, round_chunk, shard_batch
 from .engine import DEFAULT_LANES, check_engine_sizes, run, run_lanes
-from .records import Rollout
+from .records import Rollout, check_rollout_memory
 from .step import Gains, PlanOptions
 
 __all__ = ["rollout", "strong_gains", "prng_key", "start_configuration", "batch_keys", "CompiledRollout",
@@ -66,12 +66,21 @@ def strong_gains(gains: Gains, dtype) -> Gains:
 
 
 def prng_key(seed):
-    """A PRNG key from an int seed (or a key, returned as it is)."""
+    """A PRNG key from an int seed (None: 0), or a key returned as it is: a typed key array
+    (``jax.random.key``) or raw uint32 keys (``jax.random.PRNGKey``: shape (..., 2)).
+    Anything else (a float, a bool, a string, an int beyond 64 bits) is a ValueError."""
     if seed is None:
         seed = 0
-    if isinstance(seed, (int, np.integer)):
-        return jax.random.PRNGKey(int(seed))
-    return seed
+    if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+        try:
+            return jax.random.PRNGKey(int(seed))
+        except (OverflowError, ValueError, TypeError):
+            raise ValueError(f"seed {seed} is out of the range of a PRNG seed (a 64-bit signed int)") from None
+    dtype = getattr(seed, "dtype", None)
+    if dtype is not None and (jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
+                              or (dtype == jnp.uint32 and np.ndim(seed) >= 1 and np.shape(seed)[-1] == 2)):
+        return seed
+    raise ValueError(f"seed must be an int or a PRNG key (jax.random.key / PRNGKey), got {seed!r}")
 
 
 def start_configuration(world):
@@ -156,9 +165,13 @@ class CompiledRollout:
             return self._nested(*args)
 
     def _args(self, scenario, gains, options, max_steps, seed):
-        dtype = start_configuration(scenario).dtype
-        key = batch_keys(seed, start_configuration(scenario).shape[0]) if self._batched else prng_key(seed)
-        return scenario, strong_gains(gains, dtype), options, max_steps, key
+        q0 = start_configuration(scenario)
+        max_steps = check_engine_sizes(max_steps)[0]
+        scenes = q0.shape[0] if self._batched else 1
+        # Before anything is allocated: the records of max_steps steps must fit in memory.
+        check_rollout_memory(scenario, options, max_steps, scenes, min(scenes, DEFAULT_LANES))
+        key = batch_keys(seed, scenes) if self._batched else prng_key(seed)
+        return scenario, strong_gains(gains, q0.dtype), options, max_steps, key
 
     def __call__(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0) -> Rollout:
         return self._call(*self._args(scenario, gains, options, max_steps, seed))

@@ -16,12 +16,13 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ..base.memory import check_memory
 from ..base.numerics import safe_norm
 from ..base.status import Status
-from ..geometry.obstacles import radius_and_mask
+from ..geometry.obstacles import obstacle_count, radius_and_mask
 from ..scenarios.motion import MovingScenario
 
-__all__ = ["Rollout", "Record", "Setup", "setup", "record_zeros", "freeze", "finish"]
+__all__ = ["Rollout", "Record", "Setup", "setup", "record_zeros", "check_rollout_memory", "freeze", "finish"]
 
 
 class Rollout(NamedTuple):
@@ -147,6 +148,42 @@ def record_zeros(world, options, T: int) -> Record:
     return rec
 
 
+# Copies of a rollout's records alive at once: the loop's buffer, the records cut to length,
+# the frozen records of the result, and the result brought to the host.
+RECORD_COPIES = 4
+
+
+def check_rollout_memory(world, options, max_steps: int, scenes: int = 1, side_by_side: int = 1) -> None:
+    """A ValueError naming the field before anything is allocated, when the arrays of
+    ``scenes`` rollouts of ``max_steps`` steps (:func:`record_zeros` per scene, about
+    ``RECORD_COPIES`` copies) and the N-point model's per-step arrays (``side_by_side``
+    scenes stepped at once) would not fit in the memory available
+    (:func:`~softplan_jax.base.memory.check_memory`). Shapes only: works on tracers."""
+    su = setup(world, options)
+    q0 = su.scene.q0
+    n, item = q0.shape[-2], jnp.dtype(q0.dtype).itemsize
+    m = obstacle_count(su.scene)
+    # One step's record (record_zeros): q, tip, clearance, between, step_scale [, goal, time, error] in the
+    # dtype, converged (bool), fallbacks (int32), between_searched (m bools).
+    row = item * (3 * n + 3 + 2 * m + 1 + (5 if su.track else 0)) + 1 + 4 + m
+    records = RECORD_COPIES * row * (int(max_steps) + 1) * int(scenes)
+    points = 0
+    if su.plan.method == "points":  # every curve as N points, against n * points_per_segment arm samples
+        m_c = su.scene.curves.coeffs.shape[-3]
+        per = m_c * int(su.plan.n_points) * (3 + n * int(su.plan.points_per_segment))
+        points = 4 * item * per * int(side_by_side)
+    if points > records:
+        check_memory(records + points, "n_points", f"the N-point model with N = {su.plan.n_points}",
+                     "use a smaller N (the paper uses N <= 100) or the curve method")
+    else:
+        field = "max_steps" if scenes == 1 else "max_steps x the number of scenes"
+        what = f"the records of {int(scenes)} rollout(s) of max_steps + 1 = {int(max_steps) + 1} steps " \
+               f"({row} bytes per step)"
+        check_memory(records + points, field, what,
+                     "lower max_steps (a rollout stops at its goal: the default 600 plans the paper's scenes)"
+                     + ("" if scenes == 1 else ", or plan the scenes in smaller batches"))
+
+
 def freeze(records: Record, end, still: bool):
     """Records after step ``end``: the state records hold their value at ``end``, the events are
     empty. ``still`` (a static scene): after the end nothing moves, so the clearance during the
@@ -178,9 +215,13 @@ def finish(world, options, records: Record, final) -> Rollout:
     out = dict(q=r.q, tip=r.tip, clearance=r.clearance, between=r.between, iterations=final.iterations,
                min_clearance=min_clearance, step_scale=r.step_scale, escapes=final.escapes, converged=r.converged,
                fallbacks=r.fallbacks, between_searched=r.between_searched)
+    # A collision at step 0 is the start pose's own: nothing was planned.
+    start_hit = (final.status == Status.COLLIDED) & (end == 0)
+    collided = final.status == Status.COLLIDED
     if su.stop_at_goal:
         status = jnp.where(final.status == Status.RUNNING, Status.MAX_STEPS, final.status)
-        return Rollout(**out, status=status, reached=status == Status.REACHED, collided=status == Status.COLLIDED,
+        status = jnp.where(start_hit, Status.START_COLLIDED, status).astype(jnp.int32)
+        return Rollout(**out, status=status, reached=status == Status.REACHED, collided=collided,
                        final_error=safe_norm(su.scene.goal - r.tip[-1]))
     # Tracking statistics over the steps taken (0..end).
     steps = jnp.arange(T + 1, dtype=jnp.int32)
@@ -193,11 +234,15 @@ def finish(world, options, records: Record, final) -> Rollout:
     first_loss = jnp.min(lost_at)
     held_to_end = reached & (first_loss > end)
     held_steps = jnp.where(reached, jnp.minimum(first_loss, end + 1) - reached_step, 0).astype(jnp.int32)
+    # Left the hold tolerance after the first reach: "held" when back within it at the last step, else "lost".
+    regained = r.error[end] <= su.track.hold_tolerance
     status = jnp.where(
         final.status == Status.RUNNING,
-        jnp.where(held_to_end, Status.REACHED, jnp.where(reached, Status.LOST, Status.MAX_STEPS)),
+        jnp.where(held_to_end, Status.REACHED,
+                  jnp.where(reached, jnp.where(regained, Status.HELD, Status.LOST), Status.MAX_STEPS)),
         final.status,
-    ).astype(jnp.int32)
-    return Rollout(**out, status=status, reached=reached, collided=status == Status.COLLIDED,
+    )
+    status = jnp.where(start_hit, Status.START_COLLIDED, status).astype(jnp.int32)
+    return Rollout(**out, status=status, reached=reached, collided=collided,
                    final_error=r.error[end], goal=r.goal, time=r.time, error=r.error, reached_step=reached_step,
                    held_steps=held_steps, held_to_end=held_to_end)

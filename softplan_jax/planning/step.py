@@ -38,6 +38,7 @@ import numpy as np
 from ..base.numerics import damped_pinv, safe_norm
 from ..geometry.clearance import contact_tolerance
 from ..geometry.closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
+from ..geometry.closest_grid import GridSolverOptions
 from ..geometry.kinematics import motion_bound, points_jacobian, tip_position
 from ..geometry.obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
 from ..scenarios import Scenario
@@ -142,7 +143,7 @@ def repulsion_scale(gains, clearance, segment):
 
 def default_gains(dtype=None) -> Gains:
     """The default gains (chosen by measurement on the paper's scenarios; see
-    the README's "Gains" section).
+    the documentation's Conventions page, "Gains").
 
     The tip moves at most ``v_max * dt = 0.05`` per step; the attraction is
     linear within ``v_max / k_att = 0.25`` of the goal. The influence distance
@@ -276,7 +277,37 @@ PAPER_STEP = {"step": "plain", "escapes": 0, "stall_window": 60, "stall_toleranc
 
 
 
+_INT_OPTIONS = ("n_points", "points_per_segment", "stall_window", "escapes", "escape_steps", "step_chunk")
+_FLOAT_OPTIONS = ("goal_tolerance", "stall_tolerance", "contact_tolerance", "safe_fraction")
+_BOOL_OPTIONS = ("check_collisions", "warm_start", "swept_proof")
+
+
+def _check_option_types(options: PlanOptions) -> None:
+    """Each field of the type it must have (a ValueError naming it): options are static
+    arguments of the compiled rollouts, so a float count or a string tolerance must not reach them."""
+    for name in _INT_OPTIONS:
+        v = getattr(options, name)
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+            raise ValueError(f"{name} must be an int, got {v!r}")
+    for name in _FLOAT_OPTIONS:
+        v = getattr(options, name)
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(v):
+            raise ValueError(f"{name} must be a finite number, got {v!r}")
+    for name in _BOOL_OPTIONS:
+        if not isinstance(getattr(options, name), (bool, np.bool_)):
+            raise ValueError(f"{name} must be True or False, got {getattr(options, name)!r}")
+    for name in ("method", "repulsion", "step"):
+        if not isinstance(getattr(options, name), str):
+            raise ValueError(f"{name} must be a string, got {getattr(options, name)!r}")
+    if not isinstance(options.solver, (SolverOptions, GridSolverOptions)):
+        raise ValueError(f"solver must be a SolverOptions or a GridSolverOptions, got {options.solver!r}")
+
+
 def check_options(options: PlanOptions) -> PlanOptions:
+    _check_option_types(options)
+    if not options.stall_tolerance >= 0:
+        raise ValueError(f"stall_tolerance must be >= 0, got {options.stall_tolerance}")
     if options.method not in ("curve", "points"):
         raise ValueError(f"unknown method {options.method!r}; choose 'curve' or 'points'")
     if options.repulsion not in ("khatib", "exponential"):

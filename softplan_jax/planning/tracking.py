@@ -33,7 +33,9 @@ puts them and the goal is ``g(t_k)``. Beyond the static planner:
   number or ``too_fast``. Then: ``reached`` (|g(t) - tip| < goal_tolerance at
   some step), ``held_steps`` (steps from the first reach until the error first
   exceeds ``hold_tolerance``), and the status ``reached`` (held to the end),
-  ``lost`` (reached, not held) or ``max_steps`` (never reached).
+  ``held`` (reached, left the hold tolerance, and back within it at the last
+  step), ``lost`` (reached, left, and not within the hold tolerance at the
+  last step) or ``max_steps`` (never reached).
 
 Stalls start the random-walk escapes of the static planner (not while the tip
 holds the goal); a stall with no escape left does not end the rollout, since
@@ -57,7 +59,7 @@ from ..scenarios.motion import MovingScenario, goal_at
 from .engine import check_engine_sizes, run
 from .planner import check_gains, make_options, run_batch
 from .programs import prng_key, rollout_batch, rollout_jit, strong_gains
-from .records import Rollout
+from .records import Rollout, check_rollout_memory
 from .step import Gains, PlanOptions
 
 __all__ = ["TrackOptions", "make_track_options", "Track", "TrackResult", "track_rollout", "track", "track_batch"]
@@ -130,8 +132,10 @@ class TrackResult(NamedTuple):
     """What :func:`track` returns (host side, trimmed to the steps taken).
 
     Attributes:
-      status: "reached" (reached and held to the end), "lost" (reached, then
-        left the hold tolerance), "max_steps" (never reached), "collided",
+      status: "reached" (reached and held to the end), "held" (reached, left
+        the hold tolerance, and within it again at the last step), "lost"
+        (reached, left, and not within it at the last step), "max_steps"
+        (never reached), "collided", "start_in_collision" (the start pose),
         "too_fast" (an obstacle could reach the arm within one step whatever
         it did: the rollout stopped at the last configuration proven clear)
         or "non_finite".
@@ -203,6 +207,7 @@ def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gai
     dtype = moving.scene.q0.dtype
     g = strong_gains(check_gains(gains, dtype, moving.n_segments), dtype)
     T = check_engine_sizes(max_steps)[0]
+    check_rollout_memory(moving, opts, T)
     r = track_program(opts, T, False)(moving, g, prng_key(seed))
     return result_from_track(r, moving, float(g.dt))
 

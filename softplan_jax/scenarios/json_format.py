@@ -1,6 +1,6 @@
-"""Scenario files: the JSON format ``softplan-scenario/1`` documented in the
-README (arm, goal, obstacles as polynomial curves, line segments or point sets),
-read with every malformed field named in a ValueError, and written atomically.
+"""Scenario files: the JSON format ``softplan-scenario/1`` (the documentation's
+"Scenario and gains files": arm, goal, obstacles as polynomial curves, line
+segments or point sets), read with every malformed field named in a ValueError, and written atomically.
 
 Moving scenes add an optional ``"motion"`` object to a polynomial
 or line-segment obstacle (the fields of :func:`~softplan_jax.scenarios.motion.curve_motion`:
@@ -16,11 +16,14 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import tempfile
 
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.memory import check_memory
+from ..base.validation import check_scale
 from ..geometry.curves import PolynomialCurve, line_segment
 from .scenario import Scenario, default_start, make_scenario
 
@@ -45,6 +48,9 @@ _MOTION_KEYS = {"pivot": (3,), "axis": (3,), "amplitude": (), "omega": (), "phas
 _GOAL_PATH_KEYS = {"times", "points", "attach"}
 _ARM_KEYS = {"segments", "start", "radius", "length_limits"}
 _FORMAT = "softplan-scenario/1"
+# Arrays per segment that planning an arm allocates at once, in units of its q0 row (a bound
+# for the memory check of arm.segments, not an exact count).
+_SEGMENT_BYTES_FACTOR = 1000
 
 
 def _err(path: str, msg: str) -> ValueError:
@@ -59,20 +65,39 @@ def _only_numbers(value) -> bool:
     return isinstance(value, (int, float))
 
 
+def _make_field(msg: str) -> str:
+    """The JSON field of one of make_scenario's messages (they start with its argument's name)."""
+    m = re.match(r"(goal|q\b|start lengths|obstacles\[\d+\]|arm_radius|L_min|L_max|need 0 < L_min)", msg)
+    if m is None:
+        return "(scene)"
+    name = m.group(1)
+    return {"goal": "goal", "q": "arm.start", "start lengths": "arm.start", "arm_radius": "arm.radius"}.get(
+        name, name if name.startswith("obstacles") else "arm.length_limits")
+
+
+def _short(value, limit: int = 120) -> str:
+    """repr of a JSON value for a message, cut to ``limit`` characters (a 400-digit integer, a long list)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def _num_array(value, path: str, shape=None):
     if not _only_numbers(value):
-        raise _err(path, f"must be numbers (JSON numbers, not strings or booleans), got {value!r}")
+        raise _err(path, f"must be numbers (JSON numbers, not strings or booleans), got {_short(value)}")
     try:
         arr = np.asarray(value, dtype=float)
+    except OverflowError:  # a JSON integer beyond the range of a float
+        raise _err(path, f"must be finite numbers within the range of a float (about 1.8e308), got "
+                         f"{_short(value)}") from None
     except (TypeError, ValueError):
-        raise _err(path, f"must be numbers, got {value!r}") from None
+        raise _err(path, f"must be numbers, got {_short(value)}") from None
     if shape is not None and (
         arr.ndim != len(shape) or any(s is not None and a != s for a, s in zip(arr.shape, shape, strict=True))
     ):
         want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise _err(path, f"must have shape {want}, got {arr.shape}")
     if not np.all(np.isfinite(arr)):
-        raise _err(path, f"must be finite, got {value!r}")
+        raise _err(path, f"must be finite, got {_short(value)}")
     return arr
 
 
@@ -85,7 +110,7 @@ def is_moving_dict(data) -> bool:
 
 
 def scenario_from_dict(data: dict, dtype=None) -> Scenario:
-    """Build a Scenario from the JSON structure (see the README); every
+    """Build a Scenario from the JSON structure (see the documentation's "Scenario and gains files"); every
     malformed field raises a ValueError naming the field. A moving scene
     (``motion``/``goal_path`` fields) is refused: use :func:`moving_from_dict`."""
     if is_moving_dict(data):
@@ -111,6 +136,10 @@ def moving_from_dict(data: dict, dtype=None):
             raise _err(where, str(err)) from None
     goal = None
     if path is not None:
+        top, first = np.asarray(data["goal"], float), np.asarray(path["points"][0], float)
+        if not np.allclose(top, first, rtol=1e-9, atol=1e-12):
+            raise _err("goal", f"{top.tolist()} disagrees with goal_path.points[0] = {first.tolist()}: a moving "
+                       "scene's goal is its goal path's first point (the planner follows goal_path); make the two equal")
         try:
             goal = goal_path(path["times"], path["points"], path["attach"], dtype=dtype)
         except ValueError as err:
@@ -120,7 +149,7 @@ def moving_from_dict(data: dict, dtype=None):
 
 def _parse_motion(value, path: str) -> dict:
     if not isinstance(value, dict):
-        raise _err(path, f"must be an object, got {value!r}")
+        raise _err(path, f"must be an object, got {_short(value)}")
     extra = set(value) - set(_MOTION_KEYS)
     if extra:
         raise _err(f"{path}.{sorted(extra)[0]}", f"unknown key (allowed: {sorted(_MOTION_KEYS)})")
@@ -133,7 +162,7 @@ def _parse_motion(value, path: str) -> dict:
 
 def _parse_goal_path(value, curve_index: dict) -> dict:
     if not isinstance(value, dict):
-        raise _err("goal_path", f"must be an object, got {value!r}")
+        raise _err("goal_path", f"must be an object, got {_short(value)}")
     extra = set(value) - _GOAL_PATH_KEYS
     if extra:
         raise _err(f"goal_path.{sorted(extra)[0]}", f"unknown key (allowed: {sorted(_GOAL_PATH_KEYS)})")
@@ -149,7 +178,7 @@ def _parse_goal_path(value, curve_index: dict) -> dict:
     attach = value.get("attach", None)
     if attach is not None:
         if not isinstance(attach, int) or isinstance(attach, bool):
-            raise _err("goal_path.attach", f"must be an obstacle index (an integer) or null, got {attach!r}")
+            raise _err("goal_path.attach", f"must be an obstacle index (an integer) or null, got {_short(attach)}")
         if attach not in curve_index:
             raise _err("goal_path.attach", f"obstacle {attach} is not a polynomial curve or line segment of this "
                        f"scene (those are {sorted(curve_index)})")
@@ -162,14 +191,14 @@ def _parse(data: dict, dtype=None):
         raise _err("(top)", f"must be a JSON object, got {type(data).__name__}")
     for key in ("name", "description"):
         if key in data and not isinstance(data[key], str):
-            raise _err(key, f"must be a string, got {data[key]!r}")
+            raise _err(key, f"must be a string, got {_short(data[key])}")
     unknown = set(data) - _TOP_KEYS
     if unknown:
         raise _err(sorted(unknown)[0], f"unknown key (allowed: {sorted(_TOP_KEYS)})")
     if data.get("format", _FORMAT) != _FORMAT:
-        raise _err("format", f"must be {_FORMAT!r}, got {data.get('format')!r}")
+        raise _err("format", f"must be {_FORMAT!r}, got {_short(data.get('format'))}")
     if not isinstance(data.get("metadata", {}), dict):
-        raise _err("metadata", f"must be a JSON object, got {data['metadata']!r}")
+        raise _err("metadata", f"must be a JSON object, got {_short(data['metadata'])}")
     if "goal" not in data:
         raise _err("goal", "is missing")
     goal = _num_array(data["goal"], "goal", (3,))
@@ -181,7 +210,13 @@ def _parse(data: dict, dtype=None):
         raise _err(f"arm.{sorted(unknown)[0]}", f"unknown key (allowed: {sorted(_ARM_KEYS)})")
     n = arm.get("segments", 3)
     if not isinstance(n, int) or isinstance(n, bool) or n < 1:
-        raise _err("arm.segments", f"must be an integer >= 1, got {n!r}")
+        raise _err("arm.segments", f"must be an integer >= 1, got {_short(n)}")
+    try:
+        # The planner's per-step arrays grow with n (Jacobians (3, 3n) per obstacle and step).
+        check_memory(8.0 * 3 * n * _SEGMENT_BYTES_FACTOR, "arm.segments", f"an arm of {n} segments",
+                     "use an arm of a few segments (the paper's has 3)", on_device=False)
+    except ValueError as err:
+        raise _err("arm.segments", str(err)) from None
     if "start" in arm:
         q0 = _num_array(arm["start"], "arm.start", (n, 3))
         if np.any(q0[:, 0] <= 0):
@@ -195,13 +230,13 @@ def _parse(data: dict, dtype=None):
     if "length_limits" in arm:
         lim = arm["length_limits"]
         if not isinstance(lim, (list, tuple)) or len(lim) != 2:
-            raise _err("arm.length_limits", f"must be [L_min, L_max], got {lim!r}")
+            raise _err("arm.length_limits", f"must be [L_min, L_max], got {_short(lim)}")
         L_min = float(_num_array(lim[0], "arm.length_limits[0]", ()))
         L_max = math.inf if lim[1] is None else float(_num_array(lim[1], "arm.length_limits[1]", ()))
         if not 0 < L_min < L_max:
-            raise _err("arm.length_limits", f"need 0 < L_min < L_max, got {lim!r}")
+            raise _err("arm.length_limits", f"need 0 < L_min < L_max, got {_short(lim)}")
         if np.any(q0[:, 0] < L_min) or np.any(q0[:, 0] > L_max):
-            raise _err("arm.length_limits", f"the start lengths {q0[:, 0].tolist()} lie outside {lim!r}")
+            raise _err("arm.length_limits", f"the start lengths {q0[:, 0].tolist()} lie outside {_short(lim)}")
     obstacles_json = data.get("obstacles", [])
     if not isinstance(obstacles_json, list):
         raise _err("obstacles", "must be a list")
@@ -217,13 +252,13 @@ def _parse(data: dict, dtype=None):
             "line_segment": {"type", "start", "end", "radius", "name", "metadata", "motion"},
             "points": {"type", "points", "radius", "name", "metadata"},
         }
-        if kind not in allowed:
-            raise _err(f"{path}.type", f"unknown obstacle type {kind!r}; choose one of {sorted(allowed)}")
+        if not isinstance(kind, str) or kind not in allowed:
+            raise _err(f"{path}.type", f"unknown obstacle type {_short(kind)}; choose one of {sorted(allowed)}")
         extra = set(ob) - allowed[kind]
         if extra:
             raise _err(f"{path}.{sorted(extra)[0]}", f"unknown key for a {kind} obstacle")
         if not isinstance(ob.get("metadata", {}), dict):
-            raise _err(f"{path}.metadata", f"must be a JSON object, got {ob['metadata']!r}")
+            raise _err(f"{path}.metadata", f"must be a JSON object, got {_short(ob['metadata'])}")
         r = _num_array(ob.get("radius", 0.0), f"{path}.radius", ())
         if r < 0:
             raise _err(f"{path}.radius", f"must be >= 0, got {float(r)}")
@@ -241,14 +276,20 @@ def _parse(data: dict, dtype=None):
             u_range = _num_array(ob["u_range"], f"{path}.u_range", (2,))
             if not u_range[0] < u_range[1]:
                 raise _err(f"{path}.u_range", f"must satisfy u_min < u_max, got {u_range.tolist()}")
-            obstacles.append(PolynomialCurve(coeffs, u_range, float(r)))
+            try:
+                obstacles.append(PolynomialCurve(coeffs, u_range, float(r)))
+            except ValueError as err:
+                raise _err(f"{path}.{str(err).split(' ')[0].rstrip(':')}", str(err)) from None
         elif kind == "line_segment":
             for key in ("start", "end"):
                 if key not in ob:
                     raise _err(f"{path}.{key}", "is missing")
             a = _num_array(ob["start"], f"{path}.start", (3,))
             b = _num_array(ob["end"], f"{path}.end", (3,))
-            obstacles.append(line_segment(a, b, float(r)))
+            try:
+                obstacles.append(line_segment(a, b, float(r)))
+            except ValueError as err:
+                raise _err(path, str(err)) from None
         else:
             if "points" not in ob:
                 raise _err(f"{path}.points", "is missing")
@@ -259,9 +300,17 @@ def _parse(data: dict, dtype=None):
     # Point radii are per obstacle: build, then set them.
     plain = [o[0] if isinstance(o, tuple) else o for o in obstacles]
     q0 = jnp.asarray(q0, dtype or jnp.result_type(float))
-    scen = make_scenario(jnp.asarray(goal, q0.dtype), plain, q0, arm_radius=float(radius), L_min=L_min, L_max=L_max)
+    try:
+        scen = make_scenario(goal, plain, q0, arm_radius=float(radius), L_min=L_min, L_max=L_max)
+    except ValueError as err:
+        raise _err(_make_field(str(err)), str(err)) from None
     radii = [o[1] for o in obstacles if isinstance(o, tuple)]
     if radii:
+        for k, r in zip([k for k, o in enumerate(obstacles_json) if o["type"] == "points"], radii, strict=True):
+            try:
+                check_scale(r, "radius", q0.dtype, "values")
+            except ValueError as err:
+                raise _err(f"obstacles[{k}].radius", str(err)) from None
         pr = np.zeros(scen.point_radius.shape)
         pr[: len(radii)] = radii
         scen = scen._replace(point_radius=jnp.asarray(pr, q0.dtype))
@@ -377,7 +426,7 @@ def read_json_file(path: str, kind: str):
 
 
 def load_scenario(path, dtype=None) -> Scenario:
-    """Read a scenario JSON file (format ``softplan-scenario/1``, see the README)."""
+    """Read a scenario JSON file (format ``softplan-scenario/1``, see the documentation's "Scenario and gains files")."""
     return _read_scenario_file(path, scenario_from_dict, dtype)
 
 
@@ -390,18 +439,29 @@ def save_scenario(scenario: Scenario, path, name: str | None = None, overwrite: 
 def write_json_file(path, data: dict, overwrite: bool = False) -> None:
     """Write ``data`` as an indented JSON file, whole (via a temporary file in the
     same directory, then a rename) or not at all; an existing file is replaced
-    only with ``overwrite=True`` (ValueError otherwise)."""
+    only with ``overwrite=True`` (ValueError otherwise). A path that cannot be written
+    (a missing folder, a directory, no permission) is a ValueError naming ``path``."""
     path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise ValueError(f"cannot write {path}: it is a directory")
+    if not os.path.isdir(folder):
+        raise ValueError(f"cannot write {path}: the folder {folder} does not exist")
     if os.path.exists(path) and not overwrite:
         raise ValueError(f"{path} exists; pass overwrite=True to replace it")
     text = json.dumps(data, indent=2)
-    fd, tmp = tempfile.mkstemp(prefix=".softplan-", suffix=".json", dir=os.path.dirname(os.path.abspath(path)))
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".softplan-", suffix=".json", dir=folder)
+    except OSError as err:
+        raise ValueError(f"cannot write {path}: {err.strerror or err}") from None
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text + "\n")
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(err, OSError):
+            raise ValueError(f"cannot write {path}: {err.strerror or err}") from None
         raise
 

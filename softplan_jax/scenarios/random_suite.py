@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.memory import check_memory
 from ..base.validation import check_configuration
 from ..geometry.curves import PolynomialCurve
 from ..geometry.kinematics import backbone_points, tip_position
@@ -186,9 +187,9 @@ def random_scenarios(
       (n, curve_slots), no point sets; each entry equals ``make_scenario(goal,
       curves, q0, curve_slots=curve_slots, degree=degree)``.
     """
+    if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"n must be an int >= 1, got {n!r}")
     n = int(n)
-    if n < 1:
-        raise ValueError(f"n must be >= 1, got {n}")
     lo, hi = (int(v) for v in obstacles)
     if not 1 <= lo <= hi <= int(curve_slots):
         raise ValueError(
@@ -213,6 +214,12 @@ def random_scenarios(
             raise ValueError(f"{name} must be >= 0, got {v}")
     dtype = dtype or jnp.result_type(float)
     q0 = check_configuration(default_start() if q0 is None else q0)
+    # The generator's arrays per scene: its curve slots' coefficients and sampled points and
+    # distances (an estimate, bytes), before anything is drawn.
+    per_scene = 8 * int(curve_slots) * (3 * (int(degree) + 1) + 16 * 30 + 64 * 8) + 1024
+    check_memory(n * per_scene, "n", f"a suite of {n} random scenes with {curve_slots} curve slots",
+                 "draw fewer scenes (or plan a large suite in parts: softplan sweep streams one of any size)",
+                 on_device=False)
     q0_np = np.asarray(q0, np.float64)
     n_seg = q0_np.shape[0]
     rng = np.random.default_rng(seed_sequence(key_or_seed))

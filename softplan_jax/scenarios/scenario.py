@@ -26,11 +26,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.validation import as_float_array, check_configuration, check_finite, check_points
-from ..geometry.curves import ParametricCurve, PolynomialCurve, stack_curves
+from ..base.validation import as_float_array, check_configuration, check_finite, check_points, check_scale
+from ..geometry.curves import ParametricCurve, PolynomialCurve, check_curve_scale, stack_curves
 from ..geometry.obstacles import (  # obstacle_count re-exported: the layout belongs to obstacles
     obstacle_count,
-    obstacle_samples,
+    point_obstacle_distances,
 )
 
 __all__ = [
@@ -40,6 +40,9 @@ __all__ = [
     "stack_scenarios",
     "obstacle_count",
     "scenario_warnings",
+    "goal_obstacle_hits",
+    "unreachable_reason",
+    "check_scenario",
 ]
 
 
@@ -129,6 +132,7 @@ def make_scenario(
     if goal.shape != (3,):
         raise ValueError(f"goal must have shape (3,); got {goal.shape}")
     check_finite(goal, "goal")
+    check_scale(goal, "goal", dtype)
     if not isinstance(obstacles, (list, tuple)):
         raise ValueError(f"obstacles must be a list; got {type(obstacles).__name__}")
     polys, params, point_sets, point_radii = [], [], [], []
@@ -136,6 +140,7 @@ def make_scenario(
         if isinstance(ob, PolynomialCurve):
             if ob.coeffs.ndim != 2:
                 raise ValueError(f"obstacles[{k}] is a stacked PolynomialCurve; pass single curves")
+            check_curve_scale(ob.coeffs, ob.u_range, ob.radius, dtype, f"obstacles[{k}]")
             polys.append(ob)
         elif isinstance(ob, ParametricCurve):
             params.append(ob.astype(dtype))
@@ -147,6 +152,7 @@ def make_scenario(
                     f"{err} (each obstacle must be a PolynomialCurve, a ParametricCurve or an "
                     "(N, 3) point array)"
                 ) from None
+            check_scale(pts, f"obstacles[{k}]", dtype)
             point_sets.append(np.asarray(pts))
             point_radii.append(0.0)
     curves, curve_mask = stack_curves(polys, size=max(curve_slots or 0, len(polys)), degree=degree)
@@ -173,6 +179,8 @@ def make_scenario(
     arm_radius = as_float_array(arm_radius, "arm_radius")
     if arm_radius.shape != () or not bool(jnp.isfinite(arm_radius)) or float(arm_radius) < 0:
         raise ValueError(f"arm_radius must be a finite scalar >= 0; got {arm_radius}")
+    check_scale(arm_radius, "arm_radius", dtype, "values")
+    check_scale(np.where(np.isinf(np.asarray(L_max)), 0.0, np.asarray(L_max)), "L_max", dtype, "lengths")
     scenario = Scenario(
         q0=q0,
         goal=goal.astype(dtype),
@@ -191,41 +199,119 @@ def make_scenario(
     return scenario
 
 
-# Curve samples of the goal check in scenario_warnings (a warning, not a proof: a
-# goal within the sample spacing of a curve counts as on it).
-_GOAL_CHECK_SAMPLES = 2049
+def goal_obstacle_hits(scenario: Scenario) -> list[tuple[int, float, bool]]:
+    """The obstacles whose surface the goal lies on or inside, for one (unbatched) scene:
+    ``(slot, clearance, exact)`` for every real obstacle with ``clearance = distance -
+    radius - arm_radius <= 0``, the tip's clearance if it were on the goal. The distance is
+    exact for polynomial curves and point sets
+    (:func:`~softplan_jax.geometry.obstacles.point_obstacle_distances`; the reachability
+    proof ``goal_in_obstacle`` uses the same), a bound from below for parametric curves
+    (``exact`` False)."""
+    goal = np.asarray(scenario.goal, np.float64)
+    arm_r = float(scenario.arm_radius)
+    hits = []
+    for o in point_obstacle_distances(scenario, goal):
+        clearance = o["distance"] - o["radius"] - arm_r
+        if clearance <= 0:
+            hits.append((o["slot"], clearance, o["exact"]))
+    return hits
+
+
+def unreachable_reason(scenario: Scenario) -> str:
+    """A proof that no configuration puts the tip on the goal without contact, for one
+    (unbatched) scene, on the host: "beyond_reach" (every point of a PCC arm lies within its
+    backbone length ``sum_i L_i`` of the base, each segment's chord being at most its arc, so
+    a goal farther than ``sum_i L_max_i`` is out of reach), "goal_in_obstacle" (the goal within
+    an obstacle's radius plus the arm's of its centre line: exact distances,
+    :func:`goal_obstacle_hits`; parametric curves prove nothing), or "" (no proof)."""
+    goal = np.asarray(scenario.goal, np.float64)
+    L_max = np.asarray(scenario.L_max, np.float64)
+    if np.all(np.isfinite(L_max)) and np.linalg.norm(goal) > np.sum(L_max):
+        return "beyond_reach"
+    if any(exact for _, _, exact in goal_obstacle_hits(scenario)):
+        return "goal_in_obstacle"
+    return ""
 
 
 def scenario_warnings(scenario: Scenario) -> list[str]:
     """Sanity checks of one (unbatched) scenario that are not errors: the goal
-    on or inside an obstacle (its radius plus the arm's), or farther from the
-    base than the arm reaches with every length at its limit L_max.
+    on or inside an obstacle (its radius plus the arm's; :func:`goal_obstacle_hits`,
+    exact distances), or farther from the base than the arm reaches with every
+    length at its limit L_max.
 
     Returns the messages (empty when all is well); :func:`make_scenario` and
     :func:`load_scenario` issue them as ``UserWarning`` and the CLI prints them.
     """
     out = []
     goal = np.asarray(scenario.goal, np.float64)
-    arm_r = float(scenario.arm_radius)
-    # Every real obstacle in slot order (the layout belongs to obstacles.py). Curves:
-    # the sampled distance minus half the sample spacing, never larger than the true one.
-    hits = []
-    for o in obstacle_samples(scenario, _GOAL_CHECK_SAMPLES):
-        pts = o["pts"]
-        d = float(np.min(np.linalg.norm(pts - goal, axis=-1)))
-        if o["kind"] == "curve":
-            d -= 0.5 * float(np.max(np.linalg.norm(np.diff(pts, axis=0), axis=-1)))
-        if d <= o["radius"] + arm_r:
-            hits.append(o["slot"])
+    hits = goal_obstacle_hits(scenario)
     if hits:
-        out.append(f"the goal {goal.tolist()} lies on or inside obstacle(s) {hits} (within the obstacle's "
-                   "radius plus the arm's): it cannot be reached without contact")
+        slots = [slot for slot, _, _ in hits]
+        clear = ", ".join(f"{c:.3g}" + ("" if exact else " (sampled)") for _, c, exact in hits)
+        out.append(f"the goal {goal.tolist()} lies on or inside obstacle(s) {slots} (within the obstacle's "
+                   f"radius plus the arm's: the tip's clearance there {clear}): it cannot be reached without contact")
     reach = float(np.sum(np.asarray(scenario.L_max, np.float64)))
     if np.isfinite(reach) and np.linalg.norm(goal) > reach:
         out.append(f"the goal is {np.linalg.norm(goal):.4g} from the arm's base, farther than the arm reaches "
                    f"with every length at L_max ({reach:.4g}): it cannot be reached")
     return out
 
+
+
+def check_scenario(scenario, batched: bool | None = None) -> Scenario:
+    """The planners' check of a Scenario built or edited by hand (``_replace``): every field
+    an array of the shape and dtype the layout needs (the shapes of :class:`Scenario`'s
+    attributes, one leading batch axis when ``batched``; None: either), the goal, the start
+    and the limits finite. A ValueError names the first wrong field; returns the scenario."""
+    if not isinstance(scenario, Scenario):
+        raise ValueError(f"scenario must be a Scenario (see make_scenario), got {type(scenario).__name__}")
+    if not isinstance(scenario.curves, PolynomialCurve):
+        raise ValueError(f"scenario.curves must be a stacked PolynomialCurve, got {type(scenario.curves).__name__}")
+    if not isinstance(scenario.parametric, tuple) or not all(isinstance(p, ParametricCurve)
+                                                             for p in scenario.parametric):
+        raise ValueError("scenario.parametric must be a tuple of ParametricCurve")
+    q0 = getattr(scenario.q0, "shape", None)
+    if q0 is None or len(q0) not in (2, 3) or q0[-1] != 3:
+        raise ValueError(f"scenario.q0 must be an array of shape (n, 3) (a batch: (B, n, 3)), got {q0}")
+    if not jnp.issubdtype(scenario.q0.dtype, jnp.floating):
+        raise ValueError(f"scenario.q0 must be a floating array, got dtype {scenario.q0.dtype}")
+    lead = q0[:-2]
+    if batched is not None and bool(lead) != batched:
+        raise ValueError(f"scenario.q0 has shape {q0}: expected {'a batch (B, n, 3)' if batched else '(n, 3)'}")
+    n = q0[-2]
+    m_c = scenario.curves.coeffs.shape[len(lead)] if scenario.curves.coeffs.ndim == len(lead) + 3 else None
+    pts = getattr(scenario.points, "shape", ())
+    m_p, n_max = (pts[len(lead)], pts[len(lead) + 1]) if len(pts) == len(lead) + 3 else (None, None)
+    want = {
+        "goal": (3,), "curves.coeffs": (m_c, 3, None), "curves.u_range": (m_c, 2), "curves.radius": (m_c,),
+        "curve_mask": (m_c,), "points": (m_p, n_max, 3), "point_mask": (m_p, n_max), "point_radius": (m_p,),
+        "arm_radius": (), "L_min": (n,), "L_max": (n,),
+    }
+    for name, shape in want.items():
+        x = scenario
+        for part in name.split("."):
+            x = getattr(x, part)
+        got = tuple(getattr(x, "shape", ()))
+        full = lead + shape
+        if not hasattr(x, "dtype") or len(got) != len(full) or any(
+                w is not None and g != w for g, w in zip(got, full, strict=True)):
+            dims = ["B" if k < len(lead) else "K" if w is None else str(w) for k, w in enumerate(full)]
+            text = "(" + ", ".join(dims) + ("," if len(dims) == 1 else "") + ")"
+            raise ValueError(f"scenario.{name} must have shape {text} for a start q0 of shape {q0}, got "
+                             f"{got if hasattr(x, 'dtype') else type(x).__name__} (rebuild it with make_scenario)")
+        mask = name in ("curve_mask", "point_mask")
+        if mask != (x.dtype == bool) or (not mask and x.dtype != scenario.q0.dtype):
+            want_dtype = "bool" if mask else f"{scenario.q0.dtype} (the dtype of the start q0)"
+            raise ValueError(f"scenario.{name} must be an array of dtype {want_dtype}, got {x.dtype}")
+    for name in ("q0", "goal", "L_min"):
+        check_finite(getattr(scenario, name), f"scenario.{name}")
+    dtype = scenario.q0.dtype
+    for name in ("goal", "points", "point_radius", "arm_radius"):
+        check_scale(getattr(scenario, name), f"scenario.{name}", dtype, "values")
+    check_scale(scenario.q0[..., 0], "scenario.q0", dtype, "segment lengths")
+    check_curve_scale(scenario.curves.coeffs, scenario.curves.u_range, scenario.curves.radius, dtype,
+                      "scenario.curves")
+    return scenario
 
 
 def stack_scenarios(scenarios) -> Scenario:

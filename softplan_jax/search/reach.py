@@ -47,6 +47,7 @@ from ..geometry.closest import DEFAULT_OPTIONS, SolverOptions
 from ..geometry.kinematics import points_jacobian, tip_position
 from ..geometry.obstacles import radius_and_mask, true_closest
 from ..scenarios import Scenario
+from ..scenarios.scenario import unreachable_reason
 
 __all__ = ["ReachOptions", "Reachability", "REACH_REASONS", "reachability", "goal_configurations", "scene_of"]
 
@@ -322,30 +323,9 @@ def _goal_configurations_jit(options: ReachOptions, solver, contact: float, extr
 
 
 def unreachable_proof(scenario: Scenario) -> str:
-    """"beyond_reach", "goal_in_obstacle" or "" for one (unbatched) scene (exact, host side)."""
-    goal = np.asarray(scenario.goal, np.float64)
-    L_max = np.asarray(scenario.L_max, np.float64)
-    if np.all(np.isfinite(L_max)) and np.linalg.norm(goal) > np.sum(L_max):
-        return "beyond_reach"
-    arm_r = float(scenario.arm_radius)
-    # Polynomial curves: exact point-curve distance (roots of the stationarity polynomial).
-    from ..clouds import curve_distance  # exact: the roots of the stationarity polynomial and the ends
-    from ..geometry.curves import PolynomialCurve
-
-    coeffs = np.asarray(scenario.curves.coeffs, np.float64)
-    u_range = np.asarray(scenario.curves.u_range, np.float64)
-    radius = np.asarray(scenario.curves.radius, np.float64)
-    for j in np.nonzero(np.asarray(scenario.curve_mask))[0]:
-        d, _ = curve_distance(PolynomialCurve(coeffs[j], u_range[j], radius[j]), goal[None])
-        if d[0] < arm_r + radius[j]:
-            return "goal_in_obstacle"
-    pts, pmask = np.asarray(scenario.points, np.float64), np.asarray(scenario.point_mask)
-    prad = np.asarray(scenario.point_radius, np.float64)
-    for j in range(pts.shape[0]):
-        p = pts[j][pmask[j]]
-        if p.size and np.min(np.linalg.norm(p - goal, axis=-1)) < arm_r + prad[j]:
-            return "goal_in_obstacle"
-    return ""
+    """"beyond_reach", "goal_in_obstacle" or "" for one (unbatched) scene (exact, host side;
+    :func:`~softplan_jax.scenarios.scenario.unreachable_reason`)."""
+    return unreachable_reason(scenario)
 
 
 def scene_of(scenarios: Scenario, b: int) -> Scenario:

@@ -35,6 +35,7 @@ import json
 import math
 import os
 import re
+import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -189,12 +190,20 @@ def _parse(data) -> tuple[Gains | GainFunction, str, int | None]:
 
 
 def _validated(gains, dtype):
-    """``check_gains`` (the planner's rules) on the parsed gains, its error naming the field."""
+    """``check_gains`` (the planner's rules) on the parsed gains, its error naming the field;
+    a file with ``damping`` 0 gets a warning saying where the plain pseudo-inverse fails."""
     try:
-        return check_gains(gains, dtype)
+        checked = check_gains(gains, dtype)
     except ValueError as err:
         m = re.match(r"gain (\w+) ", str(err)) or re.match(r"(rep_profile|seg_weights) ", str(err))
         raise _err(f"gains.{m.group(1)}" if m else "gains", str(err)) from None
+    if float(np.asarray(gains.damping)) == 0:
+        warnings.warn("gains file field gains.damping: 0 is the plain pseudo-inverse J^T (J J^T)^-1, which does not "
+                      "exist where the arm's Jacobian loses rank (a straight arm bending in one plane, a closest "
+                      "point at the arm's base): planning then ends 'non_finite' or is refused; the paper preset uses "
+                      "it with a bent start pose. Use damping > 0 (default 0.05) unless that is what you want",
+                      UserWarning, stacklevel=3)
+    return checked
 
 
 def _check_tuned_for(file_method, file_n, method, n_points, name: str | None):

@@ -136,7 +136,7 @@ def tune_smoothed(scenarios: Scenario, space: GainSpace = GainSpace(), gains=Non
     slope, so it is smoothed widely and moves fast. With one sigma (0.4) and the
     plain step, dt crept up from the start and the result depended on ``seed``
     (validation success 77.7-94.1 % for N = 10 over tuner seeds 5-14, against
-    86.7-93.8 % with the recipe; README, "Tuning the gains").
+    86.7-93.8 % with the recipe; documentation, "Tuning the gains").
 
     Two guards keep a noisy step from running away (off by default): ``bounds``
     projects theta onto a box after every update (projected stochastic gradient

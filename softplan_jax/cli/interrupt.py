@@ -1,0 +1,121 @@
+"""Ctrl-C in the ``softplan`` command: one line, exit code 130, no partial files.
+
+A KeyboardInterrupt raised into Python while XLA compiles or runs on its own
+threads lets the interpreter shut down under them (jax's and XLA's threads
+and static objects are torn down while still in use): in most tries a
+segmentation fault after the "interrupted" line. So the command does not
+unwind on SIGINT. :func:`interrupt_guard` installs a handler that ends the
+process at once: it removes the temporary files of the outputs being written
+(:func:`atomic_output`: every output is written to a temporary file beside
+it and renamed into place when complete, so no partial file is ever under
+the user's name), writes ``softplan: interrupted`` on stderr and calls
+``os._exit(130)`` (no interpreter shutdown, no C++ destructors).
+
+Python runs a signal handler in the main thread between two bytecodes, which
+may be long after the signal while the main thread is inside one long C++
+call (an XLA compilation). So the guard also asks the C-level handler to
+write the signal's number to a pipe (``signal.set_wakeup_fd``), watched by a
+daemon thread that ends the process the same way as soon as the byte
+arrives (the compilation runs without the GIL).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import tempfile
+import threading
+
+__all__ = ["EXIT_INTERRUPTED", "interrupt_guard", "atomic_output", "exit_interrupted"]
+
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, the shell's convention
+
+_PARTIAL: set[str] = set()  # temporary files being written
+_LOCK = threading.Lock()
+_MESSAGE = b"softplan: interrupted\n"
+
+
+def exit_interrupted() -> None:
+    """Remove the partial outputs, write one line on stderr, end the process with code 130."""
+    if not _LOCK.acquire(blocking=False):
+        return  # the other path (handler or watcher) is already ending the process
+    for path in list(_PARTIAL):
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+    try:
+        os.write(2, _MESSAGE)  # not sys.stderr: its lock may be held by the interrupted thread
+    except OSError:
+        pass
+    os._exit(EXIT_INTERRUPTED)
+
+
+def _handler(signum, frame):
+    exit_interrupted()
+
+
+def _watch(fd: int) -> None:
+    while True:
+        try:
+            data = os.read(fd, 64)
+        except OSError:
+            return
+        if not data:  # the write end was closed: the guard is over
+            return
+        if signal.SIGINT in data:
+            exit_interrupted()
+
+
+@contextlib.contextmanager
+def interrupt_guard():
+    """While active, SIGINT ends the process with :func:`exit_interrupted`. A no-op outside
+    the main thread (signal handlers can only be set there); the previous handler and
+    wakeup fd are restored on exit."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    r, w = os.pipe()
+    os.set_blocking(w, False)
+    try:
+        old_fd = signal.set_wakeup_fd(w)
+    except ValueError:  # not the main thread of the main interpreter
+        os.close(r)
+        os.close(w)
+        yield
+        return
+    old_handler = signal.signal(signal.SIGINT, _handler)
+    watcher = threading.Thread(target=_watch, args=(r,), name="softplan-interrupt", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old_handler)
+        signal.set_wakeup_fd(old_fd)
+        os.close(w)  # the watcher reads end-of-file and returns
+        watcher.join(timeout=1.0)
+        os.close(r)
+
+
+@contextlib.contextmanager
+def atomic_output(path: str):
+    """Write an output file whole or not at all: yields a temporary path in the same folder
+    (same extension, so that writers that choose a format by it still do); on success it is
+    renamed to ``path``, on an error removed, and on Ctrl-C :func:`exit_interrupted` removes it."""
+    folder = os.path.dirname(os.path.abspath(path))
+    ext = os.path.splitext(path)[1]
+    fd, tmp = tempfile.mkstemp(prefix=".softplan-", suffix=ext, dir=folder)
+    os.close(fd)
+    _PARTIAL.add(tmp)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        _PARTIAL.discard(tmp)
+        if os.path.exists(tmp):
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+

@@ -1,0 +1,486 @@
+"""Sweeps at scale: plan a seeded random suite of any size in chunks, in constant
+memory, streamed to disk, resumable, with the global fallback where asked.
+
+**The scenes.** Scene ``i`` of the sweep with seed ``s`` is scene ``i mod B`` of
+``random_scenarios(seed_b, B)`` with ``B = SCENE_BLOCK`` (64) and ``seed_b`` drawn
+from ``numpy.random.SeedSequence(s, spawn_key=(b,))`` for the block ``b = i // B``;
+its escapes' random walks use the key ``jax.random.fold_in(PRNGKey(s), i)``. So a
+scene depends on the seed, its index and the suite's options (obstacles, slots,
+dtype), never on ``n`` or the chunk size: the first K scenes of every sweep with
+the same seed are the same scenes (prefix-consistent), and
+:func:`sweep_scenarios` / :func:`sweep_keys` give any of them again.
+``softplan batch --n N`` plans ``random_scenarios(seed, N)``, whose scenes depend
+on N: the two see different scenes drawn from the same distribution. The
+outcomes of a scene agree across chunk sizes to rounding only (a vmapped
+program rounds by its batch shape, see :func:`~softplan_jax.plan_batch`), and
+the fallback's searches are seeded per chunk; ``chunk`` is part of a sweep's
+identity.
+
+**The loop.** Chunk ``c`` holds scenes ``[c C, (c + 1) C)`` (C = ``chunk``, the last
+chunk padded to C with copies of its last scene, so every call has one shape and
+the planner compiles once): one :func:`~softplan_jax.planning.planner.plan_batch`
+call (lanes refilled as scenes finish, so the cost follows the steps taken), then,
+with ``fallback``, :func:`~softplan_jax.search.fallback.rescue` (reachability and
+the certified search of :func:`~softplan_jax.plan_fallback`) on the chunk's scenes
+the local planner left stalled or at max_steps. While chunk c runs, chunk c + 1's
+scenes are generated on the host. Each chunk's summary rows (and trajectories,
+when asked) are written to disk (:mod:`.store`) and dropped: the process holds at
+most two chunks, whatever ``n``.
+
+**Resuming.** A chunk is done when its table exists (written last, atomically). A
+sweep run again into the same folder with the same arguments skips the done
+chunks; the chunks are independent (their scenes, keys and fallback seeds depend
+on their index only), so the merged table is the one an uninterrupted run writes.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import os
+import platform
+import sys
+import time
+import warnings
+from importlib.metadata import PackageNotFoundError, version
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..base.status import STATUS_NAMES, Status
+from ..planning.batching import batch_mesh, pad_batch, round_chunk
+from ..planning.planner import check_gains, make_options, plan_batch, result_from_rollout
+from ..planning.presets import PRESETS, apply_preset
+from ..planning.step import GainFunction, Gains
+from ..scenarios import random_scenarios
+from ..search.fallback import rescue
+from ..search.reach import ReachOptions, check_reach_options
+from . import store
+
+__all__ = ["SCENE_BLOCK", "sweep", "sweep_scenarios", "sweep_keys"]
+
+SCENE_BLOCK = 64  # scenes per call of random_scenarios (a constant: scene i must not depend on n or chunk)
+_LOCAL_FAILURES = (int(Status.STALLED), int(Status.MAX_STEPS))  # what the fallback takes over
+
+
+def _int(name, v, lo=1):
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise ValueError(f"{name} must be an int >= {lo}, got {v!r}")
+    return int(v)
+
+
+def _block_seed(seed: int, block: int) -> int:
+    return int(np.random.SeedSequence(seed, spawn_key=(block,)).generate_state(1, np.uint64)[0])
+
+
+@functools.cache
+def _fold_keys():
+    return jax.jit(jax.vmap(jax.random.fold_in, in_axes=(None, 0)))
+
+
+def sweep_keys(seed: int, start: int, stop: int) -> np.ndarray:
+    """The escapes' keys of scenes ``start .. stop - 1`` of a sweep: ``fold_in(PRNGKey(seed), i)``.
+
+    Returns:
+      (stop - start, 2) uint32 raw keys (the ``seed`` argument of :func:`~softplan_jax.plan_batch`).
+    """
+    seed, start, stop = _int("seed", seed, 0), _int("start", start, 0), _int("stop", stop, 0)
+    idx = np.arange(start, stop, dtype=np.uint32)
+    return np.asarray(_fold_keys()(jax.random.PRNGKey(seed), idx))
+
+
+@functools.lru_cache(maxsize=2)  # the blocks of the current chunk (and a rerun's in the same process)
+def _block(seed: int, block: int, obstacles: tuple, slots: int, dtype: str):
+    s = random_scenarios(_block_seed(seed, block), SCENE_BLOCK, obstacles=obstacles, curve_slots=slots, dtype=dtype)
+
+    def frozen(x):
+        x = np.asarray(x)
+        x.flags.writeable = False
+        return x
+
+    return jax.tree_util.tree_map(frozen, s)
+
+
+class _Scenes:
+    """Scenes of a sweep by index, generated block by block (:data:`SCENE_BLOCK` scenes)."""
+
+    def __init__(self, seed, obstacles, slots, dtype):
+        self.seed, self.args = seed, (tuple(int(v) for v in obstacles), int(slots), str(jnp.dtype(dtype)))
+
+    def _get(self, b):
+        return _block(self.seed, b, *self.args)
+
+    def take(self, start, stop):
+        parts = []
+        for b in range(start // SCENE_BLOCK, (stop - 1) // SCENE_BLOCK + 1):
+            lo, hi = max(start, b * SCENE_BLOCK) - b * SCENE_BLOCK, min(stop, (b + 1) * SCENE_BLOCK) - b * SCENE_BLOCK
+            parts.append(jax.tree_util.tree_map(lambda x, lo=lo, hi=hi: x[lo:hi], self._get(b)))
+        return parts[0] if len(parts) == 1 else jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
+
+
+def sweep_scenarios(seed: int, start: int, stop: int, *, obstacles=(1, 8), slots: int = 8, dtype=None):
+    """Scenes ``start .. stop - 1`` of the sweep suite (module docstring), as one batched Scenario.
+
+    Args:
+      seed: the sweep's seed, an int >= 0.
+      start, stop: scene indices, 0 <= start < stop.
+      obstacles, slots, dtype: as :func:`sweep`.
+
+    Returns:
+      A batched :class:`~softplan_jax.Scenario` (leading axis stop - start) of read-only NumPy arrays.
+    """
+    seed, start, stop = _int("seed", seed, 0), _int("start", start, 0), _int("stop", stop, 1)
+    if stop <= start:
+        raise ValueError(f"need start < stop, got {start}, {stop}")
+    return _Scenes(seed, obstacles, slots, _check_dtype(dtype)).take(start, stop)
+
+
+def _jsonable(x):
+    """Options, gains and other NamedTuples as plain JSON values."""
+    if hasattr(x, "_asdict"):
+        return {k: _jsonable(v) for k, v in x._asdict().items()}
+    if isinstance(x, (tuple, list)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.ndarray, np.generic, jax.Array)):
+        return np.asarray(x).tolist()
+    return x
+
+
+def _versions() -> dict:
+    try:
+        own = version("softplan_jax")
+    except PackageNotFoundError:
+        own = "0.0.0+unknown"
+    return dict(softplan_jax=own, jax=jax.__version__, numpy=np.__version__, python=platform.python_version())
+
+
+def _check_dtype(dtype):
+    dt = jnp.dtype(jnp.result_type(float) if dtype is None else dtype)
+    if dt not in (jnp.dtype(jnp.float32), jnp.dtype(jnp.float64)):
+        raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+    if dt == jnp.dtype(jnp.float64) and not jax.config.jax_enable_x64:
+        raise ValueError("dtype float64 needs jax_enable_x64 (jax.config.update('jax_enable_x64', True))")
+    return dt
+
+
+def _check_gains(gains, dtype):
+    """``(preset name or None, Gains, preset options)``."""
+    if gains is None or isinstance(gains, str):
+        name = "default" if gains is None else gains
+        if name not in PRESETS:
+            raise ValueError(f"gains: unknown preset {name!r}; choose one of {sorted(PRESETS)}, or pass Gains")
+        from ..planning.presets import preset
+
+        p = preset(name)
+        return name, Gains(**{k: jnp.asarray(p.gains[k], dtype) for k in Gains._fields}), dict(p.options)
+    if not isinstance(gains, (Gains, GainFunction)):
+        raise ValueError(f"gains must be None, a preset name, Gains or GainFunction, got {type(gains).__name__}")
+    return None, check_gains(gains, dtype), {}
+
+
+def _check_trajectories(trajectories, n):
+    """How many scenes (the first ones) keep their trajectory."""
+    if trajectories is None:
+        return 0
+    if trajectories == "all":
+        return n
+    if isinstance(trajectories, str):
+        raise ValueError(f"trajectories must be None, 'all' or an int >= 1, got {trajectories!r}")
+    return min(_int("trajectories", trajectories), n)
+
+
+def _prepare_folder(out, header, resume: bool, overwrite: bool) -> None:
+    """Make ``out`` ready: a new sweep's header, or the same sweep's to resume (ValueError otherwise)."""
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise ValueError(f"out: {out} exists and is not a folder")
+    try:
+        os.makedirs(out, exist_ok=True)
+    except OSError as err:
+        raise ValueError(f"out: cannot create the folder {out}: {err}") from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise ValueError(f"out: the folder {out} is not writable")
+    if overwrite:
+        store.remove_sweep_files(out)
+        old = None
+    else:
+        old = store.read_header(out)
+        if old is None and os.listdir(out):
+            raise ValueError(f"out: {out} holds files but no sweep (no sweep.json); choose a new or empty folder, "
+                             "or pass overwrite=True (--force) to write the sweep beside them")
+        if old is not None and not resume:
+            raise ValueError(f"out: {out} holds a sweep; pass resume=True to continue it or overwrite=True "
+                             "(--force) to start anew")
+    if old is not None:
+        diff = store.header_differences(old, header)
+        if diff:
+            raise ValueError(f"out: {out} holds a sweep with other arguments: {'; '.join(diff)}; use another "
+                             "folder, the same arguments, or overwrite=True (--force) to start anew")
+        if old.get("versions") != header["versions"]:
+            warnings.warn(f"resuming the sweep in {out} with other versions ({header['versions']}) than it was "
+                          f"started with ({old.get('versions')}): its chunks may differ to rounding",
+                          RuntimeWarning, stacklevel=3)
+        return
+    try:
+        store.write_header(out, header)
+    except OSError as err:
+        raise ValueError(f"out: cannot write into {out}: {err}") from None
+
+
+def sweep(n: int, out, seed: int = 0, *, chunk: int = 256, method: str = "curve", n_points: int = 10, gains=None,
+          max_steps: int = 600, fallback: bool = False, reach: ReachOptions | None = None, obstacles=(1, 8),
+          slots: int = 8, dtype=None, devices=None, trajectories=None, progress=True, resume: bool = True,
+          overwrite: bool = False, **options) -> dict:
+    """Plan ``n`` scenes of the sweep suite in chunks, streaming one summary row per scene to disk.
+
+    The scenes, the loop, the files and resuming: module docstring and :mod:`.store`.
+    Memory stays flat in ``n``: the process holds at most two chunks (their scenes and
+    rollouts) and two blocks of 64 generated scenes; the rows go to disk chunk by
+    chunk, and the summary is computed by streaming the merged table.
+
+    Args:
+      n: number of scenes, >= 1.
+      out: the sweep folder (created if needed; a new sweep needs a new or empty folder).
+      seed: int >= 0: the scenes, the escapes' keys and the fallback's seeds.
+      chunk: scenes per planner call (one compiled shape; rounded up to a multiple of the
+        device count, at most ``n``).
+      method, n_points, max_steps, **options: the local planner's settings, as
+        :func:`~softplan_jax.plan_batch` (``options``: further PlanOptions fields).
+      gains: None (the default preset), a preset name ("default", "paper": gains, step
+        options and start pose), or :class:`~softplan_jax.Gains` /
+        :class:`~softplan_jax.GainFunction`.
+      fallback: run the global fallback (:func:`~softplan_jax.plan_fallback`'s reachability
+        and certified search) on every scene the local planner leaves stalled or at
+        max_steps; the table says which planner reached each scene.
+      reach: :class:`~softplan_jax.search.ReachOptions` of the fallback (default ReachOptions()).
+      obstacles, slots: curves per scene drawn from ``obstacles[0] .. obstacles[1]``, padded to
+        ``slots`` (as :func:`~softplan_jax.random_scenarios`).
+      dtype: float32 or float64 (default: JAX's default float; float64 needs jax_enable_x64).
+      devices: None (every local device) or an int k (the first k), as plan_batch.
+      trajectories: None (no paths kept), "all", or an int K: the paths of scenes 0 .. K-1 (a
+        uniform sample: the scenes are independent draws), to ``trajectories/*.npz``
+        (:func:`~softplan_jax.sweeps.store.load_trajectory`).
+      progress: True (one line per chunk on stderr), False, or a callable given a dict after
+        each chunk is written: chunk (its index), chunks, chunks_done (resumed ones included),
+        n, and for this run: scenes_done, reached, local, global (reached by each planner),
+        elapsed_s, compile_s, eta_s.
+      resume: continue the sweep already in ``out`` if it has the same arguments.
+      overwrite: remove the sweep files already in ``out`` and start anew.
+
+    Returns:
+      The summary (also ``out/summary.json``): status counts; success, local, global and
+      collision rates over all ``n`` scenes with 95 % Wilson intervals (``*_ci95``); mean
+      iterations and tip path length of the reached scenes; least clearance; steps taken
+      by the local planner; times (generation, compile, run = the chunks' wall time after
+      compilation, fallback) summed over every session that wrote a chunk;
+      ``scenes_per_s = n / run_s`` and ``steps_per_s = steps_taken / (run_s - fallback_s)``.
+
+    Raises:
+      ValueError: a bad argument (named), a folder that cannot be written or holds something
+        else, or a sweep in ``out`` with other arguments (the differing fields named).
+    """
+    n, seed, max_steps = _int("n", n), _int("seed", seed, 0), _int("max_steps", max_steps)
+    chunk, slots, n_points = _int("chunk", chunk), _int("slots", slots), _int("n_points", n_points)
+    for name, v in (("fallback", fallback), ("resume", resume), ("overwrite", overwrite)):
+        if not isinstance(v, (bool, np.bool_)):
+            raise ValueError(f"{name} must be True or False, got {v!r}")
+    if not (isinstance(progress, (bool, np.bool_)) or callable(progress)):
+        raise ValueError(f"progress must be True, False or a callable, got {progress!r}")
+    if out is None or not str(out):
+        raise ValueError("out: give the sweep folder")
+    out = os.path.abspath(os.fspath(out))
+    try:
+        lo, hi = (int(v) for v in obstacles)
+    except (TypeError, ValueError):
+        raise ValueError(f"obstacles must be (min, max), got {obstacles!r}") from None
+    if not 1 <= lo <= hi <= slots:
+        raise ValueError(f"obstacles: need 1 <= min <= max <= slots ({slots}), got {obstacles!r}")
+    if {"method", "n_points"} & set(options):
+        raise ValueError("pass method and n_points once")
+    dt = _check_dtype(dtype)
+    if isinstance(devices, str):
+        raise ValueError(f"devices must be None or an int (sweep runs on local devices), got {devices!r}")
+    mesh = batch_mesh(devices)
+    n_dev = 1 if mesh is None else mesh.size
+    size = round_chunk(chunk, n, n_dev)
+    n_chunks = math.ceil(n / size)
+    preset_name, g, extra = _check_gains(gains, dt)
+    opts = make_options(method, n_points, **{**extra, **options})
+    reach = check_reach_options(ReachOptions() if reach is None else reach) if fallback else None
+    keep = _check_trajectories(trajectories, n)
+    header = dict(format=store.FORMAT, n=n, seed=seed, chunk=size, scene_block=SCENE_BLOCK, method=opts.method,
+                  n_points=opts.n_points, max_steps=max_steps, fallback=bool(fallback), reach=_jsonable(reach),
+                  obstacles=[lo, hi], slots=slots, dtype=str(dt), devices=n_dev,
+                  trajectories=None if not keep else ("all" if trajectories == "all" else keep),
+                  gains=dict(preset=preset_name, values=_jsonable(g)), options=_jsonable(opts),
+                  versions=_versions(), created=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+    header = json.loads(json.dumps(store.finite_json(header), default=str))
+    _prepare_folder(out, header, bool(resume), bool(overwrite))
+
+    done = store.completed_chunks(out)
+    todo = [c for c in range(n_chunks) if c not in done]
+    say = _reporter(progress, n, n_chunks, out, len(done), fallback)
+    scenes = _Scenes(seed, (lo, hi), slots, dt)
+    run = _Run(out, n, seed, size, max_steps, opts, g, preset_name, reach, keep, devices, scenes)
+    run.loop(todo, say)
+    merged = store.merge_tables(out, n_chunks)
+    summary = _summary(header, merged, out, len(done))
+    store.write_summary(out, summary)
+    return summary
+
+
+class _Run:
+    """The chunk loop of one sweep session."""
+
+    def __init__(self, out, n, seed, size, max_steps, opts, gains, preset_name, reach, keep, devices, scenes):
+        self.out, self.n, self.seed, self.size, self.max_steps = out, n, seed, size, max_steps
+        self.opts, self.gains, self.preset_name, self.reach, self.keep = opts, gains, preset_name, reach, keep
+        self.devices, self.scenes = devices, scenes
+        self.local_options = {k: v for k, v in opts._asdict().items() if k not in ("method", "n_points")}
+        self.session = f"{os.getpid()}-{time.time_ns()}"
+        p = None if preset_name is None else PRESETS[preset_name]
+        self.preset_pose = p is not None and (p.start_theta is not None or p.start_phi is not None)
+        self.compile_s = None
+
+    def launch(self, c):
+        """Generate chunk c's scenes and start its planning (asynchronous)."""
+        t0 = time.perf_counter()
+        a, b = c * self.size, min(self.n, (c + 1) * self.size)
+        scenes, keys = pad_batch((self.scenes.take(a, b), sweep_keys(self.seed, a, b)), self.size)
+        if self.preset_name is not None and self.preset_pose:  # the preset's start pose
+            scenes = apply_preset(self.preset_name, scenes._replace(q0=jnp.asarray(scenes.q0)))[0]
+            scenes = scenes._replace(q0=np.asarray(scenes.q0))
+        t1 = time.perf_counter()
+        r = plan_batch(scenes, self.opts.method, self.opts.n_points, self.gains, self.max_steps, keys,
+                       devices=self.devices, **self.local_options)
+        if self.compile_s is None:
+            self.compile_s = time.perf_counter() - t1  # the first call returns after tracing and compiling
+        return dict(chunk=c, first=a, m=b - a, scenes=scenes, rollout=r, generation_s=t1 - t0)
+
+    def finish(self, p):
+        """Collect chunk p's rollouts, run the fallback, and commit its rows (and trajectories)."""
+        m, r, first = p["m"], p["rollout"], p["first"]
+        get = lambda x: np.asarray(x)[:m]  # noqa: E731
+        status, iters, escapes = get(r.status), get(r.iterations), get(r.escapes)
+        reached, clear, err = get(r.reached), get(r.min_clearance), get(r.final_error)
+        tip = get(r.tip)
+        path = np.linalg.norm(np.diff(tip, axis=1), axis=-1).sum(axis=1)  # frozen after the end: no extra length
+        rows = [dict(index=first + k, chunk=p["chunk"], status=STATUS_NAMES[int(status[k])], reached=bool(reached[k]),
+                     planner="local" if reached[k] else "none", iterations=int(iters[k]), local_iterations=int(iters[k]),
+                     escapes=int(escapes[k]), min_clearance=float(clear[k]), path_length=float(path[k]),
+                     final_error=float(err[k]), reason="") for k in range(m)]
+        kept = {k: None for k in range(min(m, max(0, self.keep - first)))}  # scene k of the chunk: its path
+        t_fb = time.perf_counter()
+        if self.reach is not None:
+            self._fallback(p, rows, status, kept)
+        fallback_s = time.perf_counter() - t_fb if self.reach is not None else 0.0
+        if kept:
+            q = np.asarray(r.q)
+            traj = []
+            for k, res in kept.items():
+                it = rows[k]["iterations"]
+                qk, tk = (q[k, : it + 1], tip[k, : it + 1]) if res is None else (res.q, res.tip)
+                traj.append((first + k, qk, tk, rows[k]["status"], rows[k]["planner"]))
+            store.write_trajectories(store.chunk_paths(self.out, p["chunk"])["trajectories"], traj)
+        return rows, dict(chunk=p["chunk"], first=first, scenes=m, session=self.session,
+                          generation_s=p["generation_s"], fallback_s=fallback_s, local_steps=int(iters.sum()))
+
+    def _fallback(self, p, rows, status, kept):
+        """rescue() on the chunk's scenes the local planner left stalled or at max_steps."""
+        idx = np.nonzero(np.isin(status, _LOCAL_FAILURES))[0]
+        if idx.size == 0:
+            return
+        r = jax.tree_util.tree_map(lambda x: np.asarray(x)[idx], p["rollout"])
+        sub = jax.tree_util.tree_map(lambda x: x[idx], p["scenes"])
+        one = lambda tree, k: jax.tree_util.tree_map(lambda x: x[k], tree)  # noqa: E731
+        local = [result_from_rollout(one(r, k), one(sub, k)) for k in range(idx.size)]
+        # A seed per chunk (its index only): a resumed chunk searches as the first run did.
+        chunk_seed = int(np.random.SeedSequence(self.seed, spawn_key=(1, p["chunk"])).generate_state(1)[0] >> 1)
+        results = rescue(sub, local, self.opts, reach=self.reach, seed=chunk_seed)
+        for k, res in zip(idx, results, strict=True):
+            k = int(k)
+            rows[k].update(status=res.status, reached=bool(res.reached), iterations=int(res.iterations),
+                           min_clearance=float(res.min_clearance), final_error=float(res.final_error),
+                           path_length=float(np.linalg.norm(np.diff(res.tip, axis=0), axis=-1).sum()),
+                           planner=("global" if res.planner == "global" else "local") if res.reached else "none",
+                           reason=res.reason)
+            if k in kept:
+                kept[k] = res
+
+    def loop(self, todo, say):
+        """Launch chunk c + 1 before finishing chunk c: the host generates while the device plans."""
+        t_start = last = time.perf_counter()
+        pending = None
+        for c in [*todo, None]:
+            launched = self.launch(c) if c is not None else None
+            if pending is not None:
+                rows, timing = self.finish(pending)
+                now = time.perf_counter()
+                first_of_session = timing["chunk"] == todo[0]
+                compile_s = self.compile_s if first_of_session else 0.0
+                timing.update(seconds=now - last - compile_s, compile_s=compile_s)
+                store.write_chunk(self.out, pending["chunk"], rows, timing)
+                last = now
+                say(rows, timing, now - t_start, self.compile_s or 0.0)
+            pending = launched
+
+
+def _reporter(progress, n, n_chunks, out, already, fallback):
+    """The per-chunk progress callback: a line on stderr, the user's callable, or nothing."""
+    state = dict(chunks=already, scenes=0, local=0, glob=0)
+    if progress is True and already:
+        print(f"sweep: resuming {out}: {already}/{n_chunks} chunks done", file=sys.stderr, flush=True)
+
+    def say(rows, timing, elapsed, compile_s):
+        state["chunks"] += 1
+        state["scenes"] += len(rows)
+        state["local"] += sum(r["planner"] == "local" for r in rows)
+        state["glob"] += sum(r["planner"] == "global" for r in rows)
+        left = n_chunks - state["chunks"]
+        run = max(elapsed - compile_s, 1e-9)
+        rate = state["scenes"] / run
+        info = dict(chunk=timing["chunk"], chunks=n_chunks, chunks_done=state["chunks"], scenes_done=state["scenes"],
+                    n=n, reached=state["local"] + state["glob"], local=state["local"], **{"global": state["glob"]},
+                    elapsed_s=elapsed, compile_s=compile_s, eta_s=left * timing["scenes"] / rate if left else 0.0)
+        if callable(progress):
+            progress(info)
+        elif progress:
+            pct = 100.0 * info["reached"] / state["scenes"]
+            share = f" (global {100.0 * state['glob'] / state['scenes']:.1f} %)" if fallback else ""
+            line = (f"sweep: {state['chunks']}/{n_chunks} chunks, {state['scenes']:,} scenes this run, reached "
+                    f"{pct:.1f} %{share}, {rate:,.1f} scenes/s, "
+                    f"{elapsed:.1f} s" + (f", eta {info['eta_s']:.0f} s" if left else "")
+                    + f" (compile {compile_s:.1f} s)")
+            print(line, file=sys.stderr, flush=True)
+
+    return say
+
+
+def _rate(k, n):
+    lo, hi = store.wilson_interval(k, n)
+    return k / n, [lo, hi]
+
+
+def _summary(header, merged, out, resumed) -> dict:
+    n = header["n"]
+    counts = merged["status_counts"]
+    local, glob = merged["planners"]["local"], merged["planners"]["global"]
+    reached = local + glob
+    s = dict(out=out, n=n, seed=header["seed"], chunk=header["chunk"], chunks=math.ceil(n / header["chunk"]),
+             method=header["method"], n_points=header["n_points"] if header["method"] == "points" else None,
+             max_steps=header["max_steps"], fallback=header["fallback"], dtype=header["dtype"],
+             devices=header["devices"], gains=header["gains"]["preset"] or "custom", resumed_chunks=resumed,
+             sessions=merged["sessions"], status_counts=counts, reached=reached, reached_local=local,
+             reached_global=glob)
+    collided = counts.get("collided", 0) + counts.get("start_in_collision", 0)
+    for name, k in (("success", reached), ("local", local), ("global", glob), ("collision", collided)):
+        s[f"{name}_rate"], s[f"{name}_ci95"] = _rate(k, n)
+    run_s, fb_s = merged["seconds"], merged["fallback_s"]
+    s.update(mean_iterations_reached=merged["iterations_reached"] / reached if reached else None,
+             mean_path_length_reached=merged["path_length_reached"] / reached if reached else None,
+             min_clearance=merged["min_clearance"], steps_taken=merged["local_steps"],
+             generation_s=merged["generation_s"], compile_s=merged["compile_s"], run_s=run_s, fallback_s=fb_s,
+             scenes_per_s=n / run_s if run_s > 0 else None,
+             steps_per_s=merged["local_steps"] / (run_s - fb_s) if run_s - fb_s > 0 else None)
+    return s
