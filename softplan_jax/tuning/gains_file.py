@@ -35,7 +35,6 @@ import json
 import math
 import os
 import re
-import warnings
 
 import jax.numpy as jnp
 import numpy as np
@@ -190,19 +189,14 @@ def _parse(data) -> tuple[Gains | GainFunction, str, int | None]:
 
 
 def _validated(gains, dtype):
-    """``check_gains`` (the planner's rules) on the parsed gains, its error naming the field;
-    a file with ``damping`` 0 gets a warning saying where the plain pseudo-inverse fails."""
+    """``check_gains`` (the planner's rules) on the parsed gains, its error naming the field.
+    ``damping`` 0 (the paper preset's plain pseudo-inverse) is accepted without a warning:
+    :func:`~softplan_jax.plan` refuses it, with the reason, where the start pose makes it singular."""
     try:
         checked = check_gains(gains, dtype)
     except ValueError as err:
         m = re.match(r"gain (\w+) ", str(err)) or re.match(r"(rep_profile|seg_weights) ", str(err))
         raise _err(f"gains.{m.group(1)}" if m else "gains", str(err)) from None
-    if float(np.asarray(gains.damping)) == 0:
-        warnings.warn("gains file field gains.damping: 0 is the plain pseudo-inverse J^T (J J^T)^-1, which does not "
-                      "exist where the arm's Jacobian loses rank (a straight arm bending in one plane, a closest "
-                      "point at the arm's base): planning then ends 'non_finite' or is refused; the paper preset uses "
-                      "it with a bent start pose. Use damping > 0 (default 0.05) unless that is what you want",
-                      UserWarning, stacklevel=3)
     return checked
 
 
