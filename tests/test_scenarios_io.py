@@ -272,3 +272,23 @@ def test_save_rejects_parametric_curves(tmp_path):
     with pytest.raises(ValueError, match="ParametricCurve"):
         sp.save_scenario(scenario, path)
     assert not path.exists()
+
+
+def test_written_files_get_an_ordinary_mode(tmp_path):
+    """Files written through a temporary file (mkstemp: mode 0600) end with the mode a plain
+    open() gives them (0666 less the umask), not private to their owner by accident."""
+    import os
+    import stat
+
+    from softplan_jax.cli.interrupt import atomic_output
+
+    old = os.umask(0o022)
+    try:
+        sp.save_scenario(sp.paper_scenario("sim1"), tmp_path / "s.json")
+        with atomic_output(str(tmp_path / "t.png")) as tmp:
+            with open(tmp, "wb") as fh:
+                fh.write(b"x")
+        for name in ("s.json", "t.png"):
+            assert stat.S_IMODE(os.stat(tmp_path / name).st_mode) == 0o644, name
+    finally:
+        os.umask(old)

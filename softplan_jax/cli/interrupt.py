@@ -27,6 +27,8 @@ import signal
 import tempfile
 import threading
 
+from ..base.files import publish
+
 __all__ = ["EXIT_INTERRUPTED", "interrupt_guard", "atomic_output", "exit_interrupted"]
 
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, the shell's convention
@@ -110,7 +112,7 @@ def atomic_output(path: str):
     _PARTIAL.add(tmp)
     try:
         yield tmp
-        os.replace(tmp, path)
+        publish(tmp, path)
     finally:
         _PARTIAL.discard(tmp)
         if os.path.exists(tmp):

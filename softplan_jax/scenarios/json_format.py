@@ -22,6 +22,7 @@ import tempfile
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.files import publish
 from ..base.memory import check_memory
 from ..base.validation import check_scale
 from ..geometry.curves import PolynomialCurve, line_segment
@@ -457,7 +458,7 @@ def write_json_file(path, data: dict, overwrite: bool = False) -> None:
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text + "\n")
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException as err:
         if os.path.exists(tmp):
             os.unlink(tmp)
