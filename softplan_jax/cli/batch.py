@@ -13,7 +13,7 @@ import os
 import sys
 import time
 
-from .common import EXIT_OK, InputError, fmt_gain_values, fmt_seconds, gains_report, resolve_gains
+from .common import EXIT_OK, InputError, check_points_args, fmt_gain_values, fmt_seconds, gains_report, resolve_gains
 from .parser import check_distributed_args, check_gains_arg, check_output_path
 
 __all__ = ["cmd_batch"]
@@ -42,12 +42,7 @@ def cmd_batch(args) -> int:
                      if "xla_force_host_platform_device_count" not in f]
             flags.append(f"--xla_force_host_platform_device_count={args.host_devices}")
             os.environ["XLA_FLAGS"] = " ".join(flags)
-    if args.method == "points":
-        args.n_points = 10 if args.n_points is None else args.n_points
-        if args.n_points < 1:
-            raise InputError(f"--n-points must be >= 1, got {args.n_points}")
-    elif args.n_points is not None:
-        raise InputError("--n-points applies to --method points only")
+    check_points_args(args)
     if args.out is not None:
         if not args.out.endswith(".npz"):
             raise InputError(f"--out: use a .npz file, got {args.out!r}")

@@ -18,7 +18,7 @@ import sys
 
 __all__ = [
     "EXIT_OK", "EXIT_BAD_INPUT", "EXIT_NOT_REACHED", "InputError", "package_version", "warn", "paper_names",
-    "fmt_seconds", "fmt_gain_values", "resolve_gains", "gains_report", "write_figures", "report",
+    "fmt_seconds", "fmt_gain_values", "resolve_gains", "gains_report", "write_figures", "report", "check_points_args",
 ]
 
 EXIT_OK = 0
@@ -153,3 +153,15 @@ def report(args, summary: dict, text, reached: bool) -> int:
     if args.require_reached and not reached:
         return EXIT_NOT_REACHED
     return EXIT_OK
+
+
+def check_points_args(args) -> None:
+    """``--method`` / ``--n-points`` of ``batch`` and ``sweep``: ``--n-points`` (default 10)
+    with the N-point method only, at least 1 (sets ``args.n_points``)."""
+    if args.method == "points":
+        args.n_points = 10 if args.n_points is None else args.n_points
+        if args.n_points < 1:
+            raise InputError(f"--n-points must be >= 1, got {args.n_points}")
+    elif args.n_points is not None:
+        raise InputError("--n-points applies to --method points only")
+

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import os
 
-from .common import EXIT_OK, InputError, fmt_seconds
+from .common import EXIT_OK, InputError, check_points_args, fmt_seconds
 from .parser import check_gains_arg
 
 __all__ = ["cmd_sweep"]
@@ -26,12 +26,7 @@ def _check_args(args) -> None:
     lo, hi = args.obstacles
     if not 1 <= lo <= hi <= args.slots:
         raise InputError(f"--obstacles: need 1 <= LO <= HI <= --slots ({args.slots}), got {lo} {hi}")
-    if args.method == "points":
-        args.n_points = 10 if args.n_points is None else args.n_points
-        if args.n_points < 1:
-            raise InputError(f"--n-points must be >= 1, got {args.n_points}")
-    elif args.n_points is not None:
-        raise InputError("--n-points applies to --method points only")
+    check_points_args(args)
     if args.trajectories is not None and args.trajectories != "all":
         try:
             args.trajectories = int(args.trajectories)
