@@ -317,3 +317,95 @@ def test_command(full, tmp_path, capsys):
     assert sorted(os.listdir(copy / "chunks")) == ["000000.csv", "000000.json"]
     assert not (copy / "trajectories").exists() and (copy / "notes.txt").read_text() == "mine"
     assert read_table(copy)["status"].tolist() == read_table(d)["status"][:3].tolist()
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
+def _processes(tmp_path, out, extra=((), ())):
+    """``softplan sweep`` as 2 processes of one CPU device each (jax.distributed on this
+    machine); ``extra``: further flags of process 0 and 1. Returns [(rc, stdout, stderr)]."""
+    env = subprocess_env()
+    env["XLA_FLAGS"] = " ".join(f for f in env.get("XLA_FLAGS", "").split()
+                                if "xla_force_host_platform_device_count" not in f)
+    port = _free_port()
+    common = [sys.executable, "-m", "softplan_jax.cli", "sweep", "--n", str(N), "--out", str(out),
+              *CLI_ARGS, "--json"]
+    procs = [subprocess.Popen([*common, *extra[i], "--coordinator", f"localhost:{port}", "--num-processes", "2",
+                               "--process-id", str(i)], cwd=REPO, env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for i in range(2)]
+    outs = [p.communicate(timeout=900) for p in procs]
+    ours = lambda text: "\n".join(x for x in text.splitlines() if not x.startswith("[Gloo]"))  # noqa: E731
+    return [(p.returncode, ours(o), e) for p, (o, e) in zip(procs, outs, strict=True)]
+
+
+@pytest.mark.slow
+def test_two_processes_write_the_one_process_table(full, tmp_path):
+    """``softplan sweep --coordinator ... --num-processes 2 --process-id I`` on this machine:
+    process i plans chunks c % 2 == i into one folder, process 0 merges and reports, and
+    scenes.csv is byte for byte the uninterrupted one-process sweep's. The folder then
+    resumes in one process with every chunk done. Not a test on real multi-host hardware."""
+    d, s = full
+    out = tmp_path / "two"
+    (r0, o0, e0), (r1, o1, e1) = _processes(tmp_path, out, extra=(["--no-progress"], []))
+    assert r0 == 0 and r1 == 0, (e0[-3000:], e1[-3000:])
+    summary = json.loads(o0)
+    assert summary["processes"] == 2 and summary["sessions"] == 2 and summary["status_counts"] == s["status_counts"]
+    assert o1.strip() == ""  # process 1 prints no summary, only its progress lines
+    assert "sweep[1/2]: 2/2 chunks" in e1, e1[-2000:]
+    assert (out / "scenes.csv").read_bytes() == (d / "scenes.csv").read_bytes()
+    chunks = (out / "chunks.csv").read_text().splitlines()[1:]
+    sessions = [row.split(",")[3] for row in chunks]
+    assert sessions[0] == sessions[2] != sessions[1] == sessions[3]  # chunks 0, 2 by one process; 1, 3 by the other
+    again = sweep(N, out, SEED, progress=False, **ARGS)
+    assert again["resumed_chunks"] == 4 and again["processes"] == 1 and again["status_counts"] == s["status_counts"]
+
+
+@pytest.mark.slow
+def test_processes_with_other_arguments_all_exit_2(tmp_path):
+    """A process whose arguments differ from process 0's sweep: both processes exit 2,
+    the field named, process 1's error reported by process 0 too; nothing is planned."""
+    out = tmp_path / "mixed"
+    (r0, _, e0), (r1, _, e1) = _processes(tmp_path, out, extra=([], ["--max-steps", "100"]))
+    assert (r0, r1) == (2, 2), (e0[-3000:], e1[-3000:])
+    assert "process 1 of 2" in e0 and "max_steps (200 there, 100 here)" in e0, e0[-2000:]
+    assert "max_steps (200 there, 100 here)" in e1, e1[-2000:]
+    assert not (out / "chunks").exists()
+
+
+def test_batch_command_with_the_fallback(tmp_path, capsys):
+    """``softplan batch --fallback``: the scenes the local planner reached keep its arrays
+    bit for bit; the one it left at max_steps (scene 4 of seed 0, the case chosen) is taken by
+    the fallback, and the summary's local and global shares add up to the npz's rows."""
+    argv = ["batch", "--n", 6, "--seed", 0, "--chunk", 3, "--max-steps", 200, "--obstacles", 1, 5, "--slots", 5,
+            "--json", "--no-progress"]
+    code, out, err = _main(capsys, *argv, "--out", tmp_path / "local.npz")
+    assert code == 0, err
+    plain = json.loads(out)
+    code, out, err = _main(capsys, *argv, "--fallback", "--out", tmp_path / "fallback.npz")
+    assert code == 0, err
+    s = json.loads(out)
+    a, b = np.load(tmp_path / "local.npz"), np.load(tmp_path / "fallback.npz")
+    left = np.nonzero(np.isin(a["status"], [sp.Status.STALLED, sp.Status.MAX_STEPS]))[0]
+    assert left.tolist() == [4] and plain["reached_global"] == 0 and not plain["fallback"]
+    kept = np.setdiff1d(np.arange(6), left)
+    for key in ("status", "iterations", "min_clearance", "final_error", "escapes", "reached", "collided", "planner"):
+        np.testing.assert_array_equal(a[key][kept], b[key][kept], err_msg=key)
+    assert b["planner"].tolist() == [("global" if k in left else "local") if r else "none"
+                                     for k, r in enumerate(b["reached"])]
+    assert b["status"][4] in (sp.Status.REACHED, sp.Status.UNREACHABLE, sp.Status.MAX_STEPS)
+    assert b["iterations"][4] >= a["iterations"][4] and b["escapes"][4] == a["escapes"][4]
+    k_local, k_global = int(np.sum(b["planner"] == "local")), int(np.sum(b["planner"] == "global"))
+    assert (s["reached_local"], s["reached_global"]) == (k_local, k_global) == (5, int(b["reached"][4]))
+    assert s["success_rate"] == pytest.approx((k_local + k_global) / 6) and s["fallback"]
+    assert s["success_ci95"] == pytest.approx(list(wilson(k_local + k_global, 6)))
+    assert s["fallback_time_s"] > 0 and sum(s["status_counts"].values()) == 6
+    # With --coordinator the fallback is refused (softplan sweep runs it per process).
+    code, _, err = _main(capsys, *argv, "--fallback", "--coordinator", "localhost:1", "--num-processes", 2,
+                         "--process-id", 0)
+    assert code == 2 and "--fallback does not combine with --coordinator" in err

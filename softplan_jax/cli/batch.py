@@ -14,7 +14,7 @@ import sys
 import time
 
 from .common import EXIT_OK, InputError, check_points_args, fmt_gain_values, fmt_seconds, gains_report, resolve_gains
-from .parser import check_distributed_args, check_gains_arg, check_output_path
+from .parser import check_distributed_args, check_gains_arg, check_output_path, initialize_distributed
 
 __all__ = ["cmd_batch"]
 
@@ -28,6 +28,9 @@ def cmd_batch(args) -> int:
     if args.chunk < 1:
         raise InputError(f"--chunk must be >= 1, got {args.chunk}")
     distributed = check_distributed_args(args)
+    if distributed and args.fallback:
+        raise InputError("--fallback does not combine with --coordinator; use 'softplan sweep --fallback "
+                         "--coordinator ...', which runs the fallback on each process's own chunks")
     if args.host_devices is not None:
         if args.host_devices < 1:
             raise InputError(f"--host-devices must be >= 1, got {args.host_devices}")
@@ -54,11 +57,7 @@ def cmd_batch(args) -> int:
     from ..base.compilation_cache import enable_compilation_cache
 
     if distributed:
-        try:
-            jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.num_processes,
-                                       process_id=args.process_id)
-        except (RuntimeError, ValueError) as err:
-            raise InputError(f"--coordinator: jax.distributed.initialize failed: {err}") from None
+        initialize_distributed(args)
         args.devices = "global"
         args.no_progress = args.no_progress or args.process_id != 0
     enable_compilation_cache()
@@ -72,6 +71,7 @@ def cmd_batch(args) -> int:
     from ..planning.planner import make_options, plan_batch
     from ..planning.programs import rollout_batch
     from ..scenarios import random_scenarios
+    from ..sweeps.store import wilson_interval
 
     dtype = jnp.float32 if args.float32 else jnp.float64
     args.gains_file = check_gains_arg(args.gains)
@@ -96,7 +96,11 @@ def cmd_batch(args) -> int:
                    devices=args.devices, progress=not args.no_progress, **options._asdict())
     r = jax.tree_util.tree_map(np.asarray, r)
     run_time = time.perf_counter() - t0
-    status = r.status
+    out = {k: np.array(getattr(r, k)) for k in ("status", "iterations", "min_clearance", "final_error", "escapes",
+                                                 "reached", "collided")}  # writable copies: the fallback updates
+    out["planner"] = np.where(r.reached, "local", "none").astype("<U6")
+    fallback_time = _fallback(args, suite, r, options, out) if args.fallback else 0.0
+    status = out["status"]
     reached = status == Status.REACHED
     summary = {
         "scenarios": args.n,
@@ -110,14 +114,19 @@ def cmd_batch(args) -> int:
         "dtype": str(jnp.dtype(dtype)),
         "status_counts": {STATUS_NAMES[int(k)]: int((status == k).sum()) for k in np.unique(status)},
         "success_rate": float(reached.mean()),
+        "success_ci95": list(wilson_interval(int(reached.sum()), args.n)),
+        "fallback": bool(args.fallback),
+        "reached_local": int((out["planner"] == "local").sum()),
+        "reached_global": int((out["planner"] == "global").sum()),
         "collision_rate": float(np.isin(status, (Status.COLLIDED, Status.START_COLLIDED)).mean()),
-        "mean_iterations_reached": float(r.iterations[reached].mean()) if reached.any() else None,
-        "min_clearance": float(np.min(r.min_clearance)),
+        "mean_iterations_reached": float(out["iterations"][reached].mean()) if reached.any() else None,
+        "min_clearance": float(np.min(out["min_clearance"])),
         "generation_time_s": generation_time,
         "compile_time_s": compile_time,
-        "run_time_s": run_time,
+        "run_time_s": run_time,  # the local planner's
+        "fallback_time_s": fallback_time,  # the fallback's (its compilation included)
         # Steps taken: the engine's lanes stop computing a scene when it finishes.
-        "scenes_per_s": args.n / run_time,
+        "scenes_per_s": args.n / (run_time + fallback_time),
         "steps_per_s": float(np.sum(r.iterations)) / run_time,
         "processes": args.num_processes if distributed else 1,
         "out": None,
@@ -127,9 +136,7 @@ def cmd_batch(args) -> int:
         return EXIT_OK
     if args.out is not None:
         try:
-            np.savez_compressed(args.out, status=status, iterations=r.iterations, min_clearance=r.min_clearance,
-                                final_error=r.final_error, escapes=r.escapes, reached=r.reached,
-                                collided=r.collided)
+            np.savez_compressed(args.out, **out)
         except OSError as err:
             raise InputError(f"cannot write output: {err}") from None
         summary["out"] = os.path.abspath(args.out)
@@ -147,16 +154,38 @@ def cmd_batch(args) -> int:
             ("devices", f"{s['devices']}" + (f" on {s['processes']} processes" if s["processes"] > 1 else "")
              + f", chunks of {s['chunk']}"),
             ("outcomes", ", ".join(f"{k} {v:,}" for k, v in s["status_counts"].items())),
-            ("success / collided", f"{100 * s['success_rate']:.1f} % / {100 * s['collision_rate']:.1f} %"),
+            ("success [95 % CI]", f"{100 * s['success_rate']:.1f} % [{100 * s['success_ci95'][0]:.1f}, "
+             f"{100 * s['success_ci95'][1]:.1f}]" + (f": local {s['reached_local']:,}, global fallback "
+                                                      f"{s['reached_global']:,}" if s["fallback"] else "")),
+            ("collided", f"{100 * s['collision_rate']:.1f} %"),
             ("mean iterations (reached)", "-" if s["mean_iterations_reached"] is None
              else f"{s['mean_iterations_reached']:.1f} (max steps {s['max_steps']})"),
             ("min true clearance", f"{s['min_clearance']:.4f}"),
             ("compile time", fmt_seconds(s["compile_time_s"])),
-            ("run time", f"{fmt_seconds(s['run_time_s'])}: {s['scenes_per_s']:,.1f} scenes/s, "
-             f"{s['steps_per_s']:,.0f} steps taken/s"),
+            ("run time", f"{fmt_seconds(s['run_time_s'])}: {s['steps_per_s']:,.0f} steps taken/s"
+             + (f"; fallback {fmt_seconds(s['fallback_time_s'])}" if s["fallback"] else "")
+             + f"; {s['scenes_per_s']:,.1f} scenes/s"),
         ]
         if s["out"]:
             rows.append(("results", s["out"]))
         width = max(len(k) for k, _ in rows)
         print("\n".join(f"{k:<{width}}  {v}" for k, v in rows))
     return EXIT_OK
+
+
+def _fallback(args, suite, r, options, out) -> float:
+    """The global fallback on the scenes the local planner left stalled or at max steps
+    (:func:`~softplan_jax.search.fallback.rescue_batch`): ``out``'s per-scene arrays updated
+    in place, ``planner`` "global" where the search reached; returns its seconds."""
+
+    from ..base.status import Status
+    from ..search.fallback import rescue_batch
+
+    t0 = time.perf_counter()
+    idx, results = rescue_batch(suite, r, options, seed=args.seed, progress=not args.no_progress)
+    codes = {s.label: int(s) for s in Status}
+    for k, res in zip(idx, results, strict=True):
+        out["status"][k], out["reached"][k], out["iterations"][k] = codes[res.status], res.reached, res.iterations
+        out["min_clearance"][k], out["final_error"][k] = res.min_clearance, res.final_error
+        out["planner"][k] = ("global" if res.planner == "global" else "local") if res.reached else "none"
+    return time.perf_counter() - t0

@@ -15,7 +15,7 @@ from .common import InputError, package_version, warn
 from .trajectory import TRAJECTORY_FORMATS
 
 __all__ = ["build_parser", "check_output_path", "check_plot_format", "check_gains_arg", "check_run_args",
-           "check_distributed_args"]
+           "check_distributed_args", "initialize_distributed"]
 
 
 class _Parser(argparse.ArgumentParser):
@@ -142,20 +142,28 @@ def _add_batch_parser(sub) -> None:
                        help="use the first K local devices (default: all)")
     batch.add_argument("--host-devices", type=int, default=None, metavar="K",
                        help="split the CPU into K XLA devices (default: jax's, 1)")
-    batch.add_argument("--coordinator", default=None, metavar="HOST:PORT",
-                       help="run as one of several processes (jax.distributed): the address of process 0's "
-                       "coordinator; with --num-processes and --process-id, the same command on every host")
-    batch.add_argument("--num-processes", type=int, default=None, metavar="P",
-                       help="processes of a --coordinator run, >= 1")
-    batch.add_argument("--process-id", type=int, default=None, metavar="I",
-                       help="this process's index in a --coordinator run, 0..P-1 (process 0 prints and "
-                       "writes --out)")
+    batch.add_argument("--fallback", action="store_true",
+                       help="run the global fallback (reachability, certified search) on the scenarios the local "
+                       "planner leaves stalled or at max steps; the summary reports local and global shares")
+    _add_distributed_args(batch, "process 0 prints and writes --out")
     batch.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
     batch.add_argument("--out", metavar="FILE.npz",
-                       help="save per-scenario status, iterations, min clearance, final error, escapes (NumPy)")
+                       help="save per-scenario status, iterations, min clearance, final error, escapes, reached, "
+                       "collided and planner (NumPy)")
     batch.add_argument("--force", action="store_true", help="let --out replace an existing FILE")
     batch.add_argument("--json", action="store_true", help="print the summary as JSON")
     batch.add_argument("--float32", action="store_true", help="plan in float32 (default float64)")
+
+
+def _add_distributed_args(parser, lead: str) -> None:
+    """--coordinator, --num-processes and --process-id (jax.distributed); ``lead``: what process 0 does."""
+    parser.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                        help="run as one of several processes (jax.distributed): the address of process 0's "
+                        "coordinator; with --num-processes and --process-id, the same command on every host")
+    parser.add_argument("--num-processes", type=int, default=None, metavar="P",
+                        help="processes of a --coordinator run, >= 1")
+    parser.add_argument("--process-id", type=int, default=None, metavar="I",
+                        help=f"this process's index in a --coordinator run, 0..P-1 ({lead})")
 
 
 def _add_sweep_parser(sub) -> None:
@@ -191,6 +199,8 @@ def _add_sweep_parser(sub) -> None:
                        help="keep the paths of scenes 0..K-1 (or all) in DIR/trajectories/*.npz (default: none)")
     sweep.add_argument("--devices", type=int, default=None, metavar="K",
                        help="use the first K local devices (default: all)")
+    _add_distributed_args(sweep, "each process plans the chunks c with c %% P == I into DIR, which every "
+                          "process must see; process 0 merges the tables and prints the summary")
     sweep.add_argument("--force", action="store_true",
                        help="remove the sweep already in DIR (or write beside other files) and start anew")
     sweep.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
@@ -346,9 +356,10 @@ def check_run_args(args, paper_names) -> None:
         warn("--n-points applies to --method points only; the curve method ignores it")
 
 
-def check_distributed_args(args) -> bool:
+def check_distributed_args(args, local_devices: bool = False) -> bool:
     """Whether this is a --coordinator run; its three flags come together, in range,
-    and exclude --devices (the mesh is every device of every process)."""
+    and exclude --devices unless ``local_devices`` (batch: the mesh is every device of
+    every process; sweep: each process runs on its own local devices)."""
     given = [args.coordinator is not None, args.num_processes is not None, args.process_id is not None]
     if not any(given):
         return False
@@ -361,6 +372,17 @@ def check_distributed_args(args) -> bool:
     host, _, port = args.coordinator.rpartition(":")
     if not host or not port.isdigit():
         raise InputError(f"--coordinator: use HOST:PORT, got {args.coordinator!r}")
-    if args.devices is not None:
+    if args.devices is not None and not local_devices:
         raise InputError("--devices does not combine with --coordinator (every process's devices are used)")
     return True
+
+
+def initialize_distributed(args) -> None:
+    """``jax.distributed.initialize`` from the --coordinator flags (InputError if it fails)."""
+    import jax
+
+    try:
+        jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.num_processes,
+                                   process_id=args.process_id)
+    except (RuntimeError, ValueError) as err:
+        raise InputError(f"--coordinator: jax.distributed.initialize failed: {err}") from None

@@ -11,12 +11,13 @@ import json
 import os
 
 from .common import EXIT_OK, InputError, check_points_args, fmt_seconds
-from .parser import check_gains_arg
+from .parser import check_distributed_args, check_gains_arg, initialize_distributed
 
 __all__ = ["cmd_sweep"]
 
 
-def _check_args(args) -> None:
+def _check_args(args) -> bool:
+    """Check the flags (InputError); whether this is a --coordinator run."""
     for flag, value in (("--n", args.n), ("--chunk", args.chunk), ("--max-steps", args.max_steps),
                         ("--slots", args.slots)):
         if value < 1:
@@ -37,16 +38,19 @@ def _check_args(args) -> None:
             raise InputError(f"--trajectories must be 'all' or >= 1, got {args.trajectories}")
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         raise InputError(f"--out: {args.out} exists and is not a folder")
+    return check_distributed_args(args, local_devices=True)
 
 
 def cmd_sweep(args) -> int:
     """``softplan sweep``: run (or resume) the sweep and print its summary; the exit code."""
-    _check_args(args)
+    distributed = _check_args(args)
     gains_file = check_gains_arg(args.gains)
     import jax
 
     from ..base.compilation_cache import enable_compilation_cache
 
+    if distributed:
+        initialize_distributed(args)
     enable_compilation_cache()
     if not args.float32:
         jax.config.update("jax_enable_x64", True)
@@ -69,6 +73,9 @@ def cmd_sweep(args) -> int:
     except ValueError as err:
         raise InputError(str(err)) from None
     summary["gains_file"] = os.path.abspath(gains_file) if gains_file else None
+    if distributed and args.process_id != 0:  # process 0 reports the merged sweep
+        jax.distributed.shutdown()
+        return EXIT_OK
     if args.json:
         from ..sweeps.store import finite_json
 
@@ -89,7 +96,8 @@ def _text(s: dict) -> str:
     steps = "-" if s["steps_per_s"] is None else f"{s['steps_per_s']:,.0f} steps taken/s"
     rows = [
         ("scenes", f"{s['n']:,} (sweep suite, seed {s['seed']}, {s['dtype']}), chunks of {s['chunk']}"
-         + (f", {s['resumed_chunks']} of {s['chunks']} chunks resumed" if s["resumed_chunks"] else "")),
+         + (f", {s['resumed_chunks']} of {s['chunks']} chunks resumed" if s["resumed_chunks"] else "")
+         + (f", on {s['processes']} processes" if s.get("processes", 1) > 1 else "")),
         ("method", method + (" + global fallback" if s["fallback"] else "")),
         ("gains", s["gains"] + (" (gains file)" if s.get("gains_file") else "")),
         ("outcomes", ", ".join(f"{k} {v:,}" for k, v in s["status_counts"].items())),
@@ -100,7 +108,8 @@ def _text(s: dict) -> str:
         ("mean iterations (reached)", "-" if s["mean_iterations_reached"] is None
          else f"{s['mean_iterations_reached']:.1f} (max steps {s['max_steps']})"),
         ("compile time", fmt_seconds(s["compile_s"])),
-        ("run time", f"{fmt_seconds(s['run_s'])}: {rate}, {steps}"
+        ("run time" + (" (summed over processes)" if s.get("processes", 1) > 1 else ""),
+         f"{fmt_seconds(s['run_s'])}: {rate}, {steps}"
          + (f" (fallback {fmt_seconds(s['fallback_s'])})" if s["fallback"] else "")),
         ("results", os.path.join(s["out"], "scenes.csv")),
     ]

@@ -47,7 +47,7 @@ from ..scenarios import Scenario, stack_scenarios
 from .reach import Reachability, ReachOptions, check_reach_options, clearances, reachability, scene_of
 from .tree import global_search
 
-__all__ = ["plan_fallback", "rescue"]
+__all__ = ["plan_fallback", "rescue", "rescue_batch"]
 
 
 @functools.cache
@@ -155,6 +155,25 @@ def rescue(scenarios: Scenario, results: list, options, *, reach: ReachOptions =
     _search_all(batch, results, [todo[i] for i in search], decided, search, reach, solver, contact,
                 options.goal_tolerance, seed, chunk, progress)
     return results
+
+
+def rescue_batch(scenarios: Scenario, rollout, options, *, reach: ReachOptions = ReachOptions(), seed=0,
+                 chunk: int = 1, progress: bool = False):
+    """:func:`rescue` after :func:`~softplan_jax.plan_batch`: the scenes of the batch
+    ``scenarios`` whose batched ``rollout`` ended stalled or at max_steps, as one sub-batch.
+
+    Returns:
+      ``(idx, results)``: those scenes' indices in the batch (int array) and their
+      PlanResults after reachability and the search (``planner``, ``reason`` filled in).
+    """
+    status = np.asarray(rollout.status)
+    idx = np.nonzero(np.isin(status, (int(Status.STALLED), int(Status.MAX_STEPS))))[0]
+    if idx.size == 0:
+        return idx, []
+    r = jax.tree_util.tree_map(lambda x: np.asarray(x)[idx], rollout)
+    sub = jax.tree_util.tree_map(lambda x: x[idx], scenarios)
+    local = [_local_result(r, k, sub) for k in range(idx.size)]
+    return idx, rescue(sub, local, options, reach=reach, seed=seed, chunk=chunk, progress=progress)
 
 
 def _int_seed(seed) -> int:

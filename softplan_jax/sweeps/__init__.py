@@ -7,7 +7,10 @@ fallback where asked.
   and ``i`` only, so every sweep with the same seed starts with the same scenes);
 * :mod:`.store` -- the sweep folder: the header, per-chunk CSV tables written
   atomically, the merged table, trajectory shards, :func:`read_table`,
-  :func:`load_trajectory` and :func:`wilson_interval`.
+  :func:`load_trajectory` and :func:`wilson_interval`;
+* :mod:`.processes` -- one sweep on several processes (``jax.distributed``): the
+  chunks shared out, the processes' meetings;
+* :mod:`.report` -- progress lines and the summary.
 """
 
 from .runner import SCENE_BLOCK, sweep, sweep_keys, sweep_scenarios

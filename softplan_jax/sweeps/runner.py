@@ -27,6 +27,10 @@ scenes are generated on the host. Each chunk's summary rows (and trajectories,
 when asked) are written to disk (:mod:`.store`) and dropped: the process holds at
 most two chunks, whatever ``n``.
 
+**Several processes.** Under ``jax.distributed`` every process runs the same call;
+process ``i`` of ``P`` plans the chunks ``c % P == i`` into the shared folder, and
+process 0 merges (:mod:`.processes`). The table does not depend on ``P``.
+
 **Resuming.** A chunk is done when its table exists (written last, atomically). A
 sweep run again into the same folder with the same arguments skips the done
 chunks; the chunks are independent (their scenes, keys and fallback seeds depend
@@ -40,7 +44,6 @@ import json
 import math
 import os
 import platform
-import sys
 import time
 import warnings
 from importlib.metadata import PackageNotFoundError, version
@@ -49,20 +52,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.status import STATUS_NAMES, Status
+from ..base.status import STATUS_NAMES
 from ..planning.batching import batch_mesh, pad_batch, round_chunk
-from ..planning.planner import check_gains, make_options, plan_batch, result_from_rollout
+from ..planning.planner import check_gains, make_options, plan_batch
 from ..planning.presets import PRESETS, apply_preset
 from ..planning.step import GainFunction, Gains
 from ..scenarios import random_scenarios
-from ..search.fallback import rescue
+from ..search.fallback import rescue_batch
 from ..search.reach import ReachOptions, check_reach_options
-from . import store
+from . import processes, report, store
 
 __all__ = ["SCENE_BLOCK", "sweep", "sweep_scenarios", "sweep_keys"]
 
 SCENE_BLOCK = 64  # scenes per call of random_scenarios (a constant: scene i must not depend on n or chunk)
-_LOCAL_FAILURES = (int(Status.STALLED), int(Status.MAX_STEPS))  # what the fallback takes over
 
 
 def _int(name, v, lo=1):
@@ -220,7 +222,7 @@ def _prepare_folder(out, header, resume: bool, overwrite: bool) -> None:
         if old.get("versions") != header["versions"]:
             warnings.warn(f"resuming the sweep in {out} with other versions ({header['versions']}) than it was "
                           f"started with ({old.get('versions')}): its chunks may differ to rounding",
-                          RuntimeWarning, stacklevel=3)
+                          RuntimeWarning, stacklevel=4)
         return
     try:
         store.write_header(out, header)
@@ -257,12 +259,16 @@ def sweep(n: int, out, seed: int = 0, *, chunk: int = 256, method: str = "curve"
       obstacles, slots: curves per scene drawn from ``obstacles[0] .. obstacles[1]``, padded to
         ``slots`` (as :func:`~softplan_jax.random_scenarios`).
       dtype: float32 or float64 (default: JAX's default float; float64 needs jax_enable_x64).
-      devices: None (every local device) or an int k (the first k), as plan_batch.
+      devices: None (every local device) or an int k (the first k), as plan_batch. Under
+        ``jax.distributed``, each process plans its share of the chunks (``c % P == i``) on
+        its own local devices into ``out``, a folder every process sees (:mod:`.processes`);
+        every process returns the summary.
       trajectories: None (no paths kept), "all", or an int K: the paths of scenes 0 .. K-1 (a
         uniform sample: the scenes are independent draws), to ``trajectories/*.npz``
         (:func:`~softplan_jax.sweeps.store.load_trajectory`).
       progress: True (one line per chunk on stderr), False, or a callable given a dict after
-        each chunk is written: chunk (its index), chunks, chunks_done (resumed ones included),
+        each chunk is written: chunk (its index), chunks (this process's share of them),
+        chunks_done (resumed ones included),
         n, and for this run: scenes_done, reached, local, global (reached by each planner),
         elapsed_s, compile_s, eta_s.
       resume: continue the sweep already in ``out`` if it has the same arguments.
@@ -273,8 +279,11 @@ def sweep(n: int, out, seed: int = 0, *, chunk: int = 256, method: str = "curve"
       collision rates over all ``n`` scenes with 95 % Wilson intervals (``*_ci95``); mean
       iterations and tip path length of the reached scenes; least clearance; steps taken
       by the local planner; times (generation, compile, run = the chunks' wall time after
-      compilation, fallback) summed over every session that wrote a chunk;
-      ``scenes_per_s = n / run_s`` and ``steps_per_s = steps_taken / (run_s - fallback_s)``.
+      compilation, fallback) summed over every session and process that wrote a chunk;
+      ``scenes_per_s = n / run_s`` and ``steps_per_s = steps_taken / (run_s - fallback_s)``
+      (per process: P processes finish in about run_s / P); ``processes`` of this run.
+      (Processes other than 0 return it as read from ``summary.json``: non-finite numbers
+      as None.)
 
     Raises:
       ValueError: a bad argument (named), a folder that cannot be written or holds something
@@ -316,18 +325,53 @@ def sweep(n: int, out, seed: int = 0, *, chunk: int = 256, method: str = "curve"
                   gains=dict(preset=preset_name, values=_jsonable(g)), options=_jsonable(opts),
                   versions=_versions(), created=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
     header = json.loads(json.dumps(store.finite_json(header), default=str))
-    _prepare_folder(out, header, bool(resume), bool(overwrite))
+    procs = processes.current()
+    _meet_over_folder(procs, out, header, bool(resume), bool(overwrite))
 
-    done = store.completed_chunks(out)
-    todo = [c for c in range(n_chunks) if c not in done]
-    say = _reporter(progress, n, n_chunks, out, len(done), fallback)
+    done = store.completed_chunks(out, clean=False)
+    mine = processes.share(range(n_chunks), procs)
+    todo = [c for c in mine if c not in done]
+    say = report.reporter(progress, n, len(mine), out, len(mine) - len(todo), fallback, procs.prefix("sweep"))
     scenes = _Scenes(seed, (lo, hi), slots, dt)
     run = _Run(out, n, seed, size, max_steps, opts, g, preset_name, reach, keep, devices, scenes)
-    run.loop(todo, say)
-    merged = store.merge_tables(out, n_chunks)
-    summary = _summary(header, merged, out, len(done))
-    store.write_summary(out, summary)
+    try:
+        run.loop(todo, say)
+    except BaseException as err:  # the others stop waiting for this process's chunks
+        procs.post("written", f"{type(err).__name__}: {err}")
+        raise
+    procs.meet("written")
+    if not procs.lead:  # process 0 merges; the others read its summary
+        procs.meet("merged")
+        with open(os.path.join(out, "summary.json"), encoding="utf-8") as fh:
+            return json.load(fh)
+    try:
+        merged = store.merge_tables(out, n_chunks)
+        summary = report.summary(header, merged, out, len(done), procs.count)
+        store.write_summary(out, summary)
+    except BaseException as err:
+        procs.post("merged", f"{type(err).__name__}: {err}")
+        raise
+    procs.meet("merged")
     return summary
+
+
+def _meet_over_folder(procs, out, header, resume, overwrite) -> None:
+    """Process 0 prepares ``out`` (header, stale temporary files); then every other process
+    checks the header against its own arguments (:mod:`.processes`)."""
+    error = ""
+    if procs.lead:
+        try:
+            _prepare_folder(out, header, resume, overwrite)
+            store.completed_chunks(out, clean=True)
+        except ValueError as err:
+            error = str(err)
+    procs.meet("prepared", error)
+    if not procs.lead:
+        try:
+            _prepare_folder(out, header, resume=True, overwrite=False)
+        except ValueError as err:
+            error = str(err)
+    procs.meet("checked", error)
 
 
 class _Run:
@@ -373,7 +417,7 @@ class _Run:
         kept = {k: None for k in range(min(m, max(0, self.keep - first)))}  # scene k of the chunk: its path
         t_fb = time.perf_counter()
         if self.reach is not None:
-            self._fallback(p, rows, status, kept)
+            self._fallback(p, rows, kept)
         fallback_s = time.perf_counter() - t_fb if self.reach is not None else 0.0
         if kept:
             q = np.asarray(r.q)
@@ -386,18 +430,13 @@ class _Run:
         return rows, dict(chunk=p["chunk"], first=first, scenes=m, session=self.session,
                           generation_s=p["generation_s"], fallback_s=fallback_s, local_steps=int(iters.sum()))
 
-    def _fallback(self, p, rows, status, kept):
+    def _fallback(self, p, rows, kept):
         """rescue() on the chunk's scenes the local planner left stalled or at max_steps."""
-        idx = np.nonzero(np.isin(status, _LOCAL_FAILURES))[0]
-        if idx.size == 0:
-            return
-        r = jax.tree_util.tree_map(lambda x: np.asarray(x)[idx], p["rollout"])
-        sub = jax.tree_util.tree_map(lambda x: x[idx], p["scenes"])
-        one = lambda tree, k: jax.tree_util.tree_map(lambda x: x[k], tree)  # noqa: E731
-        local = [result_from_rollout(one(r, k), one(sub, k)) for k in range(idx.size)]
         # A seed per chunk (its index only): a resumed chunk searches as the first run did.
         chunk_seed = int(np.random.SeedSequence(self.seed, spawn_key=(1, p["chunk"])).generate_state(1)[0] >> 1)
-        results = rescue(sub, local, self.opts, reach=self.reach, seed=chunk_seed)
+        head = lambda tree: jax.tree_util.tree_map(lambda x: x[: p["m"]], tree)  # noqa: E731  (not the padding)
+        idx, results = rescue_batch(head(p["scenes"]), head(p["rollout"]), self.opts, reach=self.reach,
+                                    seed=chunk_seed)
         for k, res in zip(idx, results, strict=True):
             k = int(k)
             rows[k].update(status=res.status, reached=bool(res.reached), iterations=int(res.iterations),
@@ -424,63 +463,3 @@ class _Run:
                 last = now
                 say(rows, timing, now - t_start, self.compile_s or 0.0)
             pending = launched
-
-
-def _reporter(progress, n, n_chunks, out, already, fallback):
-    """The per-chunk progress callback: a line on stderr, the user's callable, or nothing."""
-    state = dict(chunks=already, scenes=0, local=0, glob=0)
-    if progress is True and already:
-        print(f"sweep: resuming {out}: {already}/{n_chunks} chunks done", file=sys.stderr, flush=True)
-
-    def say(rows, timing, elapsed, compile_s):
-        state["chunks"] += 1
-        state["scenes"] += len(rows)
-        state["local"] += sum(r["planner"] == "local" for r in rows)
-        state["glob"] += sum(r["planner"] == "global" for r in rows)
-        left = n_chunks - state["chunks"]
-        run = max(elapsed - compile_s, 1e-9)
-        rate = state["scenes"] / run
-        info = dict(chunk=timing["chunk"], chunks=n_chunks, chunks_done=state["chunks"], scenes_done=state["scenes"],
-                    n=n, reached=state["local"] + state["glob"], local=state["local"], **{"global": state["glob"]},
-                    elapsed_s=elapsed, compile_s=compile_s, eta_s=left * timing["scenes"] / rate if left else 0.0)
-        if callable(progress):
-            progress(info)
-        elif progress:
-            pct = 100.0 * info["reached"] / state["scenes"]
-            share = f" (global {100.0 * state['glob'] / state['scenes']:.1f} %)" if fallback else ""
-            line = (f"sweep: {state['chunks']}/{n_chunks} chunks, {state['scenes']:,} scenes this run, reached "
-                    f"{pct:.1f} %{share}, {rate:,.1f} scenes/s, "
-                    f"{elapsed:.1f} s" + (f", eta {info['eta_s']:.0f} s" if left else "")
-                    + f" (compile {compile_s:.1f} s)")
-            print(line, file=sys.stderr, flush=True)
-
-    return say
-
-
-def _rate(k, n):
-    lo, hi = store.wilson_interval(k, n)
-    return k / n, [lo, hi]
-
-
-def _summary(header, merged, out, resumed) -> dict:
-    n = header["n"]
-    counts = merged["status_counts"]
-    local, glob = merged["planners"]["local"], merged["planners"]["global"]
-    reached = local + glob
-    s = dict(out=out, n=n, seed=header["seed"], chunk=header["chunk"], chunks=math.ceil(n / header["chunk"]),
-             method=header["method"], n_points=header["n_points"] if header["method"] == "points" else None,
-             max_steps=header["max_steps"], fallback=header["fallback"], dtype=header["dtype"],
-             devices=header["devices"], gains=header["gains"]["preset"] or "custom", resumed_chunks=resumed,
-             sessions=merged["sessions"], status_counts=counts, reached=reached, reached_local=local,
-             reached_global=glob)
-    collided = counts.get("collided", 0) + counts.get("start_in_collision", 0)
-    for name, k in (("success", reached), ("local", local), ("global", glob), ("collision", collided)):
-        s[f"{name}_rate"], s[f"{name}_ci95"] = _rate(k, n)
-    run_s, fb_s = merged["seconds"], merged["fallback_s"]
-    s.update(mean_iterations_reached=merged["iterations_reached"] / reached if reached else None,
-             mean_path_length_reached=merged["path_length_reached"] / reached if reached else None,
-             min_clearance=merged["min_clearance"], steps_taken=merged["local_steps"],
-             generation_s=merged["generation_s"], compile_s=merged["compile_s"], run_s=run_s, fallback_s=fb_s,
-             scenes_per_s=n / run_s if run_s > 0 else None,
-             steps_per_s=merged["local_steps"] / (run_s - fb_s) if run_s - fb_s > 0 else None)
-    return s

@@ -108,8 +108,9 @@ def write_chunk(out: str, chunk: int, rows: list[dict], timing: dict) -> None:
     atomic_write(p["table"], _table_bytes(rows))
 
 
-def completed_chunks(out: str) -> set:
-    """The chunks whose tables exist; stale temporary files of a killed run are removed."""
+def completed_chunks(out: str, clean: bool = True) -> set:
+    """The chunks whose tables exist; with ``clean``, stale temporary files of a killed run
+    are removed (only while no other process writes into ``out``)."""
     done = set()
     for d in (_CHUNK_DIR, _TRAJ_DIR):
         folder = os.path.join(out, d)
@@ -117,6 +118,8 @@ def completed_chunks(out: str) -> set:
             continue
         for name in os.listdir(folder):
             if name.startswith(".") and ".tmp." in name:
+                if not clean:
+                    continue
                 os.remove(os.path.join(folder, name))
             elif d == _CHUNK_DIR and name.endswith(".csv") and name[:-4].isdigit():
                 done.add(int(name[:-4]))
