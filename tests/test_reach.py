@@ -171,6 +171,37 @@ def test_batch_compiles_the_search_once_and_keeps_local_results(rescued):
     assert (fn._cache_size(), ik._cache_size()) == before
 
 
+def test_search_lanes_run_independently(rescued):
+    """The search's batched loop (search.machine): a lane searching beside a lane with no
+    goal root (done at once) finds the single-lane search's path: same trees, iterations
+    and steps, q to rounding (a wider program may round differently), every step of it
+    proven by the swept check."""
+    from softplan_jax.search.fallback import _path_check_jit, _start_roots
+
+    s, local, _ = rescued
+    R, G = OPTS.start_roots, OPTS.goal_roots
+    d = sp.search.reachability(s, q_extra=local.q[-1], options=OPTS)
+    roots = _start_roots(local.q, R)
+    q_starts = np.zeros((R, 3, 3))
+    q_starts[: len(roots)] = local.q[roots]
+    key = jax.random.split(jax.random.PRNGKey(1), 1)[0]  # plan_fallback's (seed 0) for the fixture's scene
+    args = (s, q_starts, len(roots), d.q_goal[:G], int(np.sum(d.certified[:G])), key)
+    fn = _search_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
+    stack = lambda *xs: jax.tree_util.tree_map(lambda *ys: np.stack([np.asarray(y) for y in ys]), *xs)  # noqa: E731
+    one = jax.device_get(fn(*stack(args)))
+    idle = (*args[:4], 0, jax.random.PRNGKey(4))  # no goal root: this lane's search ends at once
+    two = jax.device_get(fn(*stack(idle, args)))
+    assert bool(one.found[0]) and bool(two.found[1]) and not bool(two.found[0])
+    assert int(two.iterations[0]) == 0 and int(two.steps[0]) == 0
+    for f in ("start", "steps", "iterations", "nodes", "path_nodes"):
+        np.testing.assert_array_equal(getattr(two, f)[1], getattr(one, f)[0], err_msg=f)
+    k = int(one.steps[0])
+    np.testing.assert_allclose(two.q[1][: k + 1], one.q[0][: k + 1], rtol=0, atol=1e-12)
+    q = two.q[1]  # padded with its last step: plan_fallback's shape of the check
+    _, proven = jax.device_get(_path_check_jit(sp.geometry.SolverOptions(), 1e-6)(s, q, np.roll(q, -1, axis=0)))
+    assert proven[:k].all()
+
+
 def test_unreachable_goal_gets_a_status_not_a_path():
     # test_planner's unreachable scene: the arm cannot stretch to the goal.
     s = sp.paper_scenario("sim1", L_max=1.05, **PAD)._replace(goal=jnp.array([0.0, 0.0, 10.0]))

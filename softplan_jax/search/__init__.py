@@ -4,7 +4,9 @@
 * :mod:`.reach` -- is a collision-free configuration with the tip on the goal
   there? (:func:`reachability`; proofs of unreachability where it has one);
 * :mod:`.tree` -- RRT-Connect over certified straight motions (conservative
-  advancement), shortcuts, smoothing, and the densified path;
+  advancement), shortcuts, smoothing, and the densified path; the motions are
+  :mod:`.motions`, and :mod:`.machine` runs the whole search as one loop with one
+  exact solve per iteration;
 * :mod:`.fallback` -- :func:`plan_fallback`: the local planner first, then the
   two above for every scene it left stalled.
 """

@@ -45,17 +45,17 @@ from ..planning.batching import pad_batch
 from ..planning.planner import PlanResult, make_options, plan, plan_batch
 from ..scenarios import Scenario, stack_scenarios
 from .reach import Reachability, ReachOptions, check_reach_options, clearances, reachability, scene_of
-from .tree import global_search
+from .tree import global_search_batch
 
 __all__ = ["plan_fallback", "rescue", "rescue_batch"]
 
 
 @functools.cache
 def _search_jit(options: ReachOptions, solver, contact: float):
-    def one(scenario, q_starts, n_starts, q_goals, n_goals, key):
-        return global_search(scenario, q_starts, n_starts, q_goals, n_goals, key, options, solver, contact)
+    def search(scenarios, q_starts, n_starts, q_goals, n_goals, keys):
+        return global_search_batch(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options, solver, contact)
 
-    return jax.jit(jax.vmap(one))
+    return jax.jit(search)
 
 
 @functools.cache
@@ -65,13 +65,13 @@ def _path_check_jit(solver, contact: float):
     from ..geometry.clearance import swept_clear
     from ..geometry.obstacles import radius_and_mask
 
-    def one(scenario, q_a, q_b):
+    def path_check(scenario, q_a, q_b):
         c, truth, _ = clearances(q_a, scenario, solver)
         _, mask = radius_and_mask(scenario)
         proven = jnp.all(swept_clear(q_a, q_b, truth, c, contact) | ~mask)  # the metrics' own swept proof
         return c, proven
 
-    return jax.jit(jax.vmap(one, in_axes=(None, 0, 0)))
+    return jax.jit(jax.vmap(path_check, in_axes=(None, 0, 0)))
 
 
 _tips_jit = jax.jit(jax.vmap(tip_position))

@@ -235,12 +235,12 @@ def _tip_lm(q, scenario: Scenario, iterations: int):
     return q
 
 
-def _push_step(q, scenario: Scenario, options: ReachOptions, solver: SolverOptions):
+def _push_step(q, c, truth, scenario: Scenario, options: ReachOptions):
     """One null-space step: the tip kept on the goal, the arm moved up the exact
-    clearance gradient of every obstacle within 2 ik_clearance (see the module docstring)."""
+    clearance gradient of every obstacle within 2 ik_clearance (see the module docstring).
+    ``c, truth``: :func:`clearances` at q."""
     n = q.shape[0]
     dtype = q.dtype
-    c, truth, _ = clearances(q, scenario, solver)
     away = truth.arm_point - truth.obstacle_point
     normal = away / jnp.maximum(safe_norm(away), jnp.finfo(dtype).tiny)[:, None]
     J_s = points_jacobian(q, truth.segment, truth.s)  # (m, 3, 3n)
@@ -278,44 +278,46 @@ def goal_configurations(scenario: Scenario, key, q_extra, options: ReachOptions,
     starts = jax.vmap(lambda q: clip_lengths(q, scenario))(starts)
 
     def assess(q):
-        c, _, ok = clearances(q, scenario, solver)
+        """The exact clearances at q (kept: the next push step starts from them) and their verdict."""
+        c_all, truth, ok = clearances(q, scenario, solver)
         err = safe_norm(scenario.goal - tip_position(q))
-        c = jnp.min(c, initial=jnp.inf)
+        c = jnp.min(c_all, initial=jnp.inf)
         finite = jnp.all(jnp.isfinite(q)) & jnp.isfinite(err)
         certified = finite & ok & (c >= options.ik_clearance) & (err <= options.ik_tolerance)
         free = finite & ok & (c > contact)
-        return c, err, certified, free
+        return (c_all, truth), c, err, certified, free
 
     # The starts themselves count for the best collision-free tip distance (the start pose
     # is clear in a valid scene: a goal inside an obstacle still gets a finite distance).
-    _, err0, _, free0 = jax.vmap(assess)(starts)
+    _, _, err0, _, free0 = jax.vmap(assess)(starts)
     q = jax.vmap(lambda q: _tip_lm(q, scenario, options.ik_iterations))(starts)
-    c, err, certified, free = jax.vmap(assess)(q)
+    solved, c, err, certified, free = jax.vmap(assess)(q)
     best = jnp.minimum(jnp.min(jnp.where(free0, err0, jnp.inf)), jnp.min(jnp.where(free, err, jnp.inf)))
 
     def cond(state):
-        k, _, _, _, certified, _, _ = state
+        k, _, _, _, _, certified, _, _ = state
         return (k < options.ik_clear_iterations) & ~jnp.any(certified)
 
     def body(state):
-        k, q, _, _, _, _, best = state
-        q = jax.vmap(lambda q: _tip_lm(_push_step(q, scenario, options, solver), scenario, 3))(q)
-        c, err, certified, free = jax.vmap(assess)(q)
+        # The push step at q starts from the clearances assess found there: one solve per start.
+        k, q, solved, _, _, _, _, best = state
+        q = jax.vmap(lambda q, s: _tip_lm(_push_step(q, *s, scenario, options), scenario, 3))(q, solved)
+        solved, c, err, certified, free = jax.vmap(assess)(q)
         best = jnp.minimum(best, jnp.min(jnp.where(free, err, jnp.inf)))
-        return k + 1, q, c, err, certified, free, best
+        return k + 1, q, solved, c, err, certified, free, best
 
-    state = (jnp.zeros((), jnp.int32), q, c, err, certified, free, best)
-    _, q, c, err, certified, _, best = jax.lax.while_loop(cond, body, state)
+    state = (jnp.zeros((), jnp.int32), q, solved, c, err, certified, free, best)
+    _, q, _, c, err, certified, _, best = jax.lax.while_loop(cond, body, state)
     order = jnp.argsort(jnp.where(certified, -c, jnp.inf))  # certified, widest clearance first
     return q[order], certified[order], c[order], err[order], best
 
 
 @functools.cache
 def _goal_configurations_jit(options: ReachOptions, solver, contact: float, extra: bool):
-    def one(scenario, key, q_extra):
+    def goal_configs(scenario, key, q_extra):
         return goal_configurations(scenario, key, q_extra if extra else None, options, solver, contact)
 
-    return jax.jit(jax.vmap(one))
+    return jax.jit(jax.vmap(goal_configs))
 
 
 # ----------------------------------------------------------------------------

@@ -1,0 +1,287 @@
+"""The global search as one loop with one exact solve per iteration.
+
+:func:`~softplan_jax.search.tree.global_search` is a sequence of certified motions:
+RRT-Connect's extensions and connections, the shortcut attempts, the smoothing
+moves, and the walk along the final polyline. Written as nested loops, each kind
+of motion holds its own copy of the exact closest-point solver in the compiled
+program (six copies, most of the search's compile time). Here they are one
+``while_loop`` over a state machine: every iteration first lets the phase's
+handler consume the motion that just ended and set up the next one (a
+``lax.switch`` on the phase), then takes one conservative-advancement substep of
+the current motion, the only place the solver appears:
+
+    q = q_a + t dq,   alpha = safe_scale(q, q_e, c(q), 2 contact, f[, step_motion])
+    t <- 1 if alpha >= 1 else t + alpha (1 - t)
+
+(:func:`~softplan_jax.planning.step.safe_scale`; a motion stops at its end, when a
+solve does not converge, or after its substeps). Each motion does the arithmetic
+of the nested loops in the same order, so the search's results are the same.
+
+Phases, in order (``_P_*``): grow the trees (extend tree a, then connect tree b,
+until connected or out of iterations), the connected path, shortcut attempts,
+smoothing passes (two motions per inner node), the walk in steps of at most
+``step_motion`` (one motion over every edge of the polyline), done.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from . import motions as mo
+from .reach import ReachOptions, random_configurations
+
+__all__ = ["run_search"]
+
+# The handler to run when no motion is active (what the last motion was for).
+(_P_TREE, _P_EXTENDED, _P_CONNECTED, _P_TREE_DONE, _P_CUT, _P_SMOOTH_START, _P_SMOOTH_A, _P_SMOOTH_B, _P_WALK_START,
+ _P_WALK, _P_DONE) = range(11)
+
+
+class _State(NamedTuple):
+    phase: jax.Array  # () int32: the handler to run when the motion ends
+    # The current motion: the line q_a -> q_e (= q_a + dq), at fraction t after k substeps.
+    q_a: jax.Array
+    dq: jax.Array
+    q_e: jax.Array
+    t: jax.Array
+    k: jax.Array
+    limit: jax.Array  # () int32 substeps allowed
+    failed: jax.Array  # () bool: a solve did not converge (or alpha was not > 0)
+    active: jax.Array  # () bool: a motion is under way
+    # RRT-Connect.
+    trees: tuple  # motions.Trees
+    near: jax.Array  # () int32: the node of tree a the extension left from
+    new_idx: jax.Array  # () int32: where the extension's node went
+    added: jax.Array  # () bool: it was added
+    near_b: jax.Array  # () int32: the node of tree b the connection left from
+    # The polyline: shortcuts, smoothing, the walk.
+    path: jax.Array  # (2T, n, 3)
+    length: jax.Array  # () int32 nodes
+    start: jax.Array  # () int32 the start root
+    count: jax.Array  # () int32: shortcut attempts made / smoothing passes made
+    node: jax.Array  # () int32: the inner node being smoothed; the walk's edge
+    key: jax.Array  # the shortcuts' key
+    possible: jax.Array  # () bool: the shortcut attempt's j is on the path
+    cut: jax.Array  # (2,) int32: the attempt's i, j
+    cand: jax.Array  # (n, 3) the smoothing candidate
+    first_ok: jax.Array  # () bool: the motion path[k-1] -> cand reached
+    out: jax.Array  # (S + 1, n, 3) the walk's steps
+    steps: jax.Array  # () int32 steps of the walk
+
+
+def _add(trees, T: int, tree, q, par, allowed):
+    """Node q (parent par) into tree ``tree`` if allowed and the tree has room."""
+    idx = jnp.minimum(trees.count[tree], T - 1)
+    ok = allowed & (trees.count[tree] < T)
+    nodes = trees.nodes.at[tree, idx].set(jnp.where(ok, q, trees.nodes[tree, idx]))
+    parent = trees.parent.at[tree, idx].set(jnp.where(ok, par, trees.parent[tree, idx]))
+    return trees._replace(nodes=nodes, parent=parent, count=trees.count.at[tree].add(ok.astype(jnp.int32))), idx, ok
+
+
+def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: ReachOptions, solver,
+               contact: float):
+    """The search of :func:`~softplan_jax.search.tree.global_search` for a batch of B scenes
+    (module docstring; every argument with a leading axis B): ``(trees, length, start, out,
+    steps, complete)``, batched.
+
+    The loop runs over the whole batch: in an iteration, a phase's handler runs (on the
+    lanes whose motion ended in that phase; skipped when there is none), then one
+    substep of every lane whose motion is under way. So a lane costs one exact solve
+    per iteration, and the handlers cost only when a motion ended: the batch needs no
+    vmap of the loop, which would evaluate every handler on every iteration."""
+    B = keys.shape[0]
+    state = jax.vmap(lambda sc, *a: _lane(sc, options, solver, contact, q_starts.shape[-2], q_starts.dtype)[0](*a))(
+        scenarios, q_starts, n_starts, q_goals, n_goals, keys)
+
+    def run(index, s):
+        """Lane-wise: handler ``index`` (or the substep: index None) on every lane."""
+        def one(st, sc):
+            _, handlers, substep = _lane(sc, options, solver, contact, q_starts.shape[-2], q_starts.dtype)
+            return substep(st) if index is None else handlers[index](st)
+
+        return jax.vmap(one)(s, scenarios)
+
+    def select(mask, new, old):
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(mask.reshape((B,) + (1,) * (a.ndim - 1)), a, b), new, old)
+
+    def handle(s):
+        """The handler of each lane whose motion ended (phase p: handlers[p])."""
+        idle = ~s.active & (s.phase != _P_DONE)
+        if B == 1:  # one branch, chosen by the lane's phase (the last: no handler)
+            branches = [lambda s, p=p: run(p, s) for p in range(_P_DONE)] + [lambda s: s]
+            return jax.lax.switch(jnp.where(idle[0], s.phase[0], _P_DONE), branches, s)
+        phase = s.phase
+        for p in range(_P_DONE):  # each handler only where some lane needs it
+            mask = idle & (phase == p)
+            s = jax.lax.cond(jnp.any(mask), lambda s, p=p, mask=mask: select(mask, run(p, s), s), lambda s: s, s)
+        return s
+
+    def body(s):
+        s = handle(s) if B == 1 else jax.lax.cond(jnp.any(~s.active & (s.phase != _P_DONE)), handle, lambda s: s, s)
+        return substep_all(s)  # every iteration: a lane with no motion under way keeps its state
+
+    def substep_all(s):
+        new = run(None, s)
+        # The walk's steps as they are: the substep writes one row per lane, and only where active.
+        return select(s.active, new, s)._replace(out=new.out)
+
+    s = jax.lax.while_loop(lambda s: jnp.any(s.phase != _P_DONE), body, state)
+    return s.trees, s.length, s.start, s.out, s.steps, s.node >= s.length - 1
+
+
+def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype):
+    """One lane's ``(init, handlers, substep)``: the state of a new search, the phases'
+    handlers (list index = phase), and the substep of the current motion."""
+    T, S = int(options.tree_size), int(options.path_steps)
+    i0, f0, q0 = jnp.zeros((), jnp.int32), jnp.zeros((), bool), jnp.zeros((n, 3), dtype)
+
+    def init(q_starts, n_starts, q_goals, n_goals, key):
+        k_tree, k_cut = jax.random.split(key)
+        nodes = jnp.zeros((2, T, n, 3), dtype)
+        nodes = nodes.at[0, : q_starts.shape[0]].set(q_starts[:T]).at[1, : q_goals.shape[0]].set(q_goals[:T])
+        count = jnp.stack([jnp.minimum(n_starts, T), jnp.minimum(n_goals, T)]).astype(jnp.int32)
+        trees = mo.Trees(nodes, jnp.full((2, T), -1, jnp.int32), count, jnp.zeros((), bool),
+                          jnp.zeros((2,), jnp.int32), jnp.zeros((), jnp.int32), k_tree)
+        return _State(jnp.asarray(_P_TREE, jnp.int32), q0, q0, q0, jnp.zeros((), dtype), i0, i0, f0, f0, trees, i0,
+                      i0, f0, i0, jnp.zeros((2 * T, n, 3), dtype), i0, i0, i0, i0, k_cut, f0,
+                      jnp.zeros((2,), jnp.int32), q0, f0, jnp.zeros((S + 1, n, 3), dtype), i0)
+
+    def motion(s, q_a, q_b, substeps, phase):
+        """Start the certified straight motion q_a -> q_a + wrap_delta(q_a, q_b) (motions.advance)."""
+        dq = mo.wrap_delta(q_a, q_b)
+        return s._replace(phase=jnp.asarray(phase, jnp.int32), q_a=q_a, dq=dq, q_e=q_a + dq, t=jnp.zeros((), dtype),
+                          k=i0, limit=jnp.asarray(substeps, jnp.int32), failed=f0, active=jnp.ones((), bool))
+
+    def ended(s):
+        """The motion that ended: ``(q reached, t, reached)`` as motions.advance returns them."""
+        return s.q_a + s.t * s.dq, s.t, s.t >= 1.0
+
+    def when(c, a, b):
+        """``a if c else b`` for two states (c a traced bool)."""
+        return jax.tree_util.tree_map(lambda x, y: jnp.where(c, x, y), a, b)
+
+    # --- RRT-Connect: extend tree a towards a sample, then connect tree b to the new node.
+    def tree_next(s):
+        t = s.trees
+        go = ~t.done & (t.it < options.iterations) & (t.count[0] > 0) & (t.count[1] > 0)
+        a = t.it % 2
+        key, k_rand = jax.random.split(t.key)
+        q_rand = random_configurations(k_rand, scenario, options, 1)[0]
+        near = mo.nearest(t.nodes[a], t.count[a], q_rand).astype(jnp.int32)
+        q_near = t.nodes[a, near]
+        dq = mo.wrap_delta(q_near, q_rand)
+        B = mo.line_bound(q_near, dq)
+        target = q_near + jnp.minimum(1.0, options.extend_distance / jnp.maximum(B, 1e-30)) * dq
+        extend = motion(s._replace(near=near, trees=t._replace(key=key)), q_near, target, options.extend_substeps,
+                        _P_EXTENDED)
+        return when(go, extend, s._replace(phase=jnp.asarray(_P_TREE_DONE, jnp.int32)))
+
+    def extended(s):
+        t = s.trees
+        a = t.it % 2
+        q_new, t_ext, _ = ended(s)
+        t, new_idx, added = _add(t, T, a, q_new, s.near, t_ext > 0.05)
+        b = 1 - a
+        near_b = mo.nearest(t.nodes[b], t.count[b], q_new).astype(jnp.int32)
+        s = s._replace(trees=t, new_idx=new_idx.astype(jnp.int32), added=added, near_b=near_b)
+        return motion(s, t.nodes[b, near_b], q_new, options.connect_substeps, _P_CONNECTED)
+
+    def connected(s):
+        t = s.trees
+        a = t.it % 2
+        q_c, t_c, reached = ended(s)
+        joined = s.added & reached
+        t, _, _ = _add(t, T, 1 - a, q_c, s.near_b, s.added & ~reached & (t_c > 0.05))
+        link = jnp.where(a == 0, jnp.stack([s.new_idx, s.near_b]), jnp.stack([s.near_b, s.new_idx])).astype(jnp.int32)
+        t = t._replace(done=joined, link=jnp.where(joined, link, t.link), it=t.it + 1)
+        return tree_next(s._replace(trees=t))
+
+    # --- The connected path, then random shortcuts.
+    def tree_done(s):
+        path, length, start = mo.tree_path(s.trees, T)
+        return cut_next(s._replace(path=path, length=length, start=start, count=i0))
+
+    def cut_next(s):
+        key, ki, kj = jax.random.split(s.key, 3)
+        i = jax.random.randint(ki, (), 0, jnp.maximum(s.length - 2, 1), dtype=jnp.int32)
+        j = jax.random.randint(kj, (), i + 2, jnp.maximum(s.length, i + 3), dtype=jnp.int32)
+        s_try = s._replace(key=key, possible=j <= s.length - 1, cut=jnp.stack([i, j]))
+        s_try = motion(s_try, s.path[i], s.path[jnp.minimum(j, 2 * T - 1)], options.connect_substeps, _P_CUT)
+        return when(s.count < options.shortcut_attempts, s_try,
+                    s._replace(phase=jnp.asarray(_P_SMOOTH_START, jnp.int32)))
+
+    def cut(s):
+        i, j = s.cut[0], s.cut[1]
+        removed = jnp.where(s.possible & ended(s)[2], j - i - 1, 0)
+        p = jnp.arange(2 * T, dtype=jnp.int32)
+        src = jnp.where(p <= i, p, jnp.minimum(p + removed, 2 * T - 1))
+        return cut_next(s._replace(path=s.path[src], length=s.length - removed, count=s.count + 1))
+
+    # --- Smoothing: inner node k moves halfway to its neighbours' midpoint if both motions are certified.
+    def smooth_start(s):
+        return smooth_next(s._replace(count=i0, node=jnp.ones((), jnp.int32)))
+
+    def smooth_next(s):
+        over = s.node >= s.length - 1  # this pass has no node left: the next pass, from node 1
+        s = s._replace(count=s.count + over.astype(jnp.int32), node=jnp.where(over, 1, s.node))
+        k = s.node
+        p_k = s.path[k]
+        a = p_k + mo.wrap_delta(p_k, s.path[k - 1])
+        b = p_k + mo.wrap_delta(p_k, s.path[k + 1])
+        cand = p_k + 0.5 * (0.5 * (a + b) - p_k)
+        s_move = motion(s._replace(cand=cand), s.path[k - 1], cand, options.extend_substeps, _P_SMOOTH_A)
+        # Passes done, or a path without inner nodes (then every pass is empty): the walk.
+        finished = (s.count >= options.smooth_passes) | (k >= s.length - 1)
+        return when(finished, s._replace(phase=jnp.asarray(_P_WALK_START, jnp.int32)), s_move)
+
+    def smooth_a(s):
+        s = s._replace(first_ok=ended(s)[2])
+        return motion(s, s.cand, s.path[s.node + 1], options.extend_substeps, _P_SMOOTH_B)
+
+    def smooth_b(s):
+        k = s.node
+        moved = s.first_ok & ended(s)[2]
+        path = s.path.at[k].set(jnp.where(moved, s.cand, s.path[k]))
+        return smooth_next(s._replace(path=path, node=k + 1))
+
+    # --- The walk: every edge of the unwrapped polyline in steps of at most step_motion.
+    def walk_start(s):
+        path = mo.unwrap(s.path)
+        s = s._replace(path=path, out=jnp.broadcast_to(path[0], (S + 1, n, 3)), steps=i0, node=i0)
+        go = s.length - 1 > 0
+        q_a, q_e = path[0], path[1]
+        s_walk = s._replace(phase=jnp.asarray(_P_WALK, jnp.int32), q_a=q_a, q_e=q_e, dq=q_e - q_a,
+                            t=jnp.zeros((), dtype), failed=f0, active=jnp.ones((), bool))
+        return when(go, s_walk, s._replace(phase=jnp.asarray(_P_WALK, jnp.int32)))
+
+    def walk_end(s):
+        k = s.steps
+        out = jnp.where((jnp.arange(S + 1, dtype=jnp.int32) <= k)[:, None, None], s.out, s.out[k])
+        return s._replace(out=out, phase=jnp.asarray(_P_DONE, jnp.int32))
+
+    handlers = [tree_next, extended, connected, tree_done, cut, smooth_start, smooth_a, smooth_b, walk_start, walk_end]
+
+    def substep(s):
+        """One conservative-advancement substep of the current motion: the one exact solve."""
+        walk = s.phase == _P_WALK
+        cap = jnp.where(walk, options.step_motion, jnp.inf).astype(dtype)  # min(allowed, inf) = allowed
+        t_new, good = mo.substep(s.q_a, s.dq, s.q_e, s.t, scenario, options, solver, contact, cap=cap)
+        # A motion of the search (motions.advance).
+        k = s.k + 1
+        moving = s._replace(t=t_new, k=k, failed=~good, active=(k < s.limit) & (t_new < 1.0) & good)
+        # The walk: a good substep is a step of the path; at an edge's end the next edge starts.
+        end = t_new >= 1.0
+        q_next = jnp.where(end, s.q_e, s.q_a + t_new * s.dq)
+        out = s.out.at[s.steps + 1].set(jnp.where(good & walk & s.active, q_next, s.out[s.steps + 1]))
+        steps, e = s.steps + good.astype(jnp.int32), s.node + end.astype(jnp.int32)
+        q_a, q_e = s.path[jnp.minimum(e, 2 * T - 1)], s.path[jnp.minimum(e + 1, 2 * T - 1)]
+        walking = s._replace(out=out, steps=steps, node=e, t=jnp.where(end, 0.0, t_new).astype(dtype),
+                             q_a=jnp.where(end, q_a, s.q_a), q_e=jnp.where(end, q_e, s.q_e),
+                             dq=jnp.where(end, q_e - q_a, s.dq), failed=~good,
+                             active=(e < s.length - 1) & (steps < S) & good)
+        return when(walk, walking, moving)
+
+    return init, handlers, substep
