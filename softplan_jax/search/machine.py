@@ -68,8 +68,12 @@ class _State(NamedTuple):
     cut: jax.Array  # (2,) int32: the attempt's i, j
     cand: jax.Array  # (n, 3) the smoothing candidate
     first_ok: jax.Array  # () bool: the motion path[k-1] -> cand reached
-    out: jax.Array  # (S + 1, n, 3) the walk's steps
     steps: jax.Array  # () int32 steps of the walk
+    # The walk's step of this substep, written by the loop into its steps (S + 1, n, 3), a carry
+    # of its own: the handlers never touch it.
+    row: jax.Array  # () int32
+    q_next: jax.Array  # (n, 3)
+    write: jax.Array  # () bool
 
 
 def _add(trees, T: int, tree, q, par, allowed):
@@ -119,17 +123,29 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
             s = jax.lax.cond(jnp.any(mask), lambda s, p=p, mask=mask: select(mask, run(p, s), s), lambda s: s, s)
         return s
 
-    def body(s):
+    lanes = jnp.arange(B)
+
+    def body(carry):
+        s, out = carry
         s = handle(s) if B == 1 else jax.lax.cond(jnp.any(~s.active & (s.phase != _P_DONE)), handle, lambda s: s, s)
-        return substep_all(s)  # every iteration: a lane with no motion under way keeps its state
+        s = substep_all(s)  # every iteration: a lane with no motion under way keeps its state
+        rows = out[lanes, s.row]
+        return s, out.at[lanes, s.row].set(jnp.where(s.write[:, None, None], s.q_next, rows))
 
     def substep_all(s):
         new = run(None, s)
         # The walk's steps as they are: the substep writes one row per lane, and only where active.
-        return select(s.active, new, s)._replace(out=new.out)
+        # Written only where a motion was under way (the substep's own flag).
+        return select(s.active, new, s)._replace(write=new.write)
 
-    s = jax.lax.while_loop(lambda s: jnp.any(s.phase != _P_DONE), body, state)
-    return s.trees, s.length, s.start, s.out, s.steps, s.node >= s.length - 1
+    S = int(options.path_steps)
+    out = jnp.zeros((B, S + 1, *q_starts.shape[-2:]), q_starts.dtype)
+    s, out = jax.lax.while_loop(lambda c: jnp.any(c[0].phase != _P_DONE), body, (state, out))
+    # The walk's steps: the first node (unwrapping keeps it), the steps taken, then the last one repeated.
+    out = out.at[:, 0].set(s.path[:, 0])
+    last = out[lanes, s.steps]
+    out = jnp.where((jnp.arange(S + 1) <= s.steps[:, None])[:, :, None, None], out, last[:, None])
+    return s.trees, s.length, s.start, out, s.steps, s.node >= s.length - 1
 
 
 def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype):
@@ -147,7 +163,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
                           jnp.zeros((2,), jnp.int32), jnp.zeros((), jnp.int32), k_tree)
         return _State(jnp.asarray(_P_TREE, jnp.int32), q0, q0, q0, jnp.zeros((), dtype), i0, i0, f0, f0, trees, i0,
                       i0, f0, i0, jnp.zeros((2 * T, n, 3), dtype), i0, i0, i0, i0, k_cut, f0,
-                      jnp.zeros((2,), jnp.int32), q0, f0, jnp.zeros((S + 1, n, 3), dtype), i0)
+                      jnp.zeros((2,), jnp.int32), q0, f0, i0, i0, q0, f0)
 
     def motion(s, q_a, q_b, substeps, phase):
         """Start the certified straight motion q_a -> q_a + wrap_delta(q_a, q_b) (motions.advance)."""
@@ -250,7 +266,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
     # --- The walk: every edge of the unwrapped polyline in steps of at most step_motion.
     def walk_start(s):
         path = mo.unwrap(s.path)
-        s = s._replace(path=path, out=jnp.broadcast_to(path[0], (S + 1, n, 3)), steps=i0, node=i0)
+        s = s._replace(path=path, steps=i0, node=i0)
         go = s.length - 1 > 0
         q_a, q_e = path[0], path[1]
         s_walk = s._replace(phase=jnp.asarray(_P_WALK, jnp.int32), q_a=q_a, q_e=q_e, dq=q_e - q_a,
@@ -258,9 +274,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
         return when(go, s_walk, s._replace(phase=jnp.asarray(_P_WALK, jnp.int32)))
 
     def walk_end(s):
-        k = s.steps
-        out = jnp.where((jnp.arange(S + 1, dtype=jnp.int32) <= k)[:, None, None], s.out, s.out[k])
-        return s._replace(out=out, phase=jnp.asarray(_P_DONE, jnp.int32))
+        return s._replace(phase=jnp.asarray(_P_DONE, jnp.int32))
 
     handlers = [tree_next, extended, connected, tree_done, cut, smooth_start, smooth_a, smooth_b, walk_start, walk_end]
 
@@ -271,14 +285,14 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
         t_new, good = mo.substep(s.q_a, s.dq, s.q_e, s.t, scenario, options, solver, contact, cap=cap)
         # A motion of the search (motions.advance).
         k = s.k + 1
-        moving = s._replace(t=t_new, k=k, failed=~good, active=(k < s.limit) & (t_new < 1.0) & good)
+        moving = s._replace(t=t_new, k=k, failed=~good, active=(k < s.limit) & (t_new < 1.0) & good, write=f0)
         # The walk: a good substep is a step of the path; at an edge's end the next edge starts.
         end = t_new >= 1.0
         q_next = jnp.where(end, s.q_e, s.q_a + t_new * s.dq)
-        out = s.out.at[s.steps + 1].set(jnp.where(good & walk & s.active, q_next, s.out[s.steps + 1]))
         steps, e = s.steps + good.astype(jnp.int32), s.node + end.astype(jnp.int32)
         q_a, q_e = s.path[jnp.minimum(e, 2 * T - 1)], s.path[jnp.minimum(e + 1, 2 * T - 1)]
-        walking = s._replace(out=out, steps=steps, node=e, t=jnp.where(end, 0.0, t_new).astype(dtype),
+        walking = s._replace(row=s.steps + 1, q_next=q_next, write=good & s.active, steps=steps, node=e,
+                             t=jnp.where(end, 0.0, t_new).astype(dtype),
                              q_a=jnp.where(end, q_a, s.q_a), q_e=jnp.where(end, q_e, s.q_e),
                              dq=jnp.where(end, q_e - q_a, s.dq), failed=~good,
                              active=(e < s.length - 1) & (steps < S) & good)
