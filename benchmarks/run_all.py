@@ -52,6 +52,7 @@ SCRIPTS = {
     "baselines": [["save", "--fallback"]],
     "sweep_scale": [[]],
     "compile_by_degree": [[]],
+    "fallback_compile": [[]],
 }
 
 

@@ -144,7 +144,7 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
     # The walk's steps: the first node (unwrapping keeps it), the steps taken, then the last one repeated.
     out = out.at[:, 0].set(s.path[:, 0])
     last = out[lanes, s.steps]
-    out = jnp.where((jnp.arange(S + 1) <= s.steps[:, None])[:, :, None, None], out, last[:, None])
+    out = jnp.where((jnp.arange(S + 1, dtype=jnp.int32) <= s.steps[:, None])[:, :, None, None], out, last[:, None])
     return s.trees, s.length, s.start, out, s.steps, s.node >= s.length - 1
 
 
