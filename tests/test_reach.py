@@ -171,11 +171,13 @@ def test_batch_compiles_the_search_once_and_keeps_local_results(rescued):
     assert (fn._cache_size(), ik._cache_size()) == before
 
 
+@pytest.mark.slow
 def test_search_lanes_run_independently(rescued):
     """The search's batched loop (search.machine): a lane searching beside a lane with no
     goal root (done at once) finds the single-lane search's path: same trees, iterations
     and steps, q to rounding (a wider program may round differently), every step of it
-    proven by the swept check."""
+    proven by the swept check. Slow: the two-lane program (chunk > 1, not the default)
+    compiles for about 20 s, and only this test uses it."""
     from softplan_jax.search.fallback import _path_check_jit, _start_roots
 
     s, local, _ = rescued

@@ -177,7 +177,6 @@ def _fallback(args, suite, r, options, out) -> float:
     """The global fallback on the scenes the local planner left stalled or at max steps
     (:func:`~softplan_jax.search.fallback.rescue_batch`): ``out``'s per-scene arrays updated
     in place, ``planner`` "global" where the search reached; returns its seconds."""
-
     from ..base.status import Status
     from ..search.fallback import rescue_batch
 

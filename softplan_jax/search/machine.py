@@ -93,9 +93,11 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
 
     The loop runs over the whole batch: in an iteration, a phase's handler runs (on the
     lanes whose motion ended in that phase; skipped when there is none), then one
-    substep of every lane whose motion is under way. So a lane costs one exact solve
-    per iteration, and the handlers cost only when a motion ended: the batch needs no
-    vmap of the loop, which would evaluate every handler on every iteration."""
+    substep of every lane, kept where its motion is under way. So a lane costs one
+    exact solve per iteration, and the handlers cost only when a motion ended: the
+    batch needs no vmap of the loop, which would evaluate every handler on every
+    iteration. The walk's steps (B, S + 1, n, 3) are a carry of their own, one row per
+    lane written after the substep."""
     B = keys.shape[0]
     state = jax.vmap(lambda sc, *a: _lane(sc, options, solver, contact, q_starts.shape[-2], q_starts.dtype)[0](*a))(
         scenarios, q_starts, n_starts, q_goals, n_goals, keys)
@@ -134,8 +136,7 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
 
     def substep_all(s):
         new = run(None, s)
-        # The walk's steps as they are: the substep writes one row per lane, and only where active.
-        # Written only where a motion was under way (the substep's own flag).
+        # ``write`` as the substep set it: false where no motion was under way.
         return select(s.active, new, s)._replace(write=new.write)
 
     S = int(options.path_steps)
