@@ -49,8 +49,7 @@ class _State(NamedTuple):
     t: jax.Array
     k: jax.Array
     limit: jax.Array  # () int32 substeps allowed
-    failed: jax.Array  # () bool: a solve did not converge (or alpha was not > 0)
-    active: jax.Array  # () bool: a motion is under way
+    active: jax.Array  # () bool: a motion is under way (it stops at its end, a failed solve, or its substeps)
     # RRT-Connect.
     trees: tuple  # motions.Trees
     near: jax.Array  # () int32: the node of tree a the extension left from
@@ -162,7 +161,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
         count = jnp.stack([jnp.minimum(n_starts, T), jnp.minimum(n_goals, T)]).astype(jnp.int32)
         trees = mo.Trees(nodes, jnp.full((2, T), -1, jnp.int32), count, jnp.zeros((), bool),
                           jnp.zeros((2,), jnp.int32), jnp.zeros((), jnp.int32), k_tree)
-        return _State(jnp.asarray(_P_TREE, jnp.int32), q0, q0, q0, jnp.zeros((), dtype), i0, i0, f0, f0, trees, i0,
+        return _State(jnp.asarray(_P_TREE, jnp.int32), q0, q0, q0, jnp.zeros((), dtype), i0, i0, f0, trees, i0,
                       i0, f0, i0, jnp.zeros((2 * T, n, 3), dtype), i0, i0, i0, i0, k_cut, f0,
                       jnp.zeros((2,), jnp.int32), q0, f0, i0, i0, q0, f0)
 
@@ -170,7 +169,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
         """Start the certified straight motion q_a -> q_a + wrap_delta(q_a, q_b) (motions.advance)."""
         dq = mo.wrap_delta(q_a, q_b)
         return s._replace(phase=jnp.asarray(phase, jnp.int32), q_a=q_a, dq=dq, q_e=q_a + dq, t=jnp.zeros((), dtype),
-                          k=i0, limit=jnp.asarray(substeps, jnp.int32), failed=f0, active=jnp.ones((), bool))
+                          k=i0, limit=jnp.asarray(substeps, jnp.int32), active=jnp.ones((), bool))
 
     def ended(s):
         """The motion that ended: ``(q reached, t, reached)`` as motions.advance returns them."""
@@ -271,7 +270,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
         go = s.length - 1 > 0
         q_a, q_e = path[0], path[1]
         s_walk = s._replace(phase=jnp.asarray(_P_WALK, jnp.int32), q_a=q_a, q_e=q_e, dq=q_e - q_a,
-                            t=jnp.zeros((), dtype), failed=f0, active=jnp.ones((), bool))
+                            t=jnp.zeros((), dtype), active=jnp.ones((), bool))
         return when(go, s_walk, s._replace(phase=jnp.asarray(_P_WALK, jnp.int32)))
 
     def walk_end(s):
@@ -286,7 +285,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
         t_new, good = mo.substep(s.q_a, s.dq, s.q_e, s.t, scenario, options, solver, contact, cap=cap)
         # A motion of the search (motions.advance).
         k = s.k + 1
-        moving = s._replace(t=t_new, k=k, failed=~good, active=(k < s.limit) & (t_new < 1.0) & good, write=f0)
+        moving = s._replace(t=t_new, k=k, active=(k < s.limit) & (t_new < 1.0) & good, write=f0)
         # The walk: a good substep is a step of the path; at an edge's end the next edge starts.
         end = t_new >= 1.0
         q_next = jnp.where(end, s.q_e, s.q_a + t_new * s.dq)
@@ -295,7 +294,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
         walking = s._replace(row=s.steps + 1, q_next=q_next, write=good & s.active, steps=steps, node=e,
                              t=jnp.where(end, 0.0, t_new).astype(dtype),
                              q_a=jnp.where(end, q_a, s.q_a), q_e=jnp.where(end, q_e, s.q_e),
-                             dq=jnp.where(end, q_e - q_a, s.dq), failed=~good,
+                             dq=jnp.where(end, q_e - q_a, s.dq),
                              active=(e < s.length - 1) & (steps < S) & good)
         return when(walk, walking, moving)
 
