@@ -52,6 +52,24 @@ def subprocess_env(base=None) -> dict:
     return env
 
 
+def one_device_env() -> dict:
+    """:func:`subprocess_env` without a host device count: one CPU device per subprocess
+    (the jax.distributed tests' processes)."""
+    env = subprocess_env()
+    env["XLA_FLAGS"] = " ".join(f for f in env.get("XLA_FLAGS", "").split()
+                                if "xla_force_host_platform_device_count" not in f)
+    return env
+
+
+def free_port() -> int:
+    """A free TCP port on localhost (a jax.distributed coordinator's)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
 def enable() -> str | None:
     """Turn the cache on in this process (before the first compilation); returns its directory."""
     import jax

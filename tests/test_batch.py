@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from session import subprocess_env
+from session import free_port, one_device_env, subprocess_env
 
 import softplan_jax as sp
 from softplan_jax.base.numerics import evaluate_where, solve_small, tie
@@ -300,29 +300,13 @@ DISTRIBUTED = textwrap.dedent(
 )
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        return s.getsockname()[1]
-
-
-def _one_device_env() -> dict:
-    """The test subprocesses' environment without a host device count: one CPU device."""
-    env = subprocess_env()
-    env["XLA_FLAGS"] = " ".join(f for f in env.get("XLA_FLAGS", "").split()
-                                if "xla_force_host_platform_device_count" not in f)
-    return env
-
-
 @pytest.mark.slow
 def test_distributed_two_processes_one_host():
     """The README's jax.distributed recipe, run as 2 processes on this machine (CPU,
     1 device each): every process plans its share, the summaries are gathered, and
     they are the whole suite's (statuses and iterations). Not a test on real
     multi-host hardware."""
-    port, env = _free_port(), _one_device_env()
+    port, env = free_port(), one_device_env()
     procs = [subprocess.Popen([sys.executable, "-c", DISTRIBUTED, f"localhost:{port}", str(i)], cwd=ROOT, env=env,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
     outs = []
@@ -342,9 +326,9 @@ def test_batch_command_on_two_processes_is_the_sharded_run(tmp_path):
     one process sharded over 2 host devices: a global mesh, each process computing its own
     devices' shards, the results gathered. Process 0 writes --out; the per-scenario results
     equal the one-process run's bit for bit. Not a test on real multi-host hardware."""
-    env = _one_device_env()
+    env = one_device_env()
     common = ["-m", "softplan_jax.cli", "batch", "--n", "6", "--max-steps", "40", "--chunk", "4", "--no-progress"]
-    port = _free_port()
+    port = free_port()
     procs = [subprocess.Popen([sys.executable, *common, "--coordinator", f"localhost:{port}", "--num-processes", "2",
                                "--process-id", str(i), "--json", "--out", str(tmp_path / f"p{i}.npz")],
                               cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

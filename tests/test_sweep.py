@@ -24,7 +24,7 @@ import tracemalloc
 import jax
 import numpy as np
 import pytest
-from session import REPO, subprocess_env
+from session import REPO, free_port, one_device_env, subprocess_env
 from stats import wilson
 
 import softplan_jax as sp
@@ -319,21 +319,10 @@ def test_command(full, tmp_path, capsys):
     assert read_table(copy)["status"].tolist() == read_table(d)["status"][:3].tolist()
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        return s.getsockname()[1]
-
-
 def _processes(tmp_path, out, extra=((), ())):
     """``softplan sweep`` as 2 processes of one CPU device each (jax.distributed on this
     machine); ``extra``: further flags of process 0 and 1. Returns [(rc, stdout, stderr)]."""
-    env = subprocess_env()
-    env["XLA_FLAGS"] = " ".join(f for f in env.get("XLA_FLAGS", "").split()
-                                if "xla_force_host_platform_device_count" not in f)
-    port = _free_port()
+    env, port = one_device_env(), free_port()
     common = [sys.executable, "-m", "softplan_jax.cli", "sweep", "--n", str(N), "--out", str(out),
               *CLI_ARGS, "--json"]
     procs = [subprocess.Popen([*common, *extra[i], "--coordinator", f"localhost:{port}", "--num-processes", "2",
