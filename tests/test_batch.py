@@ -229,6 +229,7 @@ TWO_DEVICES = textwrap.dedent(
 )
 
 
+@pytest.mark.slow  # a 2-device subprocess compiling its own partitioned program (~27 s)
 def test_two_host_devices_match_one():
     """plan_batch sharded over 2 host devices, collision checks included (the default),
     on the paper scenes: it finishes (it used to hang: see solve_small), gives the

@@ -74,6 +74,8 @@ def _ok(run):
     assert rc == 0, f"exit code {rc}\nstdout:\n{stdout[-3000:]}\nstderr:\n{stderr[-5000:]}"
 
 
+@pytest.mark.slow  # a subprocess compiling the benchmark's own programs (~25 s); the paper's
+# numbers themselves are checked in the default suite by test_presets
 def test_paper_tables_quick(paper_run):
     d, run = paper_run
     _ok(run)

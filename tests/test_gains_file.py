@@ -302,7 +302,10 @@ def test_cli_run_with_gains_file(tmp_path, capsys):
     slow = tmp_path / "slow.json"
     sp.save_gains(sp.default_gains()._replace(dt=jnp.asarray(0.05)), slow)
     traj = tmp_path / "run.json"
-    code, out, err = run_main(capsys, "run", "sim1", "--max-steps", 80, "--gains", slow, "--out", traj)
+    # --no-fallback: these gains do not reach within 80 steps, and the global search (its own
+    # programs, ~20 s of compilation) is not what this test is about.
+    code, out, err = run_main(capsys, "run", "sim1", "--max-steps", 80, "--gains", slow, "--out", traj,
+                              "--no-fallback")
     assert code == 0, err
     assert "gains file" in out and "dt 0.05" in out
     record = json.loads(traj.read_text())

@@ -118,7 +118,8 @@ def _wire_clearance(q_a, q_b, a, b, substeps, arm_samples):
     best = np.inf
     for t in np.linspace(0.0, 1.0, substeps + 1):
         q = q_a + t * (q_b - q_a)
-        pts = np.concatenate([oracle.segment_points(q, i, s) for i in range(q.shape[0])])
+        Rs, Ps = oracle.segment_frames(q)  # oracle.segment_points, the frames computed once per q
+        pts = np.concatenate([oracle.local_arc(q[i], s)[0] @ Rs[i].T + Ps[i] for i in range(q.shape[0])])
         w = np.clip((pts - a) @ ab / (ab @ ab), 0.0, 1.0)
         best = min(best, float(np.min(np.linalg.norm(pts - (a + w[:, None] * ab), axis=1))))
     return best
@@ -249,6 +250,7 @@ def test_mixed_obstacles_both_methods():
             assert dense.min() > 0, dense.min()
 
 
+@pytest.mark.slow  # the deprecated pathwise tuner: its loss-and-gradient program (~30 s compile)
 def test_gradient_through_rollout_matches_finite_differences(paper):
     """jax.grad through whole rollouts (the batch loss of notebooks/tuning.ipynb, the same
     compiled program: the notebook's test run and this test share it through the persistent
@@ -366,6 +368,7 @@ def test_swept_proof_skips_only_motions_that_cannot_collide():
     always = make_options("curve", check_collisions=False, swept_proof=False, **sp.PAPER_STEP)
     post = jax.jit(apply_collision_checks, static_argnums=2)
     contact = contact_tolerance(always, jnp.float64)
+    tip_bound = jax.jit(jax.vmap(lambda q_a, q_b: sp.geometry.motion_bound(q_a, q_b)[-1]))
     skipped = searched = 0
     collided = []
     for label, sc, gains, opts in _swept_cases():
@@ -380,7 +383,7 @@ def test_swept_proof_skips_only_motions_that_cannot_collide():
         did = np.asarray(r.between_searched)[1 : it + 1][:, mask]
         assert not np.asarray(r.between_searched)[it + 1 :].any() and not np.asarray(r.between_searched)[0].any()
         assert np.asarray(ref.between_searched)[1 : it + 1][:, mask].all()
-        bound = np.array([float(sp.geometry.motion_bound(r.q[k], r.q[k + 1])[-1]) for k in range(it)])
+        bound = np.asarray(tip_bound(r.q[:-1], r.q[1:]))[:it]  # every motion of the padded record, one program
         lower = c[:-1] - bound[:, None]
         # Every search result is achieved during the motion: never below the proof's bound.
         assert np.all(cb_ref >= lower - 1e-9), label
@@ -426,6 +429,7 @@ def test_swept_clear_edge_cases(paper):
     assert not bool(jnp.any(swept_clear(q, q, truth._replace(converged=~truth.converged), c, contact)))
 
 
+@pytest.mark.slow  # the deprecated pathwise tuner: its loss-and-gradient program (~30 s compile)
 def test_tune_gains_lowers_the_loss_and_compiles_once(paper):
     from softplan_jax.tuning.pathwise import tune_gains
 

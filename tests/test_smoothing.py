@@ -224,7 +224,9 @@ def test_gain_function_generalises_gains():
     c = 0.7
     scaled = np.asarray(sp.planning.planner_step(q, sc, g._replace(eta=g.eta * math.exp(c)), opts))
     assert np.abs(scaled - ref).max() > 1e-6  # the repulsion matters here
-    for f in (fn._replace(rep_profile=jnp.full((5,), c)), fn._replace(seg_weights=jnp.full((3,), c))):
+    # float64, not weakly typed: fn's program (a weak type would compile two more)
+    for f in (fn._replace(rep_profile=jnp.full((5,), c, jnp.float64)),
+              fn._replace(seg_weights=jnp.full((3,), c, jnp.float64))):
         np.testing.assert_allclose(np.asarray(sp.planning.planner_step(q, sc, f, opts)), scaled, rtol=1e-12, atol=1e-14)
 
 

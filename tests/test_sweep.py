@@ -13,6 +13,7 @@ fallback's programs are test_reach's (the same scene shape and ReachOptions).
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import shutil
@@ -256,6 +257,7 @@ def test_memory_is_flat_in_n(full, tmp_path):
     samples = []
 
     def progress(info):
+        gc.collect()  # garbage of earlier tests (freed whenever the collector runs) is not the sweep's
         samples.append((sum(x.nbytes for x in jax.live_arrays()), tracemalloc.get_traced_memory()[0]))
 
     tracemalloc.start()

@@ -38,6 +38,8 @@ tests use it as an independent reference.
 
 from __future__ import annotations
 
+from functools import partial
+
 import jax
 import jax.numpy as jnp
 
@@ -324,6 +326,7 @@ def apply_collision_checks(r, scenario, options):
     )
 
 
+@partial(jax.jit, static_argnames=("substeps", "arm_samples", "curve_samples"))
 def dense_trajectory_clearance(qs, scenario, substeps: int = 20, arm_samples: int = 200, curve_samples: int = 2000):
     """Brute-force minimum clearance of a trajectory, for checking.
 
@@ -331,6 +334,7 @@ def dense_trajectory_clearance(qs, scenario, substeps: int = 20, arm_samples: in
     the arm at ``arm_samples`` points per segment and each curve at
     ``curve_samples`` points, and returns (T, m) minimum clearance per step
     interval and obstacle slot (padding slots: +inf). Slow: for tests and audits.
+    Jitted (the sample counts static): one compilation per shape of ``qs`` and scene.
     """
     from .curves import curve_points
 
