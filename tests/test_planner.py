@@ -118,8 +118,7 @@ def _wire_clearance(q_a, q_b, a, b, substeps, arm_samples):
     best = np.inf
     for t in np.linspace(0.0, 1.0, substeps + 1):
         q = q_a + t * (q_b - q_a)
-        Rs, Ps = oracle.segment_frames(q)  # oracle.segment_points, the frames computed once per q
-        pts = np.concatenate([oracle.local_arc(q[i], s)[0] @ Rs[i].T + Ps[i] for i in range(q.shape[0])])
+        pts = oracle.arm_points(q, s)
         w = np.clip((pts - a) @ ab / (ab @ ab), 0.0, 1.0)
         best = min(best, float(np.min(np.linalg.norm(pts - (a + w[:, None] * ab), axis=1))))
     return best

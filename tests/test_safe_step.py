@@ -89,7 +89,7 @@ def _brute_clearance(q_a, q_b, coeffs, substeps=8, arm_samples=60, curve_samples
     best = np.inf
     for t in np.linspace(0.0, 1.0, substeps + 1):
         q = q_a + t * (q_b - q_a)
-        arm = np.concatenate([oracle.segment_points(q, i, s) for i in range(q.shape[0])])
+        arm = oracle.arm_points(q, s)
         d = np.sqrt(((arm[:, None, :] - pts_c[None, :, :]) ** 2).sum(-1))
         best = min(best, float(d.min()))
     return best

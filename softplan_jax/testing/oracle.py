@@ -35,6 +35,7 @@ from .oracle_geometry import (
     OHelix,
     OPoly,
     arc_coeffs,
+    arm_points,
     backbone_points,
     central_difference,
     helix,
@@ -58,7 +59,7 @@ from .oracle_geometry import (
 __all__ = [
     # kinematics (paper section 2.1), from oracle_geometry
     "segment_transform", "segment_frames", "tip_frame", "tip_position", "segment_points", "segment_point_derivs",
-    "segment_point", "backbone_points", "jacobian_complex_step", "point_jacobian", "tip_jacobian",
+    "segment_point", "backbone_points", "arm_points", "jacobian_complex_step", "point_jacobian", "tip_jacobian",
     "central_difference", "arc_coeffs", "local_arc",
     # curves, from oracle_geometry
     "OPoly", "OFunc", "OHelix", "helix", "line",

@@ -37,7 +37,7 @@ import numpy as np
 __all__ = [
     # kinematics (paper section 2.1)
     "segment_transform", "segment_frames", "tip_frame", "tip_position", "segment_points", "segment_point_derivs",
-    "segment_point", "backbone_points", "jacobian_complex_step", "point_jacobian", "tip_jacobian",
+    "segment_point", "backbone_points", "arm_points", "jacobian_complex_step", "point_jacobian", "tip_jacobian",
     "central_difference", "arc_coeffs", "local_arc",
     # curves
     "OPoly", "OFunc", "OHelix", "helix", "line",
@@ -193,7 +193,15 @@ def segment_point(q, i, s):
 def backbone_points(q, k=10):
     q = np.asarray(q)
     s = np.arange(1, k + 1) / k
-    return np.concatenate([segment_points(q, i, s) for i in range(q.shape[0])])
+    return arm_points(q, s)
+
+
+def arm_points(q, s):
+    """Every segment's points at fractions s (m,), segment after segment -> (n m, 3): the
+    points of :func:`segment_points`, the frames computed once."""
+    q = np.asarray(q)
+    Rs, Ps = segment_frames(q)
+    return np.concatenate([local_arc(q[i], s)[0] @ Rs[i].T + Ps[i] for i in range(q.shape[0])])
 
 
 def jacobian_complex_step(fn, q, h=1e-30):
@@ -386,7 +394,7 @@ def moving_min_clearance(qs, times, coeffs, u_ranges, radii, motions, arm_radius
         for tau in np.linspace(0.0, 1.0, substeps + 1):
             q = qs[a] + tau * (qs[b] - qs[a])
             t = float(times[a]) + tau * (float(times[b]) - float(times[a]))
-            arm = np.concatenate([segment_points(q, i, s) for i in range(q.shape[0])])
+            arm = arm_points(q, s)
             for c, ur, r, m in zip(coeffs, u_ranges, radii, motions, strict=True):
                 pts = moving_curve_points(c, ur, m, t, curve_samples)
                 d = np.sqrt(((arm[:, None, :] - pts[None]) ** 2).sum(-1)).min()
