@@ -586,10 +586,12 @@ def test_moving_benchmark_quick_run(tmp_path):
 def test_throughput_rejects_bad_arguments():
     import throughput
 
-    for argv in (["--sizes", "0,4"], ["--sizes", "a"], ["--devices", "0"], ["--steps", "0"], ["--rounds", "0"]):
+    for argv in (["--sizes", "0,4"], ["--sizes", "a"], ["--devices", "0"], ["--steps", "0"], ["--rounds", "0"],
+                 ["--lanes", "0"], ["--lanes", "b"], ["--lanes", ""], ["--dtype", "float16"]):
         with pytest.raises(SystemExit) as e:
             throughput.parse_args(argv)
         assert e.value.code == 2, argv
+    assert throughput.parse_args(["--lanes", "64,B"]).lane_list == [64, "B"]
 
 
 def test_baselines_compare_tells_steps_taken_from_the_tail(tmp_path, capsys):

@@ -70,11 +70,18 @@ fallback lowers D_w, so one pass is enough.
 Fallback cost. The failed pairs are solved one by one in a
 ``lax.while_loop`` (flattened over the curves of a stack). Under ``vmap`` a
 batching rule (``jax.custom_batching.custom_vmap``) folds the batch axis into
-that loop: it solves the failed pairs of ALL members, ``FALLBACK_CHUNK`` side
-by side per iteration, so a batch pays for its failures only, where plain
-``vmap`` would run the loop as long as the member with the most failures and
-solve a pair for every member in each iteration. At the first step of a
-rollout (no warm state) every pair fails and takes the full solve.
+that loop: it solves the failed pairs of ALL members, ``chunk`` side by side
+per iteration, so a batch pays for its failures only, where plain ``vmap``
+would run the loop as long as the member with the most failures and solve a
+pair for every member in each iteration. At the first step of a rollout (no
+warm state) every pair fails and takes the full solve. The chunk is
+``max(FALLBACK_CHUNK, ceil(pairs / FALLBACK_TRIPS))`` (pairs: the batch's
+curve-segment pairs), so the loop's trips per step stay bounded (at most
+``FALLBACK_TRIPS``) however wide the batch: with a fixed chunk of 8 they grew
+with the width (measured on random_scenarios(0, 1024), 200 steps: 0.28 failed
+pairs per scene-step, so a mean of 21 trips per step at 1,024 scenes side by
+side and 84 at 4,096; every trip is a serial round of small kernels on a GPU).
+At 64 lanes and 8 slots (1,536 pairs) the chunk is 24.
 
 Derivatives. Everything here runs without derivatives (stop_gradient); the
 winning pair goes through :func:`~softplan_jax.geometry.closest.closest_from_pairs`,
@@ -125,8 +132,11 @@ TOLERANCE = 64.0
 # ParametricCurve: max |F_o''| from samples over the range, times this factor.
 PARAMETRIC_SAFETY = 2.0
 PARAMETRIC_SAMPLES = 257
-# Failed pairs solved side by side per iteration of the fallback loop under vmap.
+# Failed pairs solved side by side per iteration of the fallback loop under vmap: at least
+# FALLBACK_CHUNK, and at least 1 / FALLBACK_TRIPS of the batch's pairs, so that a step's trips
+# through the loop stay bounded as the batch widens (module docstring, "Fallback cost").
 FALLBACK_CHUNK = 8
+FALLBACK_TRIPS = 64
 
 
 class CurveData(NamedTuple):
@@ -279,9 +289,9 @@ def _fallback_fn(solver: SolverOptions):
     iteration solving a pair for EVERY member: a batch of B paid B full pair
     solves per failure of its worst member (measured: 8 of 44 µs per
     scenario-step, batch of 64). The rule instead folds the batch axis into
-    the array and solves only the failed pairs of all members, ``FALLBACK_CHUNK``
-    at a time (``benchmarks/kernel.py`` at b850131, batch of 64: 39 -> 31 µs per
-    scenario-step). Nested ``vmap`` folds one axis per level. custom_vmap has
+    the array and solves only the failed pairs of all members, a chunk at a time
+    (:func:`_solve_failed`; ``benchmarks/kernel.py`` at b850131, batch of 64 and
+    a chunk of 8: 39 -> 31 µs per scenario-step). Nested ``vmap`` folds one axis per level. custom_vmap has
     no reverse-mode rule; none is needed, as every input is stop_gradient-ed
     (the JVP of a rollout sees only symbolic-zero tangents here).
     """
@@ -306,13 +316,13 @@ def _solve_failed(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, s
     """The loop of :func:`_fallback` over any leading axes ``lead`` (``fail``:
     lead + (m, n); segs: lead + (n,); curves, data: lead + (m,)): the failed
     pairs go through :func:`~softplan_jax.base.numerics.evaluate_where`, ``chunk``
-    at a time (1 without leading axes, else ``FALLBACK_CHUNK``), and each keeps
-    the better of its full and polished answers."""
+    at a time (1 without leading axes, else ``max(FALLBACK_CHUNK, ceil(pairs /
+    FALLBACK_TRIPS))``), and each keeps the better of its full and polished answers."""
     m, n = fail.shape[-2:]
     lead = fail.shape[:-2]
     batch = math.prod(lead)
     total = batch * m * n
-    chunk = min(1 if not lead else FALLBACK_CHUNK, total)
+    chunk = min(1 if not lead else max(FALLBACK_CHUNK, -(-total // FALLBACK_TRIPS)), total)
 
     def flat(tree):  # lead axes -> one axis of size batch
         return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) :])), tree)
