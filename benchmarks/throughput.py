@@ -115,7 +115,8 @@ def worker(args) -> dict:
     rows = []
     for (method, b, lanes), t in times.items():
         _, _, lanes_b, compile_s, taken = calls[(method, b, lanes)]
-        rows.append(dict(devices=k, method=method, batch=b, lanes=min(lanes_b, b), dtype=args.dtype, compile_s=compile_s,
+        rows.append(dict(devices=k, method=method, batch=b, lanes=min(lanes_b, -(-b // k)), dtype=args.dtype,
+                         compile_s=compile_s,
                          min_s=min(t), median_s=statistics.median(t), steps_taken=taken,
                          steps_per_s_best=taken / min(t), steps_per_s_median=taken / statistics.median(t),
                          scenes_per_s_median=b / statistics.median(t)))
@@ -135,6 +136,11 @@ def run_worker(args, k: int) -> dict:
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
+def _lanes_label(row) -> str:
+    """"B" where every scene of the device's share steps side by side, else the lane count."""
+    return "B" if row["lanes"] * row["devices"] >= row["batch"] else str(row["lanes"])
+
+
 def plot(rows, path):
     import matplotlib
 
@@ -144,9 +150,9 @@ def plot(rows, path):
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for method, color in (("curve", "C0"), ("points10", "C1")):
         for k, style in ((1, "-"), (2, "--"), (4, ":")):
-            for lanes in sorted({r["lanes"] if r["lanes"] != r["batch"] else "B" for r in rows}, key=str):
+            for lanes in sorted({_lanes_label(r) for r in rows}, key=str):
                 rs = sorted((r for r in rows if r["method"] == method and r["devices"] == k
-                             and (r["lanes"] if r["lanes"] != r["batch"] else "B") == lanes), key=lambda r: r["batch"])
+                             and _lanes_label(r) == lanes), key=lambda r: r["batch"])
                 if rs:
                     ax.plot([r["batch"] for r in rs], [r["steps_per_s_median"] for r in rs], style, color=color,
                             marker="o" if lanes == "B" else "s",
@@ -197,8 +203,8 @@ def main(argv=None):
              *machine_lines(machine), "",
              "Taken scenario-steps per second (the sum over scenes of iterations + 1, over the wall time; median "
              "over rounds, best in brackets); compile apart.", "",
-             "| devices | method | B | lanes | compile | per taken scenario-step (median) | taken scenario-steps / s "
-             "| scenes / s |",
+             "| devices | method | B | lanes per device | compile | per taken scenario-step (median) "
+             "| taken scenario-steps / s | scenes / s |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['devices']} | {r['method']} | {r['batch']:,} | {r['lanes']:,} | {r['compile_s']:.1f} s "
