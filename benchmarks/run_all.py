@@ -53,6 +53,8 @@ SCRIPTS = {
     "sweep_scale": [[]],
     "compile_by_degree": [[]],
     "fallback_compile": [[]],
+    # made for one GPU (its docstring); here the single plan and plan_batch's defaults on this machine
+    "gpu": [["--parts", "plan,defaults", "--out", os.path.join(RESULTS, "gpu_this_machine")]],
 }
 
 

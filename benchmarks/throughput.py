@@ -17,9 +17,7 @@ after the other; on a GPU, ``--devices 1`` is the one accelerator.
 
     python benchmarks/throughput.py           # ~20 min on 2 CPUs
     python benchmarks/throughput.py --quick   # B = 4 and 16, 20 steps, one round, into results/quick/
-    # on one GPU (issue 41): whole batches side by side, float64 and float32
-    python benchmarks/throughput.py --devices 1 --sizes 1024,4096,16384 --lanes 64,B --steps 200 --out /tmp/gpu64
-    python benchmarks/throughput.py --devices 1 --sizes 1024,16384 --lanes B --steps 200 --dtype float32 --out /tmp/gpu32
+    # on a GPU: benchmarks/gpu.py (suites drawn ahead on a CPU, a profile, the single plan)
 
 Writes ``benchmarks/results/throughput.{md,json}`` and
 ``benchmarks/results/figures/throughput.png``.

@@ -180,8 +180,8 @@ def test_run_all_rejects_unknown_scripts(capsys):
 
 
 # Scripts whose quick run no other test below runs: `NAME.py --quick --out DIR/NAME` in a subprocess.
-QUICK_ONLY = ["baselines", "closest", "compile_by_degree", "devices", "engine", "fallback_compile", "numpy_baseline",
-              "paper_presets", "speed_targets", "sweep_scale", "throughput", "warm_start"]
+QUICK_ONLY = ["baselines", "closest", "compile_by_degree", "devices", "engine", "fallback_compile", "gpu",
+              "numpy_baseline", "paper_presets", "speed_targets", "sweep_scale", "throughput", "warm_start"]
 
 
 @pytest.mark.bench
@@ -592,6 +592,17 @@ def test_throughput_rejects_bad_arguments():
             throughput.parse_args(argv)
         assert e.value.code == 2, argv
     assert throughput.parse_args(["--lanes", "64,B"]).lane_list == [64, "B"]
+
+
+def test_gpu_script_rejects_bad_arguments(tmp_path):
+    import gpu
+
+    for argv in (["--sizes", "0"], ["--sizes", "a"], ["--steps", "0"], ["--rounds", "0"], ["--parts", "plan,x"]):
+        with pytest.raises(SystemExit) as e:
+            gpu.parse_args([*argv, "--out", str(tmp_path / "g")])
+        assert e.value.code == 2, argv
+    a = gpu.parse_args(["--quick", "--out", str(tmp_path / "g")])
+    assert (a.size_list, a.steps, a.part_list) == ([8], 10, ["plan", "batch", "float32"])
 
 
 def test_baselines_compare_tells_steps_taken_from_the_tail(tmp_path, capsys):

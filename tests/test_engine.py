@@ -1,7 +1,8 @@
 """The rollout engine (softplan_jax.planning.engine): its drivers give the same arrays, a
 finished rollout's records are frozen, a batch's refilled lanes give every scene
-its own rollout (checked against a Python loop of single rollouts), the safe
-step's scale against its formula, and the sizes' bad input."""
+its own rollout (checked against a Python loop of single rollouts), the lanes and the
+single plan's device by platform, the safe step's scale against its formula, and the
+sizes' bad input."""
 
 import jax
 import jax.numpy as jnp
@@ -10,8 +11,8 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.base.compilation_cache import rollout_compiler_options
-from softplan_jax.planning.engine import check_engine_sizes, run
-from softplan_jax.planning.planner import make_options
+from softplan_jax.planning.engine import ACCELERATOR_LANES, DEFAULT_LANES, check_engine_sizes, default_lanes, run
+from softplan_jax.planning.planner import make_options, plan_device
 from softplan_jax.planning.programs import batch_keys, rollout, rollout_jit
 from softplan_jax.planning.step import safe_scale
 
@@ -90,6 +91,34 @@ def test_lanes_refill_matches_single_rollouts(five):
     # Another key for the escaping scene changes its walks (the keys follow the scenes into their lanes).
     other = jax.device_get(rollout_jit(five[3], sp.default_gains(), make_options("curve"), STEPS, keys[2]))
     assert np.abs(other.q - two.q[3]).max() > 1e-2
+
+
+def test_default_lanes_by_platform():
+    """A batch's lanes when none are given: 64 on a CPU, the whole share (up to 16,384) on an
+    accelerator, where a wide vmapped step costs little more than a narrow one."""
+    assert default_lanes("cpu") == DEFAULT_LANES == 64
+    assert default_lanes("gpu") == default_lanes("cuda") == default_lanes("tpu") == ACCELERATOR_LANES == 16384
+    assert default_lanes() == default_lanes(jax.default_backend())
+
+
+def test_plan_device(paper, monkeypatch):
+    """plan(device=...): a named device runs the same rollout (here the one CPU: bit for bit);
+    bad values are refused before anything compiles; with an accelerator as the default
+    backend, one scene goes to the host CPU."""
+    cpu = jax.devices("cpu")[0]
+    ref = sp.plan(paper["tree"], max_steps=STEPS)
+    on_cpu = sp.plan(paper["tree"], max_steps=STEPS, device=cpu)
+    assert on_cpu.status == ref.status == "reached" and on_cpu.iterations == ref.iterations
+    np.testing.assert_array_equal(np.asarray(on_cpu.q), np.asarray(ref.q))
+    assert plan_device("default") is None and plan_device(cpu) is cpu
+    assert plan_device(None) is None  # the default backend is this CPU
+    before = sp.planning.rollout_jit.cache_size()
+    for bad in ("gpu", 3, [cpu]):
+        with pytest.raises(ValueError, match="device"):
+            sp.plan(paper["tree"], max_steps=STEPS, device=bad)
+    assert sp.planning.rollout_jit.cache_size() == before
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert plan_device(None) == cpu
 
 
 def test_safe_scale_against_its_formula():

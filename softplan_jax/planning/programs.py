@@ -19,7 +19,7 @@ import numpy as np
 from ..base.compilation_cache import load_or_export, rollout_compiler_options
 from ..scenarios import Scenario
 from .batching import BATCH_AXIS, batch_mesh, pad_batch, round_chunk, shard_batch
-from .engine import DEFAULT_LANES, check_engine_sizes, run, run_lanes
+from .engine import check_engine_sizes, default_lanes, run, run_lanes
 from .records import Rollout, check_rollout_memory
 from .step import Gains, PlanOptions
 
@@ -98,8 +98,11 @@ def _rollout_jit(world, gains: Gains, options, max_steps: int, key) -> Rollout:
 
 
 def _rollout_batch(worlds, gains: Gains, options, max_steps: int, keys, mesh=None, lanes=None) -> Rollout:
+    platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
+    width = default_lanes(platform) if lanes is None else lanes
+
     def laned(worlds, gains, keys):
-        return run_lanes(worlds, gains, options, max_steps, keys, lanes=DEFAULT_LANES if lanes is None else lanes,
+        return run_lanes(worlds, gains, options, max_steps, keys, lanes=width,
                          step_chunk=_plan_options(options).step_chunk)
 
     if mesh is None:
@@ -169,7 +172,7 @@ class CompiledRollout:
         max_steps = check_engine_sizes(max_steps)[0]
         scenes = q0.shape[0] if self._batched else 1
         # Before anything is allocated: the records of max_steps steps must fit in memory.
-        check_rollout_memory(scenario, options, max_steps, scenes, min(scenes, DEFAULT_LANES))
+        check_rollout_memory(scenario, options, max_steps, scenes, min(scenes, default_lanes()))
         key = batch_keys(seed, scenes) if self._batched else prng_key(seed)
         return scenario, strong_gains(gains, q0.dtype), options, max_steps, key
 
@@ -275,8 +278,9 @@ scenarios of one padded shape (every leaf of ``scenarios`` has a leading batch a
 jitted: ``rollout_batch(scenarios, gains, options, max_steps, seed=0, devices=None, lanes=None)``.
 Scenario b's escapes use ``jax.random.split(key(seed), B)[b]`` (or ``seed[b]`` when ``seed`` holds B
 keys). ``lanes`` scenes step side by side, each lane taking the next scene when its scene finishes
-(:func:`softplan_jax.planning.engine.run_lanes`; None: ``engine.DEFAULT_LANES``), so the cost follows the
-steps taken. A stacked MovingScenario with TrackOptions tracks instead (:func:`~softplan_jax.track_batch`).
+(:func:`softplan_jax.planning.engine.run_lanes`; None: :func:`~softplan_jax.planning.engine.default_lanes`, 64
+on a CPU, the whole batch up to 16,384 on an accelerator), so the cost follows the steps taken. A
+stacked MovingScenario with TrackOptions tracks instead (:func:`~softplan_jax.track_batch`).
 
 With more than one local device the batch is sharded over all of them (``devices``: None = every
 local device, an int k = the first k, 1 = no sharding, a sequence of jax devices, or ``"global"``:
