@@ -35,8 +35,9 @@ Parts (each one timed with compile apart; warm calls interleaved in rounds):
     python benchmarks/gpu.py --quick                  # smoke run (any machine): B = 8, 10 steps
     python benchmarks/gpu.py --audit $OUT/gpu_float32_q.npz   # the float32 audit, on a CPU
 
-where S holds ``random0_B.npz`` suites written ahead on a CPU (``--write-suites S B ...``):
-``random_scenarios`` draws a scene at a time, minutes for 16,384 scenes, longer on a GPU.
+where S holds ``random0_B.npz`` suites written ahead on a CPU (``--write-suites S B ...``).
+The H200 runs of ``results/gpu*.md`` used them: ``random_scenarios`` then built a scene at a
+time (138 s for 4,096 scenes on the GPU); it now draws 16,384 in seconds, so S is optional.
 
 Writes ``OUT.json``, ``OUT.md``, ``OUT_profile_B*.json``, ``OUT_hlo_B*.txt.gz`` and
 ``OUT_float32_q.npz`` (OUT: ``--out``, default ``benchmarks/results/gpu``).
@@ -73,8 +74,7 @@ def parse_args(argv=None):
     ap.add_argument("--parts", default=None,
                     help="comma list of the parts to run (default all)")
     ap.add_argument("--suites", default=None, help="folder of random0_B.npz suites (the leaves of "
-                    "random_scenarios(0, B), float64) made ahead on a host: generating a large suite op by op on an "
-                    "accelerator takes minutes")
+                    "random_scenarios(0, B), float64) made ahead on a host (--write-suites)")
     ap.add_argument("--defaults-size", type=int, default=None, help="the batch of part defaults (default 1024; "
                     "quick 8)")
     ap.add_argument("--no-extras", action="store_true", help="part batch: lanes = B only (no 64-lane and no "

@@ -55,6 +55,8 @@ SCRIPTS = {
     "fallback_compile": [[]],
     # made for one GPU (its docstring); here the single plan and plan_batch's defaults on this machine
     "gpu": [["--parts", "plan,defaults", "--out", os.path.join(RESULTS, "gpu_this_machine")]],
+    # this version alone; against another: --against PATH (its docstring)
+    "suite_speed": [[]],
 }
 
 

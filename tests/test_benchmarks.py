@@ -181,7 +181,8 @@ def test_run_all_rejects_unknown_scripts(capsys):
 
 # Scripts whose quick run no other test below runs: `NAME.py --quick --out DIR/NAME` in a subprocess.
 QUICK_ONLY = ["baselines", "closest", "compile_by_degree", "devices", "engine", "fallback_compile", "gpu",
-              "numpy_baseline", "paper_presets", "speed_targets", "sweep_scale", "throughput", "warm_start"]
+              "numpy_baseline", "paper_presets", "speed_targets", "suite_speed", "sweep_scale", "throughput",
+              "warm_start"]
 
 
 @pytest.mark.bench
@@ -256,6 +257,15 @@ def test_random_scenarios_shapes_and_make_scenario_equality():
         curves = [sp.PolynomialCurve(host.curves.coeffs[k, j], host.curves.u_range[k, j]) for j in range(counts[k])]
         rebuilt.append(sp.make_scenario(host.goal[k], curves, curve_slots=8, degree=2))
     assert _leaves_equal(suite, sp.scenarios.stack_scenarios(rebuilt))
+    # float32: make_scenario's scenes from the same float64 draws, with a float32 start
+    # (random_scenarios assembles the stack on the host, casting once)
+    q0_32 = jnp.asarray(sp.scenarios.default_start(), jnp.float32)
+    rebuilt32 = [sp.make_scenario(host.goal[k], [sp.PolynomialCurve(host.curves.coeffs[k, j], (0.0, 1.0))
+                                                 for j in range(counts[k])], q0_32, curve_slots=8, degree=2)
+                 for k in range(n)]
+    assert _leaves_equal(sp.random_scenarios(1, n, dtype=jnp.float32), sp.scenarios.stack_scenarios(rebuilt32))
+    # goal_clearance 0 (a goal may touch a curve): every scene through make_scenario
+    assert sp.random_scenarios(1, 3, goal_clearance=0.0).curves.coeffs.shape == (3, 8, 3, 3)
     # other padded shapes, counts, degrees and dtypes
     small = sp.random_scenarios(2, 5, obstacles=(2, 3), degrees=(1,), curve_slots=4, degree=2, dtype=jnp.float32)
     assert small.curves.coeffs.shape == (5, 4, 3, 3) and small.curves.coeffs.dtype == jnp.float32
