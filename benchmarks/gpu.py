@@ -206,7 +206,7 @@ def part_defaults(args, rep):
     from softplan_jax.planning.planner import plan_device
 
     tree = sp.paper_scenario("tree")
-    suite = load_suite(args, args.defaults_size, "float64")
+    suite = load_suite(args.suites, args.defaults_size, "float64")
     calls = {"plan device=None": lambda: sp.plan(tree).q,
              'plan device="default"': lambda: sp.plan(tree, device="default").q,
              "plan_batch lanes=None": lambda: sp.plan_batch(suite, max_steps=args.steps).q,
@@ -267,16 +267,17 @@ def batch_variants(args):
     return v
 
 
-def load_suite(args, b, dtype):
-    """random_scenarios(0, b) in ``dtype``: from ``--suites`` if it holds it, else generated on the host
-    CPU; placed on the default device."""
+def load_suite(suites, b, dtype):
+    """random_scenarios(0, b) in ``dtype``: from the folder ``suites`` (``--suites``, as
+    :func:`write_suites` writes it) if it holds it, else drawn on the host CPU; placed on the
+    default device."""
     import jax
     import numpy as np
 
     import softplan_jax as sp
 
-    path = os.path.join(args.suites or "", f"random0_{b}.npz")
-    if args.suites and os.path.exists(path):
+    path = os.path.join(suites or "", f"random0_{b}.npz")
+    if suites and os.path.exists(path):
         template = sp.random_scenarios(0, 2, dtype=np.dtype(dtype))
         treedef = jax.tree_util.tree_structure(template)
         with np.load(path) as z:
@@ -299,7 +300,7 @@ def part_batch(args, rep, programs):
     opts = sp.make_options("curve")
     calls, info = {}, {}
     for name, dtype, b, lanes, trips in batch_variants(args):
-        suite = load_suite(args, b, dtype)
+        suite = load_suite(args.suites, b, dtype)
         g = strong_gains(sp.default_gains(np.dtype(dtype)), suite.q0.dtype)
         keys = batch_keys(0, b)
         compiled, compile_s = _lanes_program(opts, args.steps, lanes, trips)(suite, g, keys=keys)
@@ -481,8 +482,7 @@ def audit(path, suites=None, substeps: int = 16):
 
     d = np.load(path)
     q, it, b = d["q"].astype(np.float64), d["iterations"], int(d["batch"])
-    args = argparse.Namespace(suites=suites)
-    suite = load_suite(args, b, "float64")
+    suite = load_suite(suites, b, "float64")
 
     @jax.jit
     def pieces(qs, scn):
