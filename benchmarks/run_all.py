@@ -46,6 +46,7 @@ SCRIPTS = {
     "tuning": [[]],
     "reach": [[]],
     "moving": [[]],
+    "evasion": [[]],
     "engine": [[]],
     "throughput": [[]],
     "devices": [[]],

@@ -55,6 +55,7 @@ from .scenarios import Scenario, load_scenario, make_scenario, paper_scenario, r
 from .scenarios.motion import make_moving_scenario
 from .scenarios.moving import moving_scenario
 from .search.fallback import plan_fallback
+from .search.tracking import track_fallback
 from .tuning.gains_file import load_gains, save_gains
 
 _install_old_module_paths()
@@ -101,6 +102,7 @@ __all__ = [
     "make_moving_scenario",
     "track",
     "track_batch",
+    "track_fallback",
     # gains
     "apply_preset",
     "save_gains",

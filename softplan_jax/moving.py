@@ -1,7 +1,9 @@
 """Moving goals and moving obstacles, in one namespace (``sp.moving``).
 
 The types and scenes live in :mod:`softplan_jax.scenarios` (:mod:`.scenarios.motion`,
-:mod:`.scenarios.moving`), the tracker in :mod:`softplan_jax.planning.tracking`.
+:mod:`.scenarios.moving`), the tracker in :mod:`softplan_jax.planning.tracking` (its evasive step in
+:mod:`softplan_jax.planning.evasion`), the tracker with the global search in
+:mod:`softplan_jax.search.tracking`.
 """
 
 from .planning.tracking import Track, TrackOptions, TrackResult, make_track_options, track, track_batch
@@ -19,6 +21,7 @@ from .scenarios.motion import (
     stack_moving_scenarios,
 )
 from .scenarios.moving import MOVING_SCENARIOS, moving_scenario, random_moving_scenarios
+from .search.tracking import track_fallback
 
 __all__ = [
     "CurveMotion",
@@ -42,4 +45,5 @@ __all__ = [
     "TrackResult",
     "track",
     "track_batch",
+    "track_fallback",
 ]

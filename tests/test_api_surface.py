@@ -29,7 +29,7 @@ PUBLIC = [
     "Gains", "GainFunction", "default_gains", "PAPER_STEP", "PlanOptions", "make_options", "PlanResult", "Status",
     "plan", "plan_batch", "plan_fallback",
     # moving goals and obstacles
-    "moving_scenario", "make_moving_scenario", "track", "track_batch",
+    "moving_scenario", "make_moving_scenario", "track", "track_batch", "track_fallback",
     # gains
     "apply_preset", "save_gains", "load_gains", "enable_compilation_cache", "disable_compilation_cache",
     "__version__",

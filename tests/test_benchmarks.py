@@ -180,7 +180,7 @@ def test_run_all_rejects_unknown_scripts(capsys):
 
 
 # Scripts whose quick run no other test below runs: `NAME.py --quick --out DIR/NAME` in a subprocess.
-QUICK_ONLY = ["baselines", "closest", "compile_by_degree", "devices", "engine", "fallback_compile", "gpu",
+QUICK_ONLY = ["baselines", "closest", "compile_by_degree", "devices", "engine", "evasion", "fallback_compile", "gpu",
               "numpy_baseline", "paper_presets", "speed_targets", "suite_speed", "sweep_scale", "throughput",
               "warm_start"]
 

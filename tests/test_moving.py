@@ -263,6 +263,67 @@ def test_an_obstacle_too_fast_to_avoid_ends_too_fast_not_collided():
     assert S * float(sp.default_gains().dt) > 0.8 * (r.clearance[-1].min() - 2e-6)
 
 
+def _wire(**motion):
+    """The wire_sweep preset's wire and motion (1.2 +- 0.8 m at 0.3 rad/s), padded to the tree's shape."""
+    wire = sp.line_segment([0.9, 0.4, 1.2], [0.9, 2.0, 1.2])
+    scene = sp.make_scenario(jnp.asarray([1.2, 0.9, 1.4]), [wire], **PAD)
+    return sp.make_moving_scenario(scene, [sp.moving.curve_motion(**{"shift": (0.0, 0.0, 0.8), "omega": 0.3,
+                                                                     **motion})])
+
+
+def test_evasive_step_ducks_the_wire_where_today_stops_too_fast():
+    """Issue 38: the wire comes faster than the safe step allows (no look-ahead). Today's tracker
+    stops too_fast; the evasive step moves the arm out of its way and back, and the independent
+    brute force in space and time finds no contact on the whole path."""
+    m = _wire()
+    for flag, value in (("--evasion-speed", "-1"), ("--barrier-gain", "inf")):
+        assert main(["run", "wire_sweep", flag, value]) == 2
+    today = sp.track(m, max_steps=STEPS, evasion=False)
+    assert today.status == "too_fast" and today.evasive_steps == 0
+    r = sp.track(m, max_steps=STEPS)
+    assert r.status != "too_fast" and not r.collided and r.iterations == STEPS, r.status
+    assert r.evasive_steps > 0 and r.reached
+    # Bit-identical to today's rollout up to the step where today's stopped.
+    k = today.iterations
+    np.testing.assert_array_equal(r.q[: k + 1], today.q[: k + 1])
+    assert r.min_clearance > 0 and _brute_min_clearance(r) > 0
+    # The evasive steps are where the field's step was not proven safe: the budget fell below the travel.
+    S = float(sp.moving.speed_bounds(m)[0]) * float(sp.default_gains().dt)
+    first = int(np.flatnonzero(r.evasive)[0])
+    assert first == today.iterations and r.evasive.sum() == r.evasive_steps
+    assert 0.8 * (r.clearance[first].min() - 2e-6) < S
+
+
+def test_no_evasion_where_the_safe_step_suffices(random_moving):
+    """Scenes where today's tracker never ends too_fast: the evasive step never acts and the
+    rollouts are bit-identical with it on and off (one scene; the batch baselines check more)."""
+    m = random_moving[0]
+    on, off = sp.track(m, max_steps=STEPS), sp.track(m, max_steps=STEPS, evasion=False)
+    assert off.status != "too_fast" and on.evasive_steps == 0
+    np.testing.assert_array_equal(on.q, off.q)
+    np.testing.assert_array_equal(on.clearance, off.clearance)
+
+
+@pytest.mark.slow  # the global search's programs and a guided run's goal path of its own (~60 s of compilation)
+def test_track_fallback_reaches_what_the_tracker_never_does():
+    """Issue 38: a random moving scene whose goal the tracker never reaches within the horizon (a
+    local minimum of the field): track_fallback plans the scene at rest with the global search and
+    tracks again along its path; judged against the true goal, with no contact by brute force."""
+    suite = sp.moving.random_moving_scenarios(5, 48, obstacles=(1, 5), curve_slots=5)
+    m = jax.tree_util.tree_map(lambda x: x[22], suite)
+    alone = sp.track(m, max_steps=STEPS)
+    assert alone.status == "max_steps" and not alone.reached and alone.planner == "local"
+    r = sp.track_fallback(m, max_steps=STEPS, waypoint_speed=0.4)
+    assert r.planner == "search" and r.reason is None and r.status in ("reached", "held"), (r.status, r.reason)
+    # Judged against the true goal g(t) (the guided run's own goal was the search's path).
+    truth = np.asarray(sp.moving.goal_at(m, r.time[-1]))
+    np.testing.assert_allclose(r.goal[-1], truth, atol=1e-12)
+    assert r.error[-1] == pytest.approx(np.linalg.norm(r.tip[-1] - truth))
+    assert r.final_error < 0.02 and r.reached_step is not None and r.error[r.reached_step] < 1e-2
+    assert r.iterations == STEPS and r.held_steps > 0
+    assert not r.collided and r.min_clearance > 0 and _brute_min_clearance(r) > 0
+
+
 @pytest.mark.slow  # float32 tracking programs of their own (~40 s of compilation); CI's slow step
 def test_float32_smoke(random_moving):
     """float32: the fruit preset and two random moving scenes, no contact by brute force."""
@@ -360,6 +421,16 @@ def test_bad_input_raises():
         sp.track(m, hold_tolerance=0.0)
     with pytest.raises(ValueError, match="anticipation"):
         sp.track(m, anticipation=-1.0)
+    for bad in (dict(evasion_speed=-1.0), dict(evasion_speed=0.0), dict(barrier_gain=np.inf),
+                dict(barrier_gain=np.nan), dict(evasion_pieces=0), dict(evasion_pieces=2.5), dict(evasion="yes"),
+                dict(evasion_speed="fast")):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            sp.track(m, **bad)
+    for bad in (dict(waypoints=1), dict(waypoints=2.0), dict(waypoint_speed=0.0), dict(waypoint_speed=np.nan)):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            sp.track_fallback(m, **bad)
+    with pytest.raises(ValueError, match="MovingScenario"):
+        sp.track_fallback(scene)
     with pytest.raises(ValueError, match="max_steps"):
         sp.track(m, max_steps=0)
     with pytest.raises(ValueError, match="unknown planner option"):

@@ -39,6 +39,7 @@ __all__ = [
     "psd_shift",
     "contact_floor",
     "evaluate_where",
+    "when_any",
     "tie",
 ]
 
@@ -255,3 +256,45 @@ def evaluate_where(todo, fn, chunk: int, fill):
         return out, left.at[idx].set(False, mode="drop")
 
     return jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (tie(fill, todo), todo))[0]
+
+
+def when_any(pred, fn, skip, operands, chunk: int | None = None):
+    """``fn(operands)`` where ``pred`` (a () bool), ``skip(operands)`` elsewhere: a true branch
+    (``lax.cond``), also under ``vmap``.
+
+    Under vmap a ``lax.cond`` with a batched predicate becomes a select that runs both
+    branches for every element at every call. Here the batch takes one branch for all
+    its elements: ``fn`` vmapped over the whole batch when ANY element needs it (the
+    others keep ``skip``'s value), else ``skip`` alone. For a step that almost never
+    needs ``fn`` (the evasive step of :mod:`softplan_jax.planning.evasion`) this costs
+    the batch a predicate, where ``evaluate_where``'s loop cost about a tenth of a step.
+    ``fn`` and ``skip`` return pytrees of the same structure; not differentiable
+    (``jax.custom_batching.custom_vmap``). ``chunk``: None, ``fn`` vmapped over the whole
+    batch; an int, over the elements that need it only, ``chunk`` at a time
+    (:func:`evaluate_where`).
+    """
+
+    @jax.custom_batching.custom_vmap
+    def gate(pred, operands):
+        return jax.lax.cond(pred, fn, skip, operands)
+
+    @gate.def_vmap
+    def _batched(axis_size, in_batched, pred, operands):
+        batched_pred, batched_ops = in_batched
+        pred = pred if batched_pred else jnp.broadcast_to(pred, (axis_size,))
+        operands = jax.tree_util.tree_map(lambda x, b: x if b else jnp.broadcast_to(x, (axis_size, *jnp.shape(x))),
+                                          operands, batched_ops)
+
+        def some(operands):
+            kept = jax.vmap(skip)(operands)
+            if chunk is None:
+                done = jax.vmap(fn)(operands)
+                return jax.tree_util.tree_map(
+                    lambda a, b: jnp.where(pred.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), done, kept)
+            one = lambda i: fn(jax.tree_util.tree_map(lambda x: x[i], operands))  # noqa: E731
+            return evaluate_where(pred, one, chunk, kept)
+
+        out = jax.lax.cond(jnp.any(pred), some, jax.vmap(skip), operands)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return gate(pred, operands)

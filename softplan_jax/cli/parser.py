@@ -73,12 +73,19 @@ def build_parser() -> argparse.ArgumentParser:
                      help="repulsion gain function (default: khatib)")
     run.add_argument("--no-fallback", action="store_true",
                      help="the local planner only: no reachability test and no global search where it stalls or "
-                          "runs out of steps (default: both; see plan_fallback)")
+                          "runs out of steps (default: both; see plan_fallback; a moving scene: track_fallback)")
     run.add_argument("--anticipation", type=float, default=None, metavar="S",
                      help="moving scenes: seconds of look-ahead of the repulsion, >= 0 (the field sees each "
                      "moving obstacle inflated by its speed bound times S; default: the preset's, else 0)")
     run.add_argument("--hold-tolerance", type=float, default=None, metavar="TOL",
                      help="moving scenes: the goal counts as held while |goal - tip| <= TOL (default 0.02)")
+    run.add_argument("--no-evasion", action="store_true",
+                     help="moving scenes: end 'too_fast' where the field's step is not proven safe, instead of "
+                     "trying the certified evasive step (default: evade)")
+    run.add_argument("--evasion-speed", type=float, default=None, metavar="V",
+                     help="moving scenes: the actuators' limit for the evasive step, > 0 m/s (default 1.0)")
+    run.add_argument("--barrier-gain", type=float, default=None, metavar="G",
+                     help="moving scenes: the evasive step's barrier gain gamma, finite, >= 0 1/s (default 5.0)")
     run.add_argument("--plot", metavar="PATH", help="write the snapshot figure (PNG, PDF, SVG, ...)")
     run.add_argument("--gif", metavar="PATH", help="write an animated GIF of the motion (needs pillow)")
     run.add_argument("--out", metavar="FILE",
@@ -307,6 +314,10 @@ def check_run_args(args, paper_names) -> None:
         raise InputError(f"--goal-tolerance must be a finite number > 0, got {args.goal_tolerance}")
     if args.anticipation is not None and not (math.isfinite(args.anticipation) and args.anticipation >= 0):
         raise InputError(f"--anticipation must be a finite number >= 0, got {args.anticipation}")
+    if args.evasion_speed is not None and not (math.isfinite(args.evasion_speed) and args.evasion_speed > 0):
+        raise InputError(f"--evasion-speed must be a finite number > 0, got {args.evasion_speed}")
+    if args.barrier_gain is not None and not (math.isfinite(args.barrier_gain) and args.barrier_gain >= 0):
+        raise InputError(f"--barrier-gain must be a finite number >= 0, got {args.barrier_gain}")
     if args.hold_tolerance is not None and not (math.isfinite(args.hold_tolerance) and args.hold_tolerance > 0):
         raise InputError(f"--hold-tolerance must be a finite number > 0, got {args.hold_tolerance}")
     is_file = args.scenario not in paper_names

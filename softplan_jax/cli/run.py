@@ -5,7 +5,9 @@ compiled rollout (the paper's eq. 9 step; :func:`~softplan_jax.planning.programs
 then, where the local planner stalls or runs out of steps, rescued by the
 reachability test and the global search (unless ``--no-fallback``). A moving
 scene (a moving preset, or a JSON file with motion fields) is tracked among its
-moving obstacles (:mod:`softplan_jax.planning.tracking`). Both write the same
+moving obstacles (:mod:`softplan_jax.planning.tracking`), and where the goal is
+never reached, tracked again along the global search's path at rest
+(:func:`~softplan_jax.search.tracking.track_fallback`; unless ``--no-fallback``). Both write the same
 figures, the same ``--out`` trajectory file and the same report.
 
 jax is imported inside :func:`cmd_run`, after the arguments are parsed, so that
@@ -117,7 +119,9 @@ def cmd_run(args) -> int:
     dtype = jnp.float32 if args.float32 else jnp.float64
     if args.scenario in _moving_names() or (args.scenario not in static_names and _is_moving_file(args.scenario)):
         return _cmd_track(args, dtype)
-    for flag, value in (("--anticipation", args.anticipation), ("--hold-tolerance", args.hold_tolerance)):
+    for flag, value in (("--anticipation", args.anticipation), ("--hold-tolerance", args.hold_tolerance),
+                        ("--no-evasion", args.no_evasion or None), ("--evasion-speed", args.evasion_speed),
+                        ("--barrier-gain", args.barrier_gain)):
         if value is not None:
             warn(f"{flag} applies to moving scenes only; {args.scenario} does not move, it is ignored")
     try:
@@ -234,6 +238,11 @@ def _cmd_track(args, dtype) -> int:
             preset["anticipation"] = args.anticipation
         if args.hold_tolerance is not None:
             preset["hold_tolerance"] = args.hold_tolerance
+        if args.no_evasion:
+            preset["evasion"] = False
+        for name in ("evasion_speed", "barrier_gain"):
+            if getattr(args, name) is not None:
+                preset[name] = getattr(args, name)
         options = make_track_options(args.method, args.n_points, **preset, **extra)
         max_steps = int(args.max_steps)
         check_rollout_memory(moving, options, max_steps)  # before anything is allocated
@@ -257,6 +266,12 @@ def _cmd_track(args, dtype) -> int:
     run_time = time.perf_counter() - t0
     compile_time = max(first - run_time, 0.0)
     result = result_from_track(track, moving, float(gains.dt))
+    if result.status == "max_steps" and not args.no_fallback:
+        from ..search.tracking import track_fallback
+
+        print("softplan: the goal was never reached: planning the scene at rest with the global search, then "
+              "tracking again along its path (--no-fallback: skip) ...", file=sys.stderr, flush=True)
+        result = track_fallback(moving, args.method, args.n_points, gains, max_steps, args.seed, **preset, **extra)
     summary = {
         "scenario": label,
         "moving": True,
@@ -266,6 +281,10 @@ def _cmd_track(args, dtype) -> int:
         **gains_report(args, gain_values),
         "step": options.plan.step,
         "anticipation_s": options.anticipation,
+        "evasion": options.evasion,
+        "evasive_steps": result.evasive_steps,
+        "planner": result.planner,
+        "reason": result.reason,
         "hold_tolerance": options.hold_tolerance,
         "dtype": str(jax.numpy.dtype(dtype)),
         "status": result.status,
@@ -305,10 +324,12 @@ def _cmd_track(args, dtype) -> int:
             ("scenario", f"{label} (moving obstacles; tracked)"),
             ("method", args.method + (f" (N = {args.n_points})" if args.method == "points" else "")),
             ("gains", summary["gains"]),
-            ("step", f"{summary['step']}, look-ahead {summary['anticipation_s']:g} s"),
+            ("step", f"{summary['step']}, look-ahead {summary['anticipation_s']:g} s, "
+                     + (f"{result.evasive_steps} evasive step(s)" if options.evasion else "no evasion")),
             ("dtype", summary["dtype"]),
             ("status", result.status),
             ("steps", f"{result.iterations} of {max_steps} ({summary['horizon_s']:g} s horizon)"),
+            ("planner", result.planner + ("" if result.reason is None else f" ({result.reason})")),
             ("reached", "no" if not result.reached else
              f"at t = {summary['reached_at_s']:.2f} s; held {result.held_time:.2f} s"
              + (" (to the end)" if result.held_to_end else f" (hold tolerance {options.hold_tolerance:g})")),

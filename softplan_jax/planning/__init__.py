@@ -8,7 +8,7 @@
 * :mod:`.planner` -- the entry points :func:`plan` and :func:`plan_batch`
   and their results;
 * :mod:`.tracking` -- :func:`track` and :func:`track_batch` for moving goals
-  and obstacles;
+  and obstacles; :mod:`.evasion` -- the evasive step among fast obstacles;
 * :mod:`.presets` -- named calibrations (``"paper"``, ``"default"``);
 * :mod:`.batching` -- host-side helpers of batch runs.
 """

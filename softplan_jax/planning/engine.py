@@ -13,6 +13,9 @@ time:
   which the safe step and the between-step proof subtract;
 * the attraction: paper eq. (9)'s F_e, with the goal's velocity fed forward
   for a moving goal (:func:`~softplan_jax.planning.step.tracking_attraction`);
+* where even standing still is not proven safe among moving obstacles (the rollout used
+  to end ``too_fast``): the evasive step of :mod:`~softplan_jax.planning.evasion`
+  (``TrackOptions.evasion``), run only for the scenes that need it;
 * when to stop, set by the options: with PlanOptions (planning) a rollout
   ends at the goal or at a stall with no escape left; with TrackOptions
   (tracking, a static scene or a moving one) it holds the goal to the horizon
@@ -55,15 +58,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.numerics import evaluate_where, safe_norm, tie
+from ..base.numerics import evaluate_where, safe_norm, tie, when_any
 from ..base.status import Status
 from ..geometry.clearance import between_steps, contact_tolerance, swept_clear
-from ..geometry.closest import ClosestPoint, SolverOptions, curve_closest
+from ..geometry.closest import ClosestPoint, SolverOptions
 from ..geometry.kinematics import tip_position
 from ..geometry.obstacles import placeholder_closest, radius_and_mask, true_closest, warm_cells, warm_closest, warm_state
-from ..scenarios.motion import MovingScenario, goal_velocity, moved_cells, moved_curves, scenario_at, speed_bounds
+from ..scenarios.motion import MovingScenario, goal_velocity, moved_cells, scenario_at, speed_bounds
+from .evasion import evasive_target, slot_clearance
 from .records import Record, Rollout, finish, record_zeros, setup
-from .step import attraction, next_q, tracking_attraction
+from .step import attraction, scaled_step, step_target, tracking_attraction
 
 __all__ = ["Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "ACCELERATOR_LANES", "default_lanes", "run",
            "run_lanes", "check_engine_sizes"]
@@ -102,6 +106,7 @@ class Carry(NamedTuple):
     walk_left: jax.Array  # steps left in the current random walk (0: following the field)
     walk_velocity: jax.Array  # (3,) tip velocity of the current walk
     warm: tuple  # the warm start's state (obstacles.warm_state), () without it
+    certified: jax.Array  # the motion from q_{k-1} to q_k was proven clear by the evasive step
 
 
 def check_engine_sizes(max_steps, step_chunk=DEFAULT_STEP_CHUNK, lanes=None) -> tuple:
@@ -147,6 +152,7 @@ def init_carry(world, options, key) -> Carry:
         walk_left=jnp.zeros((), jnp.int32),
         walk_velocity=jnp.zeros((3,), dtype),
         warm=warm_state(scene) if warm else (),
+        certified=jnp.zeros((), bool),
     )
     return tie(carry0, q0)  # under vmap (a batch), the carry is batched from the start (see tie)
 
@@ -188,7 +194,8 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
         lead = speed * track.anticipation  # (m,) the field's inflation (TrackOptions.anticipation)
         m_c = scene.curves.coeffs.shape[0]
         substeps = jnp.arange(1, track.search_substeps + 1, dtype=dtype) / (track.search_substeps + 1)
-        only_polynomials = scene.points.shape[0] == 0 and not scene.parametric
+    # The evasive step (TrackOptions.evasion) needs the true clearance (check_collisions) and the safe step.
+    evades = su.moving and track.evasion and check and plan.step == "safe"
 
     def clearance_of(truth):
         return jnp.where(mask, truth.distance - scene.arm_radius - radius, jnp.inf)
@@ -197,15 +204,7 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
         """Slot j's smallest exact clearance at the search instants, arm and curves moving together."""
 
         def at(tau):
-            q_tau = q_a + tau * (q_b - q_a)
-            if only_polynomials:  # the one curve of slot j, moved to the instant
-                one = jax.tree_util.tree_map(lambda x: x[j], (w.scene.curves, w.motion))
-                curve = moved_curves(jax.tree_util.tree_map(lambda x: x[None], one[0]),
-                                     jax.tree_util.tree_map(lambda x: x[None], one[1]), t_a + tau * dt)
-                d = curve_closest(q_tau, jax.tree_util.tree_map(lambda x: x[0], curve), plan.solver).distance
-                return d - scene.arm_radius - radius[j]
-            sc = scenario_at(w, t_a + tau * dt)
-            return clearance_of(true_closest(q_tau, sc, plan.solver))[j]
+            return slot_clearance(w, q_a + tau * (q_b - q_a), t_a + tau * dt, j, plan.solver)
 
         return jnp.min(jax.vmap(at)(substeps))
 
@@ -215,6 +214,7 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
             # Proven clear where the clearance at its start, less the arm's motion bound and the
             # obstacle's travel, stays above the contact tolerance.
             proven = swept_clear(carry.q_prev, q, carry.truth_prev, carry.c_prev - travel, contact)
+            proven = proven | carry.certified  # an evasive step's motion: proven in time (planning.evasion)
             searched = mask & ~carry.first & running & ~proven
 
             def search(j):
@@ -304,7 +304,26 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
             F_e, field, extra = attraction(V_e, gains), sc, {}
         # An escape's random walk replaces the attraction (paper eq. 9's F_e).
         F_e = jnp.where(walk_left > 0, walk_velocity, F_e)
-        q_next, alpha, too_fast = next_q(q, field, gains, truth, plan, (jnp.ones((), bool), F_e), **extra)
+        q_full, field_c = step_target(q, field, gains, truth, plan, (jnp.ones((), bool), F_e), extra.get("lead"))
+        q_next, alpha, too_fast = scaled_step(q, q_full, field_c, plan, extra.get("travel"))
+        evasive = jnp.zeros((), bool)
+        if evades:
+            # Where no scale of the field's step is proven safe: the evasive step (planning.evasion),
+            # computed only for the scenes that need it (under vmap too: base.numerics.when_any).
+            want = stepping & too_fast
+
+            def evade(args):  # every array an operand: under vmap each may be batched
+                w, q_a, q_b, tr, c_a, t_a, s, g, go = args
+                q_ev, proven, _ = evasive_target(w, q_a, q_b, tr, c_a, t_a, s, g, track, go)
+                return q_ev, proven
+
+            # Held (stop_gradient): a rollout stays differentiable, the evasive step itself is not.
+            args = jax.lax.stop_gradient((world, q, q_full, truth, c, t, speed, gains, want))
+            q_ev, proven = when_any(want, evade, lambda args: (args[1], jnp.zeros((), bool)), args, chunk=1)
+            evasive = want & proven
+            q_next = jnp.where(evasive, q_ev, q_next)
+            alpha = jnp.where(evasive, 1.0, alpha)
+            too_fast = too_fast & ~evasive
         finite = jnp.all(jnp.isfinite(q_next))
         status = jnp.where(stepping & too_fast, Status.TOO_FAST, status)
         status = jnp.where(stepping & ~too_fast & ~finite, Status.NONFINITE, status).astype(jnp.int32)
@@ -324,12 +343,13 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
             walk_left=jnp.where(moved, jnp.maximum(walk_left - 1, 0), walk_left).astype(jnp.int32),
             walk_velocity=walk_velocity,
             warm=warm_next,
+            certified=evasive & moved,
         )
         converged = jnp.all(jnp.where(mask, truth.converged, True))
         alpha = jnp.where(moved, alpha, 0.0).astype(dtype)
         record = Record(q, tip_position(q), c, cb, alpha, converged, fallbacks, searched)
         if track:
-            record = record._replace(goal=sc.goal, time=t, error=err)
+            record = record._replace(goal=sc.goal, time=t, error=err, evasive=evasive & moved)
         return new, record
 
     return step

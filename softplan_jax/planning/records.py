@@ -22,7 +22,8 @@ from ..base.status import Status
 from ..geometry.obstacles import obstacle_count, radius_and_mask
 from ..scenarios.motion import MovingScenario
 
-__all__ = ["Rollout", "Record", "Setup", "setup", "record_zeros", "check_rollout_memory", "freeze", "finish"]
+__all__ = ["Rollout", "Record", "Setup", "setup", "record_zeros", "check_rollout_memory", "freeze", "finish",
+           "hold_statistics"]
 
 
 class Rollout(NamedTuple):
@@ -66,6 +67,8 @@ class Rollout(NamedTuple):
         |g(t_k) - tip_k| (T+1,), the first step within the goal tolerance
         (-1: never), the steps it was held from then (error <= hold
         tolerance) and whether it was held to the end.
+      evasive: tracking only, (T+1,) bool: the step from q_k was the evasive step
+        (:mod:`softplan_jax.planning.evasion`; ``TrackOptions.evasion``).
     """
 
     q: jax.Array
@@ -89,6 +92,7 @@ class Rollout(NamedTuple):
     reached_step: jax.Array | None = None
     held_steps: jax.Array | None = None
     held_to_end: jax.Array | None = None
+    evasive: jax.Array | None = None
 
 
 class Record(NamedTuple):
@@ -105,10 +109,11 @@ class Record(NamedTuple):
     goal: jax.Array | None = None
     time: jax.Array | None = None
     error: jax.Array | None = None
+    evasive: jax.Array | None = None
 
 
 # After the end, the state records stay at their last value and the event records are empty.
-EVENTS = ("step_scale", "fallbacks", "between_searched")
+EVENTS = ("step_scale", "fallbacks", "between_searched", "evasive")
 
 
 class Setup(NamedTuple):
@@ -144,7 +149,7 @@ def record_zeros(world, options, T: int) -> Record:
 
     rec = Record(z((n, 3)), z((3,)), z((m,)), z((m,)), z(()), z((), bool), z((), jnp.int32), z((m,), bool))
     if su.track:
-        rec = rec._replace(goal=z((3,)), time=z(()), error=z(()))
+        rec = rec._replace(goal=z((3,)), time=z(()), error=z(()), evasive=z((), bool))
     return rec
 
 
@@ -164,8 +169,8 @@ def check_rollout_memory(world, options, max_steps: int, scenes: int = 1, side_b
     n, item = q0.shape[-2], jnp.dtype(q0.dtype).itemsize
     m = obstacle_count(su.scene)
     # One step's record (record_zeros): q, tip, clearance, between, step_scale [, goal, time, error] in the
-    # dtype, converged (bool), fallbacks (int32), between_searched (m bools).
-    row = item * (3 * n + 3 + 2 * m + 1 + (5 if su.track else 0)) + 1 + 4 + m
+    # dtype, converged (bool), fallbacks (int32), between_searched (m bools) [, evasive (bool)].
+    row = item * (3 * n + 3 + 2 * m + 1 + (5 if su.track else 0)) + 1 + 4 + m + (1 if su.track else 0)
     records = RECORD_COPIES * row * (int(max_steps) + 1) * int(scenes)
     points = 0
     if su.plan.method == "points":  # every curve as N points, against n * points_per_segment arm samples
@@ -208,7 +213,6 @@ def finish(world, options, records: Record, final) -> Rollout:
     """The Rollout from a rollout's records (frozen after its end) and its last carry."""
     su = setup(world, options)
     plan = su.plan
-    T = records.q.shape[0] - 1
     end = final.iterations
     r = freeze(records, end, still=not su.moving)
     min_clearance = jnp.minimum(jnp.min(r.clearance, initial=jnp.inf), jnp.min(r.between, initial=jnp.inf))
@@ -224,25 +228,41 @@ def finish(world, options, records: Record, final) -> Rollout:
         return Rollout(**out, status=status, reached=status == Status.REACHED, collided=collided,
                        final_error=safe_norm(su.scene.goal - r.tip[-1]))
     # Tracking statistics over the steps taken (0..end).
-    steps = jnp.arange(T + 1, dtype=jnp.int32)
+    status, reached, reached_step, held_steps, held_to_end = hold_statistics(
+        r.error, end, final.status, plan.goal_tolerance, su.track.hold_tolerance)
+    status = jnp.where(start_hit, Status.START_COLLIDED, status).astype(jnp.int32)
+    return Rollout(**out, status=status, reached=reached, collided=collided,
+                   final_error=r.error[end], goal=r.goal, time=r.time, error=r.error, reached_step=reached_step,
+                   held_steps=held_steps, held_to_end=held_to_end, evasive=r.evasive)
+
+
+def hold_statistics(error, end, status, goal_tolerance, hold_tolerance):
+    """A tracking run's outcome from its goal errors (T+1,) over the steps taken (0..end)
+    and its engine status: ``(status, reached, reached_step, held_steps, held_to_end)``.
+
+    Reached: within ``goal_tolerance`` at some step (reached_step: the first; -1:
+    never); held: from then while within ``hold_tolerance``. A run still running at
+    the horizon (status RUNNING) is "reached" when held to the end, "held" when it
+    left the hold tolerance and is within it at the last step, "lost" when not,
+    "max_steps" when never reached; any other status stands.
+    """
+    T1 = error.shape[0]
+    steps = jnp.arange(T1, dtype=jnp.int32)
     alive = steps <= end
-    within = (r.error < plan.goal_tolerance) & alive
+    within = (error < goal_tolerance) & alive
     reached = jnp.any(within)
     reached_step = jnp.where(reached, jnp.argmax(within), -1).astype(jnp.int32)
     after = alive & (steps >= reached_step) & reached
-    lost_at = jnp.where(after & (r.error > su.track.hold_tolerance), steps, T + 1)
+    lost_at = jnp.where(after & (error > hold_tolerance), steps, T1)
     first_loss = jnp.min(lost_at)
     held_to_end = reached & (first_loss > end)
     held_steps = jnp.where(reached, jnp.minimum(first_loss, end + 1) - reached_step, 0).astype(jnp.int32)
     # Left the hold tolerance after the first reach: "held" when back within it at the last step, else "lost".
-    regained = r.error[end] <= su.track.hold_tolerance
+    regained = error[end] <= hold_tolerance
     status = jnp.where(
-        final.status == Status.RUNNING,
+        status == Status.RUNNING,
         jnp.where(held_to_end, Status.REACHED,
                   jnp.where(reached, jnp.where(regained, Status.HELD, Status.LOST), Status.MAX_STEPS)),
-        final.status,
+        status,
     )
-    status = jnp.where(start_hit, Status.START_COLLIDED, status).astype(jnp.int32)
-    return Rollout(**out, status=status, reached=reached, collided=collided,
-                   final_error=r.error[end], goal=r.goal, time=r.time, error=r.error, reached_step=reached_step,
-                   held_steps=held_steps, held_to_end=held_to_end)
+    return status, reached, reached_step, held_steps, held_to_end

@@ -57,6 +57,8 @@ __all__ = [
     "field_velocity",
     "apply_step",
     "safe_scale",
+    "step_target",
+    "scaled_step",
     "next_q",
     "planner_step",
 ]
@@ -425,28 +427,38 @@ def safe_scale(q, q_target, clearance, floor, fraction, travel=None, cap=None):
     return jnp.where(jnp.isnan(jnp.min(clearance, initial=jnp.inf)), jnp.nan, alpha), too_fast
 
 
-def next_q(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None, travel=None,
-           lead=None):
-    """One planner step from q: ``(q_next, alpha, too_fast)``.
-
-    Paper eq. (9) (:func:`field_velocity`, ``walk`` as there), the Euler step
-    with the length limits (:func:`apply_step`), then for ``options.step =
-    "safe"`` the scale :func:`safe_scale` (``travel``: the obstacles' travel
-    over the step, None for a static scene); ``"plain"`` is the paper's step
-    (alpha = 1). ``lead`` (m,), if given: ``scenario``'s obstacles are inflated
-    by it for the field (a look-ahead), and the safe step adds it back to the
-    field's clearance.
-    """
+def step_target(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None,
+                lead=None):
+    """The field's full step from q and the clearance the safe step scales it by:
+    ``(q_full, clearance)``. Paper eq. (9) (:func:`field_velocity`, ``walk`` as
+    there), then the Euler step with the length limits (:func:`apply_step`).
+    ``lead`` (m,), if given: ``scenario``'s obstacles are inflated by it for the
+    field (a look-ahead), and it is added back to the field's clearance."""
     qdot, clearance = field_velocity(q, scenario, gains, truth, options, walk)
     if lead is not None:
         clearance = clearance + lead
-    q_full = apply_step(q, qdot, scenario, gains)
+    return apply_step(q, qdot, scenario, gains), clearance
+
+
+def scaled_step(q, q_full, clearance, options: PlanOptions, travel=None):
+    """``(q_next, alpha, too_fast)`` of the step q -> q_full: for ``options.step = "safe"``
+    scaled by :func:`safe_scale` (``travel``: the obstacles' travel over the step, None
+    for a static scene); ``"plain"`` is the paper's step (alpha = 1)."""
     if options.step == "plain":
         return q_full, jnp.ones((), q.dtype), jnp.zeros((), bool)
     floor = 2.0 * contact_tolerance(options, q.dtype)
     alpha, too_fast = safe_scale(q, q_full, clearance, floor, options.safe_fraction, travel)
     # q and q_full lie in the length box, so every point of the segment between them does too.
     return q + alpha * (q_full - q), alpha, too_fast
+
+
+def next_q(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None, travel=None,
+           lead=None):
+    """One planner step from q: ``(q_next, alpha, too_fast)``: :func:`step_target`
+    (paper eq. 9; ``walk`` and ``lead`` as there), then :func:`scaled_step`
+    (``travel`` as there)."""
+    q_full, clearance = step_target(q, scenario, gains, truth, options, walk, lead)
+    return scaled_step(q, q_full, clearance, options, travel)
 
 
 @partial(jax.jit, static_argnames=("options",))

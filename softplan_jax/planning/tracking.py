@@ -28,6 +28,13 @@ puts them and the goal is ``g(t_k)``. Beyond the static planner:
   evaluated at ``search_substeps`` instants in between, arm and curves
   interpolated together (a search, as the static between-step check: an
   achieved clearance).
+* **The evasive step** (``TrackOptions.evasion``, default on). Where even
+  standing still is not provably safe, the arm moves away instead of
+  stopping: a barrier filter on the field's step from the exact clearances
+  and their gradients, capped at the actuators' speed, and proven clear in
+  space and time by conservative advancement
+  (:mod:`softplan_jax.planning.evasion`). Only where that proof fails too does
+  the rollout end ``too_fast``. The step from q_k is recorded in ``evasive``.
 * **Tracking, not stopping.** The rollout runs to ``max_steps`` (a horizon of
   ``max_steps dt`` seconds); it stops early only on a collision, a non-finite
   number or ``too_fast``. Then: ``reached`` (|g(t) - tip| < goal_tolerance at
@@ -79,6 +86,18 @@ class TrackOptions(NamedTuple):
         speed bound), so the arm gives way to a fast obstacle before the safe
         step has to stop it. 0: the static field. The safe step always uses
         the true clearance.
+      evasion: where no scale of the field's step is proven safe (an obstacle
+        could come further in one step than the clearance allows), take the
+        evasive step of :mod:`softplan_jax.planning.evasion` (a barrier filter
+        on the field's step, certified by conservative advancement in time)
+        instead of ending ``too_fast``; it ends ``too_fast`` only where the
+        evasive motion is not proven clear either. False: end there, as before.
+        Acts only where the rollout would otherwise end ``too_fast``.
+      evasion_speed: the actuators' limit for the evasive step [m/s]: the
+        arm's motion bound over a step at most ``evasion_speed * dt``, > 0.
+      barrier_gain: gamma [1/s] of the barrier condition
+        ``dh/dt >= -gamma h`` on the clearance's margin, finite, >= 0.
+      evasion_pieces: the most pieces of the evasive step's proof in time, >= 1.
     """
 
     plan: PlanOptions = PlanOptions()
@@ -86,6 +105,10 @@ class TrackOptions(NamedTuple):
     feedforward: bool = True
     search_substeps: int = 8
     anticipation: float = 0.0
+    evasion: bool = True
+    evasion_speed: float = 1.0
+    barrier_gain: float = 5.0
+    evasion_pieces: int = 16
 
 
 def check_track_options(options: TrackOptions) -> TrackOptions:
@@ -97,6 +120,15 @@ def check_track_options(options: TrackOptions) -> TrackOptions:
         raise ValueError(f"search_substeps must be >= 1, got {options.search_substeps}")
     if not (math.isfinite(float(options.anticipation)) and float(options.anticipation) >= 0):
         raise ValueError(f"anticipation must be a finite number >= 0, got {options.anticipation}")
+    if not isinstance(options.evasion, (bool, np.bool_)):
+        raise ValueError(f"evasion must be True or False, got {options.evasion!r}")
+    if not (math.isfinite(float(options.evasion_speed)) and float(options.evasion_speed) > 0):
+        raise ValueError(f"evasion_speed must be a finite number > 0, got {options.evasion_speed}")
+    if not (math.isfinite(float(options.barrier_gain)) and float(options.barrier_gain) >= 0):
+        raise ValueError(f"barrier_gain must be a finite number >= 0, got {options.barrier_gain}")
+    pieces = options.evasion_pieces
+    if isinstance(pieces, (bool, np.bool_)) or not isinstance(pieces, (int, np.integer)) or pieces < 1:
+        raise ValueError(f"evasion_pieces must be an int >= 1, got {pieces!r}")
     return options
 
 
@@ -145,9 +177,16 @@ class TrackResult(NamedTuple):
       iterations: planner steps taken.
       min_clearance: float, over steps and between steps.
       final_error: float, |g(t) - tip| at the last step.
+      evasive_steps: steps taken by the evasive step (``TrackOptions.evasion``),
+        where the field's step was not proven safe.
       time, goal, error: (iterations + 1,) / (iterations + 1, 3) / (iterations + 1,).
       q, tip, clearance: as :class:`~softplan_jax.planning.planner.PlanResult`.
+      evasive: (iterations + 1,) bool, the step from q_k was evasive.
       moving: the MovingScenario (for plots and checks).
+      planner: how the result got there: "local" (the tracker alone) or
+        "search" (guided by the global search's path,
+        :func:`~softplan_jax.search.tracking.track_fallback`).
+      reason: why a fallback did not help (None: none tried, or it did).
     """
 
     status: str
@@ -160,13 +199,17 @@ class TrackResult(NamedTuple):
     iterations: int
     min_clearance: float
     final_error: float
+    evasive_steps: int
     time: np.ndarray
     goal: np.ndarray
     error: np.ndarray
     q: np.ndarray
     tip: np.ndarray
     clearance: np.ndarray
+    evasive: np.ndarray
     moving: MovingScenario
+    planner: str = "local"
+    reason: str | None = None
 
 
 def _check_moving(moving, batched: bool):
@@ -180,10 +223,16 @@ def _check_moving(moving, batched: bool):
 
 
 def make_track_options(method="curve", n_points=10, *, hold_tolerance=0.02, feedforward=True, search_substeps=8,
-                       anticipation=0.0, **plan_options) -> TrackOptions:
+                       anticipation=0.0, evasion=True, evasion_speed=1.0, barrier_gain=5.0, evasion_pieces=16,
+                       **plan_options) -> TrackOptions:
     """TrackOptions from keyword arguments (PlanOptions fields go to ``plan``), validated."""
+    for name, v in (("hold_tolerance", hold_tolerance), ("anticipation", anticipation),
+                    ("evasion_speed", evasion_speed), ("barrier_gain", barrier_gain)):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+            raise ValueError(f"{name} must be a number, got {v!r}")
     return check_track_options(TrackOptions(make_options(method, n_points, **plan_options), float(hold_tolerance),
-                                            bool(feedforward), int(search_substeps), float(anticipation)))
+                                            bool(feedforward), int(search_substeps), float(anticipation),
+                                            evasion, float(evasion_speed), float(barrier_gain), evasion_pieces))
 
 
 def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
@@ -196,7 +245,8 @@ def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gai
       method, n_points, gains, seed, **options: as :func:`~softplan_jax.plan`.
       max_steps: steps of the horizon (the rollout does not stop at the goal).
       **options: :class:`TrackOptions` fields (hold_tolerance, feedforward,
-        search_substeps, anticipation) and :class:`~softplan_jax.PlanOptions`
+        search_substeps, anticipation, evasion, evasion_speed, barrier_gain,
+        evasion_pieces) and :class:`~softplan_jax.PlanOptions`
         fields (step, safe_fraction, escapes, goal_tolerance, ...).
 
     Returns:
@@ -228,12 +278,14 @@ def result_from_track(r: Track, moving: MovingScenario, dt: float) -> TrackResul
         iterations=it,
         min_clearance=float(r.min_clearance),
         final_error=float(r.final_error),
+        evasive_steps=int(np.sum(np.asarray(r.evasive))),
         time=np.asarray(r.time[: it + 1]),
         goal=np.asarray(r.goal[: it + 1]),
         error=np.asarray(r.error[: it + 1]),
         q=np.asarray(r.q[: it + 1]),
         tip=np.asarray(r.tip[: it + 1]),
         clearance=np.asarray(r.clearance[: it + 1])[:, np.asarray(mask)],
+        evasive=np.asarray(r.evasive[: it + 1]),
         moving=moving,
     )
 

@@ -8,10 +8,13 @@
   :mod:`.motions`, and :mod:`.machine` runs the whole search as one loop with one
   exact solve per iteration;
 * :mod:`.fallback` -- :func:`plan_fallback`: the local planner first, then the
-  two above for every scene it left stalled.
+  two above for every scene it left stalled;
+* :mod:`.tracking` -- :func:`track_fallback`: the tracker among moving obstacles,
+  then, where it never reaches the goal, a run guided by the search's path at rest.
 """
 
 from .fallback import plan_fallback
 from .reach import REACH_REASONS, Reachability, ReachOptions, reachability
+from .tracking import track_fallback
 
-__all__ = ["ReachOptions", "Reachability", "REACH_REASONS", "reachability", "plan_fallback"]
+__all__ = ["ReachOptions", "Reachability", "REACH_REASONS", "reachability", "plan_fallback", "track_fallback"]

@@ -1,0 +1,163 @@
+"""Tracking that does not give up: the global search where the tracker never reaches its goal.
+
+:func:`track_fallback` tracks a moving scene (:func:`~softplan_jax.track`, with the
+evasive step); where the tracker never reaches the goal within the horizon
+(status ``max_steps``: the field's local minima, as at rest), it
+
+1. plans the scene at rest (the curves at their rest pose, the goal in the rest
+   frame of the curve it rides, if any) with :func:`~softplan_jax.plan_fallback`:
+   the local planner, reachability and the certified global search;
+2. turns that plan's tip path into a moving goal: ``waypoints`` points
+   resampled by arc length, timed at ``waypoint_speed`` (default half the
+   attraction's ``v_max``) from t = 0, ending on the goal (carried by its curve's
+   motion when the goal rides one: the same frame as the plan);
+3. tracks again with that goal path. Every step is still the tracker's (the safe
+   step, the evasive step, the between-step checks): the path only guides the
+   attraction, so the run is collision-free by the same construction, while the
+   obstacles move as they do.
+
+The second run is judged against the TRUE goal g(t) (:func:`~softplan_jax.planning.records.hold_statistics`
+on ``|g(t_k) - tip_k|``) and kept when it reaches the goal; ``planner`` says how
+the result got there ("local": the tracker alone; "search": guided by the
+search's path), ``reason`` why a fallback did not help. A goal that follows a
+path of its own (a :class:`~softplan_jax.scenarios.motion.GoalPath` of more than
+one point) is not guided (reason ``moving_goal_path``).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..base.status import STATUS_NAMES, Status, status_name
+from ..planning.records import hold_statistics
+from ..planning.step import PlanOptions, default_gains
+from ..planning.tracking import TrackResult, goal_trajectory, make_track_options, result_from_track, track, track_batch
+from ..scenarios import stack_scenarios
+from ..scenarios.motion import GoalPath, MovingScenario, stack_moving_scenarios
+from .fallback import plan_fallback
+from .reach import ReachOptions
+
+__all__ = ["track_fallback", "waypoint_path"]
+
+# The statuses of a run that held on to its horizon (the engine's RUNNING at the end).
+_HORIZON = ("reached", "held", "lost", "max_steps")
+
+
+def waypoint_path(tips, count: int, speed: float, attach, dtype) -> GoalPath:
+    """A goal path along ``tips`` (K, 3): ``count`` points evenly spaced by arc length,
+    at constant ``speed`` from t = 0 (at least 0.1 s in all), carried by curve ``attach``."""
+    tips = np.asarray(tips, np.float64)
+    seg = np.linalg.norm(np.diff(tips, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    target = np.linspace(0.0, s[-1], count)
+    points = np.stack([np.interp(target, s, tips[:, k]) for k in range(3)], axis=1)
+    times = np.linspace(0.0, max(s[-1] / speed, 0.1), count)
+    return GoalPath(jnp.asarray(times, dtype), jnp.asarray(points, dtype), jnp.asarray(attach, jnp.int32))
+
+
+def track_fallback(moving: MovingScenario, method: str = "curve", n_points: int = 10, gains=None,
+                   max_steps: int = 600, seed=0, *, reach: ReachOptions = ReachOptions(), waypoints: int = 32,
+                   waypoint_speed: float | None = None, progress: bool = False, **options):
+    """Track the goal of a moving scene, and where the tracker never reaches it, track again
+    guided by the global search's path at rest (module docstring).
+
+    Args:
+      moving: one MovingScenario or a stack (:func:`~softplan_jax.moving.stack_moving_scenarios`;
+        tracked by :func:`~softplan_jax.track_batch`, the searches one scene at a time).
+      method, n_points, gains, max_steps, seed, **options: as :func:`~softplan_jax.track`.
+      reach: the search's :class:`~softplan_jax.search.reach.ReachOptions`.
+      waypoints: points of the guiding goal path, >= 2 (one compiled shape).
+      waypoint_speed: its speed [m/s], > 0 (None: half the gains' ``v_max``).
+      progress: a line per stage on stderr.
+
+    Returns:
+      A :class:`~softplan_jax.planning.tracking.TrackResult` (one scene) or a list of
+      them (a stack), with ``planner`` and ``reason``.
+    """
+    if not isinstance(moving, MovingScenario):
+        raise ValueError(f"expected a MovingScenario (see make_moving_scenario), got {type(moving).__name__}")
+    if isinstance(waypoints, bool) or not isinstance(waypoints, (int, np.integer)) or waypoints < 2:
+        raise ValueError(f"waypoints must be an int >= 2, got {waypoints!r}")
+    if waypoint_speed is not None and not (isinstance(waypoint_speed, (int, float, np.integer, np.floating))
+                                           and math.isfinite(waypoint_speed) and waypoint_speed > 0):
+        raise ValueError(f"waypoint_speed must be a finite number > 0, got {waypoint_speed!r}")
+    opts = make_track_options(method, n_points, **options)
+    single = moving.scene.q0.ndim == 2
+    dtype = moving.scene.q0.dtype
+    v_max = float((gains if gains is not None else default_gains(dtype)).v_max)
+    speed = 0.5 * v_max if waypoint_speed is None else float(waypoint_speed)
+    kw = dict(method=method, n_points=n_points, gains=gains, max_steps=max_steps, seed=seed, **options)
+    scenes = [moving] if single else [jax.tree_util.tree_map(lambda x, b=b: x[b], moving)
+                                      for b in range(moving.scene.q0.shape[0])]
+    results = [track(moving, **kw)] if single else _results(track_batch(moving, **kw), scenes)
+    todo = [b for b, r in enumerate(results) if r.status == "max_steps"]
+    if moving.goal_path.times.shape[-1] != 1:  # a goal with a path of its own: not guided
+        return _out([r._replace(reason="moving_goal_path") if b in todo else r for b, r in enumerate(results)],
+                    single)
+    if not todo:
+        return _out(results, single)
+    t0 = time.perf_counter()
+    rest = stack_scenarios([scenes[b].scene._replace(goal=scenes[b].goal_path.points[0]) for b in todo])
+    plan_options = {k: v for k, v in options.items() if k in PlanOptions._fields}
+    planned = plan_fallback(rest, method, n_points, gains, max_steps, seed, reach=reach, **plan_options)
+    if progress:
+        _say(f"track_fallback: {len(todo)} never reached; at rest {sum(p.status == 'reached' for p in planned)} "
+             f"planned, {time.perf_counter() - t0:.1f} s")
+    guide = []
+    for b, p in zip(todo, planned, strict=True):
+        if p.status != "reached":
+            results[b] = results[b]._replace(reason=f"at rest: {p.reason or p.status}")
+        else:
+            path = waypoint_path(p.tip, int(waypoints), speed, scenes[b].goal_path.attach, dtype)
+            guide.append((b, scenes[b]._replace(goal_path=path)))
+    if not guide:
+        return _out(results, single)
+    if single:
+        guided = [track(guide[0][1], **kw)]
+    else:
+        stack = stack_moving_scenarios([m for _, m in guide])
+        guided = _results(track_batch(stack, **kw), [m for _, m in guide])
+    for (b, _), g in zip(guide, guided, strict=True):
+        results[b] = _judge(results[b], g, scenes[b], opts)
+    if progress:
+        _say(f"track_fallback: {sum(results[b].planner == 'search' for b, _ in guide)} of {len(guide)} guided runs "
+             f"reached the goal, {time.perf_counter() - t0:.1f} s")
+    return _out(results, single)
+
+
+def _out(results, single):
+    return results[0] if single else results
+
+
+def _results(batched, scenes) -> list:
+    """TrackResults, one per scene, from a batched Track."""
+    dt = [float(jnp.asarray(batched.time)[b, 1] - jnp.asarray(batched.time)[b, 0]) for b in range(len(scenes))]
+    return [result_from_track(jax.tree_util.tree_map(lambda x, b=b: x[b], batched), m, dt[b])
+            for b, m in enumerate(scenes)]
+
+
+def _judge(first: TrackResult, guided: TrackResult, moving: MovingScenario, opts) -> TrackResult:
+    """The guided run judged against the TRUE goal g(t): kept where it reaches it."""
+    goal = np.asarray(goal_trajectory(moving, guided.time))
+    error = np.linalg.norm(goal - guided.tip, axis=1)
+    codes = {name: code for code, name in STATUS_NAMES.items()}
+    engine = int(Status.RUNNING) if guided.status in _HORIZON else codes[guided.status]
+    status, reached, reached_step, held_steps, held_to_end = (np.asarray(x) for x in hold_statistics(
+        jnp.asarray(error), guided.iterations, engine, opts.plan.goal_tolerance, opts.hold_tolerance))
+    if not bool(reached):
+        return first._replace(reason="the guided run did not reach the goal")
+    dt = float(guided.time[1] - guided.time[0]) if guided.time.shape[0] > 1 else 0.0
+    return guided._replace(status=status_name(int(status)), reached=True, held_to_end=bool(held_to_end),
+                           reached_step=int(reached_step), held_steps=int(held_steps),
+                           held_time=int(held_steps) * dt, final_error=float(error[-1]), goal=goal, error=error,
+                           moving=moving, planner="search")
+
+
+def _say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
