@@ -30,6 +30,8 @@ Parts (each one timed with compile apart; warm calls interleaved in rounds):
 6. ("defaults", on request) what a user gets without options: ``plan(tree)``
    (one scene goes to the host CPU) against ``device="default"``, and
    ``plan_batch`` with its default lanes against 64.
+7. ("tracking", on request) ``track_batch``'s program on moving scenes, the
+   evasive step off and on, at the default motion and at twice a brisk one.
 
     python benchmarks/gpu.py --suites S --sizes 1024,16384 --out $OUT/gpu   # one GPU, ~2.5 min
     python benchmarks/gpu.py --quick                  # smoke run (any machine): B = 8, 10 steps
@@ -79,6 +81,10 @@ def parse_args(argv=None):
                     "quick 8)")
     ap.add_argument("--no-extras", action="store_true", help="part batch: lanes = B only (no 64-lane and no "
                     "former-fallback-chunk variants)")
+    ap.add_argument("--tracking-size", type=int, default=None, help="scenes of part tracking (default 4096; "
+                    "quick 8)")
+    ap.add_argument("--tracking-steps", type=int, default=None, help="steps of part tracking (default 300; "
+                    "quick 20)")
     ap.add_argument("--deadline", type=float, default=None, help="start no part after this many seconds")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--audit", default=None, help="audit a saved OUT_float32_q.npz in float64 and exit")
@@ -87,7 +93,7 @@ def parse_args(argv=None):
     args = ap.parse_args(argv)
     quick = args.quick
     for key, full, short in (("sizes", "1024,4096,16384", "8"), ("steps", 200, 10), ("rounds", 2, 1),
-                             ("defaults_size", 1024, 8),
+                             ("defaults_size", 1024, 8), ("tracking_size", 4096, 8), ("tracking_steps", 300, 20),
                              ("parts", "plan,cmdbuf,batch,profile,float32", "plan,batch,float32")):
         if getattr(args, key) is None:  # a value the user gave is kept, and checked below
             setattr(args, key, short if quick else full)
@@ -95,8 +101,9 @@ def parse_args(argv=None):
         args.size_list = [int(x) for x in args.sizes.split(",")]
     except ValueError:
         ap.error(f"--sizes: a comma list of integers, got {args.sizes!r}")
-    if not args.size_list or min(args.size_list) < 1 or args.steps < 1 or args.rounds < 1 or args.defaults_size < 1:
-        ap.error("--sizes, --steps, --rounds and --defaults-size must be >= 1")
+    if not args.size_list or min(args.size_list) < 1 or args.steps < 1 or args.rounds < 1 or args.defaults_size < 1 \
+            or args.tracking_size < 1 or args.tracking_steps < 1:
+        ap.error("--sizes, --steps, --rounds, --defaults-size, --tracking-size and --tracking-steps must be >= 1")
     if args.write_suites is not None:
         try:
             args.write_sizes = [int(b) for b in args.write_suites[1:]]
@@ -105,7 +112,7 @@ def parse_args(argv=None):
         if not args.write_sizes or min(args.write_sizes) < 1:
             ap.error("--write-suites FOLDER B ...: give one or more sizes >= 1")
     args.part_list = [p.strip() for p in args.parts.split(",") if p.strip()]
-    bad = set(args.part_list) - {"plan", "batch", "profile", "float32", "cmdbuf", "defaults"}
+    bad = set(args.part_list) - {"plan", "batch", "profile", "float32", "cmdbuf", "defaults", "tracking"}
     if bad:
         ap.error(f"--parts: unknown part(s) {sorted(bad)}")
     if args.out is None:
@@ -225,6 +232,46 @@ def part_defaults(args, rep):
     a, b = (jax.device_get(sp.plan_batch(suite, max_steps=args.steps, lanes=x)) for x in (None, 64))
     out["plan_batch statuses equal (lanes None vs 64)"] = int(np.sum(np.asarray(a.status) == np.asarray(b.status)))
     rep.put("defaults", out)
+    return out
+
+
+def part_tracking(args, rep):
+    """Tracking among moving curves with and without the evasive step (issue 38) on the
+    accelerator: ``track_batch``'s program (default lanes) on ``random_moving_scenarios(1, B)``
+    at the benchmark's default motion and at twice the brisk one (sway 0.12 rad, shift 0.08 m,
+    1-4 rad/s), ``--tracking-steps`` steps; first call (compile) apart, warm calls interleaved;
+    statuses, steps taken and evasive steps of each."""
+    import jax
+    import numpy as np
+
+    import softplan_jax as sp
+    from softplan_jax.planning.tracking import make_track_options, track_program
+
+    B, T = args.tracking_size, args.tracking_steps
+    suites = {"default": sp.moving.random_moving_scenarios(1, B),
+              "brisk x2": sp.moving.random_moving_scenarios(1, B, amplitude=0.12, shift=0.08, omega=(1.0, 4.0))}
+    gains = sp.default_gains()
+    keys = jax.random.split(jax.random.PRNGKey(0), B)
+    calls = {}
+    for evasion in (False, True):
+        prog = track_program(make_track_options("curve", evasion=evasion), T, True)
+        for name, suite in suites.items():
+            calls[f"{name}, evasion {'on' if evasion else 'off'}"] = \
+                lambda prog=prog, suite=suite: prog(suite, gains, keys)
+    out = {"B": B, "steps": T}
+    for name, call in calls.items():
+        t0 = time.perf_counter()
+        r = jax.device_get(jax.block_until_ready(call()))
+        st, counts = np.unique(np.asarray(r.status), return_counts=True)
+        out[name] = dict(first_call_s=time.perf_counter() - t0,
+                         statuses={sp.planning.status_name(s): int(c) for s, c in zip(st, counts, strict=True)},
+                         steps_taken=int(np.sum(np.asarray(r.iterations) + 1)),
+                         evasive_steps=int(np.sum(np.asarray(r.evasive))))
+        log(f"tracking {name}: first call {out[name]['first_call_s']:.1f} s, {out[name]['statuses']}")
+    for name, t in _interleaved({k: (lambda c=c: c().q) for k, c in calls.items()}, rounds=args.rounds).items():
+        out[name].update(_stats(t))
+        out[name]["steps_per_s_median"] = out[name]["steps_taken"] / out[name]["median_s"]
+    rep.put("tracking", out)
     return out
 
 
@@ -573,6 +620,15 @@ def markdown(data) -> str:
                                  f"{'ms' if part == 'plan' else 's'}")
     for k, v in p.get("defaults", {}).items():
         lines.append(f"- defaults, {k}: {json.dumps(v)}")
+    if "tracking" in p:
+        t = p["tracking"]
+        lines += ["", f"Tracking, {t['B']} moving scenes, {t['steps']} steps (track_batch's program, default lanes):", "",
+                  "| suite, evasion | first call | warm median | steps taken | steps/s | evasive steps | statuses |",
+                  "|---|---|---|---|---|---|---|"]
+        for k, v in t.items():
+            if isinstance(v, dict) and "median_s" in v:
+                lines.append(f"| {k} | {v['first_call_s']:.1f} s | {v['median_s']:.3f} s | {v['steps_taken']:,} | "
+                             f"{v['steps_per_s_median']:,.0f} | {v['evasive_steps']:,} | {json.dumps(v['statuses'])} |")
     for k, v in data.get("errors", {}).items():
         lines.append(f"- part {k} FAILED: {v.strip().splitlines()[-1]}")
     return "\n".join(lines) + "\n"
@@ -607,6 +663,7 @@ def main(argv=None):
     for part, fn in (("plan", lambda: part_plan(args, rep, devs)),
                      ("cmdbuf", lambda: part_cmdbuf(args, rep)),
                      ("defaults", lambda: part_defaults(args, rep)),
+                     ("tracking", lambda: part_tracking(args, rep)),
                      ("batch", lambda: part_batch(args, rep, programs)),
                      ("profile", lambda: part_profile(args, rep, programs)),
                      ("float32", lambda: part_float32(args, rep, programs))):

@@ -607,12 +607,14 @@ def test_throughput_rejects_bad_arguments():
 def test_gpu_script_rejects_bad_arguments(tmp_path):
     import gpu
 
-    for argv in (["--sizes", "0"], ["--sizes", "a"], ["--steps", "0"], ["--rounds", "0"], ["--parts", "plan,x"]):
+    for argv in (["--sizes", "0"], ["--sizes", "a"], ["--steps", "0"], ["--rounds", "0"], ["--parts", "plan,x"],
+                 ["--tracking-size", "0"], ["--tracking-steps", "-1"]):
         with pytest.raises(SystemExit) as e:
             gpu.parse_args([*argv, "--out", str(tmp_path / "g")])
         assert e.value.code == 2, argv
     a = gpu.parse_args(["--quick", "--out", str(tmp_path / "g")])
     assert (a.size_list, a.steps, a.part_list) == ([8], 10, ["plan", "batch", "float32"])
+    assert (a.tracking_size, a.tracking_steps) == (8, 20)
 
 
 def test_baselines_compare_tells_steps_taken_from_the_tail(tmp_path, capsys):

@@ -426,7 +426,8 @@ def test_bad_input_raises():
                 dict(evasion_speed="fast")):
         with pytest.raises(ValueError, match=next(iter(bad))):
             sp.track(m, **bad)
-    for bad in (dict(waypoints=1), dict(waypoints=2.0), dict(waypoint_speed=0.0), dict(waypoint_speed=np.nan)):
+    for bad in (dict(waypoints=1), dict(waypoints=2.0), dict(waypoint_speed=0.0), dict(waypoint_speed=np.nan),
+                dict(retries=-1), dict(retries=1.5)):
         with pytest.raises(ValueError, match=next(iter(bad))):
             sp.track_fallback(m, **bad)
     with pytest.raises(ValueError, match="MovingScenario"):

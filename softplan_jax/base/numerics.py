@@ -258,7 +258,7 @@ def evaluate_where(todo, fn, chunk: int, fill):
     return jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (tie(fill, todo), todo))[0]
 
 
-def when_any(pred, fn, skip, operands, chunk: int | None = None):
+def when_any(pred, fn, skip, operands, chunk: int | str | None = None):
     """``fn(operands)`` where ``pred`` (a () bool), ``skip(operands)`` elsewhere: a true branch
     (``lax.cond``), also under ``vmap``.
 
@@ -271,7 +271,8 @@ def when_any(pred, fn, skip, operands, chunk: int | None = None):
     ``fn`` and ``skip`` return pytrees of the same structure; not differentiable
     (``jax.custom_batching.custom_vmap``). ``chunk``: None, ``fn`` vmapped over the whole
     batch; an int, over the elements that need it only, ``chunk`` at a time
-    (:func:`evaluate_where`).
+    (:func:`evaluate_where`); ``"auto"``: a 64th of the batch, at least 1 (one at a
+    time for the 64 lanes of a CPU batch, 256 at a time for an accelerator's 16,384).
     """
 
     @jax.custom_batching.custom_vmap
@@ -287,12 +288,13 @@ def when_any(pred, fn, skip, operands, chunk: int | None = None):
 
         def some(operands):
             kept = jax.vmap(skip)(operands)
-            if chunk is None:
+            size = max(1, axis_size // 64) if chunk == "auto" else chunk
+            if size is None:
                 done = jax.vmap(fn)(operands)
                 return jax.tree_util.tree_map(
                     lambda a, b: jnp.where(pred.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), done, kept)
             one = lambda i: fn(jax.tree_util.tree_map(lambda x: x[i], operands))  # noqa: E731
-            return evaluate_where(pred, one, chunk, kept)
+            return evaluate_where(pred, one, size, kept)
 
         out = jax.lax.cond(jnp.any(pred), some, jax.vmap(skip), operands)
         return out, jax.tree_util.tree_map(lambda _: True, out)

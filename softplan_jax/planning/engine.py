@@ -319,7 +319,7 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
 
             # Held (stop_gradient): a rollout stays differentiable, the evasive step itself is not.
             args = jax.lax.stop_gradient((world, q, q_full, truth, c, t, speed, gains, want))
-            q_ev, proven = when_any(want, evade, lambda args: (args[1], jnp.zeros((), bool)), args, chunk=1)
+            q_ev, proven = when_any(want, evade, lambda args: (args[1], jnp.zeros((), bool)), args, chunk="auto")
             evasive = want & proven
             q_next = jnp.where(evasive, q_ev, q_next)
             alpha = jnp.where(evasive, 1.0, alpha)
