@@ -126,6 +126,7 @@ def track_fallback(moving: MovingScenario, method: str = "curve", n_points: int 
     if not guide:
         return _out(results, single)
     # The guided runs; those that do not reach the goal run again with other escape seeds (``retries``).
+    guided_scenes = [b for b, _ in guide]
     for attempt in range(int(retries) + 1):
         run_kw = dict(kw, seed=_attempt_seed(seed, attempt))
         if len(guide) == 1 and single:
@@ -139,8 +140,8 @@ def track_fallback(moving: MovingScenario, method: str = "curve", n_points: int 
         if not guide:
             break
     if progress:
-        _say(f"track_fallback: {sum(results[b].planner == 'search' for b, _ in guide)} of {len(guide)} guided runs "
-             f"reached the goal, {time.perf_counter() - t0:.1f} s")
+        _say(f"track_fallback: {sum(results[b].planner == 'search' for b in guided_scenes)} of {len(guided_scenes)} "
+             f"guided scenes reached the goal, {time.perf_counter() - t0:.1f} s")
     return _out(results, single)
 
 
