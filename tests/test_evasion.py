@@ -5,6 +5,8 @@ space and time) for the proof in time. The rollouts that use them are in test_mo
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -59,6 +61,13 @@ def _scene():
     return sp.make_scenario(jnp.asarray([1.2, 0.9, 1.4]), wires, **PAD)
 
 
+@jax.jit  # one program for the gradients and every finite-difference evaluation of both cases
+def _gradients_and_distances(q, scene):
+    _, mask = radius_and_mask(scene)
+    truth = sp.geometry.true_closest(q, scene, SOLVER)
+    return clearance_gradients(q, truth, mask), jnp.where(mask, truth.distance, 0.0)
+
+
 @pytest.mark.parametrize("straight", [False, True])
 def test_clearance_gradients_match_finite_differences(straight):
     scene = _scene()
@@ -67,14 +76,8 @@ def test_clearance_gradients_match_finite_differences(straight):
     if straight:
         q[:, 1] = 0.0  # theta = 0: an ordinary input
     _, mask = radius_and_mask(scene)
-
-    @jax.jit
-    def clearance(q):
-        d = sp.geometry.true_closest(q, scene, SOLVER).distance
-        return jnp.where(mask, d, 0.0)
-
-    truth = sp.geometry.true_closest(jnp.asarray(q), scene, SOLVER)
-    a = np.asarray(clearance_gradients(jnp.asarray(q), truth, mask))
+    both = functools.partial(_gradients_and_distances, scene=scene)
+    a = np.asarray(both(jnp.asarray(q))[0])
     assert np.all(np.isfinite(a)) and np.all(a[~np.asarray(mask)] == 0)
     h = 1e-6
     fd = np.zeros_like(a)
@@ -82,7 +85,7 @@ def test_clearance_gradients_match_finite_differences(straight):
         e = np.zeros(q.size)
         e[i] = h
         e = e.reshape(q.shape)
-        fd[:, i] = (np.asarray(clearance(jnp.asarray(q + e))) - np.asarray(clearance(jnp.asarray(q - e)))) / (2 * h)
+        fd[:, i] = (np.asarray(both(jnp.asarray(q + e))[1]) - np.asarray(both(jnp.asarray(q - e))[1])) / (2 * h)
     np.testing.assert_allclose(a[np.asarray(mask)], fd[np.asarray(mask)], atol=1e-6)
 
 
