@@ -372,22 +372,17 @@ def _markdown(rep, pct_interval):
     for label, row in rep["levels"].items():
         mo = row["motion"]
         motion = f"{mo['amplitude']:g} rad, {mo['shift']:g} m, {mo['omega'][0]:g}-{mo['omega'][1]:g} rad/s"
-        for variant in ("today", "evasive"):
-            v = row[variant]
-            c = v["counts"]
-            k, m = v["reached_and_held_of_reachable"]
-            lines.append(f"| {label} | {motion} | {variant} | {pct_interval(c['reached'], n)} | "
-                         f"{pct_interval(c['max_steps'], n)} | {pct_interval(c['too_fast'], n)} | "
-                         f"{pct_interval(c['collided'], n)} | {pct_interval(k, m)} | "
-                         f"{v['evasive_steps']} ({v['evasive_scenes']}) |")
+        rows = [(variant, row[variant], f"{row[variant]['evasive_steps']} ({row[variant]['evasive_scenes']})")
+                for variant in ("today", "evasive")]
         if "fallback" in row:
-            v = row["fallback"]
+            rows.append(("evasive + track_fallback", row["fallback"],
+                         f"({row['fallback']['guided_runs_reached']} guided runs reached)"))
+        for tracker, v, last in rows:
             c = v["counts"]
             k, m = v["reached_and_held_of_reachable"]
-            lines.append(f"| {label} | {motion} | evasive + track_fallback | {pct_interval(c['reached'], n)} | "
+            lines.append(f"| {label} | {motion} | {tracker} | {pct_interval(c['reached'], n)} | "
                          f"{pct_interval(c['max_steps'], n)} | {pct_interval(c['too_fast'], n)} | "
-                         f"{pct_interval(c['collided'], n)} | {pct_interval(k, m)} | "
-                         f"({v['guided_runs_reached']} guided runs reached) |")
+                         f"{pct_interval(c['collided'], n)} | {pct_interval(k, m)} | {last} |")
     lines += ["", f"Reachable: the scenes `plan_fallback` reaches at rest ({rep['reachable_at_rest']} of {n}; its "
               f"local planner alone: {rep['local_at_rest']}). Of the latter, reached and held:", ""]
     for label, row in rep["levels"].items():

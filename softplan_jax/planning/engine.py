@@ -328,6 +328,7 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
         status = jnp.where(stepping & too_fast, Status.TOO_FAST, status)
         status = jnp.where(stepping & ~too_fast & ~finite, Status.NONFINITE, status).astype(jnp.int32)
         moved = stepping & ~too_fast & finite
+        evaded = evasive & moved  # the step just taken was the evasive one
         new = Carry(
             q=jnp.where(moved, q_next, q),
             q_prev=q,
@@ -343,13 +344,13 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
             walk_left=jnp.where(moved, jnp.maximum(walk_left - 1, 0), walk_left).astype(jnp.int32),
             walk_velocity=walk_velocity,
             warm=warm_next,
-            certified=evasive & moved,
+            certified=evaded,
         )
         converged = jnp.all(jnp.where(mask, truth.converged, True))
         alpha = jnp.where(moved, alpha, 0.0).astype(dtype)
         record = Record(q, tip_position(q), c, cb, alpha, converged, fallbacks, searched)
         if track:
-            record = record._replace(goal=sc.goal, time=t, error=err, evasive=evasive & moved)
+            record = record._replace(goal=sc.goal, time=t, error=err, evasive=evaded)
         return new, record
 
     return step

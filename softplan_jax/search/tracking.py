@@ -97,12 +97,13 @@ def track_fallback(moving: MovingScenario, method: str = "curve", n_points: int 
     opts = make_track_options(method, n_points, **options)
     single = moving.scene.q0.ndim == 2
     dtype = moving.scene.q0.dtype
-    v_max = float((gains if gains is not None else default_gains(dtype)).v_max)
+    given = gains if gains is not None else default_gains(dtype)
+    v_max, dt = float(given.v_max), float(given.dt)
     speed = 0.5 * v_max if waypoint_speed is None else float(waypoint_speed)
     kw = dict(method=method, n_points=n_points, gains=gains, max_steps=max_steps, seed=seed, **options)
     scenes = [moving] if single else [jax.tree_util.tree_map(lambda x, b=b: x[b], moving)
                                       for b in range(moving.scene.q0.shape[0])]
-    results = [track(moving, **kw)] if single else _results(track_batch(moving, **kw), scenes)
+    results = [track(moving, **kw)] if single else _results(track_batch(moving, **kw), scenes, dt)
     todo = [b for b, r in enumerate(results) if r.status == "max_steps"]
     if moving.goal_path.times.shape[-1] != 1:  # a goal with a path of its own: not guided
         return _out([r._replace(reason="moving_goal_path") if b in todo else r for b, r in enumerate(results)],
@@ -129,13 +130,13 @@ def track_fallback(moving: MovingScenario, method: str = "curve", n_points: int 
     guided_scenes = [b for b, _ in guide]
     for attempt in range(int(retries) + 1):
         run_kw = dict(kw, seed=_attempt_seed(seed, attempt))
-        if len(guide) == 1 and single:
+        if single:
             guided = [track(guide[0][1], **run_kw)]
         else:
             stack = stack_moving_scenarios([m for _, m in guide])
-            guided = _results(track_batch(stack, **run_kw), [m for _, m in guide])
+            guided = _results(track_batch(stack, **run_kw), [m for _, m in guide], dt)
         for (b, _), g in zip(guide, guided, strict=True):
-            results[b] = _judge(results[b], g, scenes[b], opts)
+            results[b] = _judge(results[b], g, scenes[b], opts, dt)
         guide = [(b, m) for b, m in guide if results[b].planner != "search"]
         if not guide:
             break
@@ -157,14 +158,13 @@ def _out(results, single):
     return results[0] if single else results
 
 
-def _results(batched, scenes) -> list:
-    """TrackResults, one per scene, from a batched Track."""
-    dt = [float(jnp.asarray(batched.time)[b, 1] - jnp.asarray(batched.time)[b, 0]) for b in range(len(scenes))]
-    return [result_from_track(jax.tree_util.tree_map(lambda x, b=b: x[b], batched), m, dt[b])
+def _results(batched, scenes, dt: float) -> list:
+    """TrackResults, one per scene, from a batched Track (``dt``: the gains' step)."""
+    return [result_from_track(jax.tree_util.tree_map(lambda x, b=b: x[b], batched), m, dt)
             for b, m in enumerate(scenes)]
 
 
-def _judge(first: TrackResult, guided: TrackResult, moving: MovingScenario, opts) -> TrackResult:
+def _judge(first: TrackResult, guided: TrackResult, moving: MovingScenario, opts, dt: float) -> TrackResult:
     """The guided run judged against the TRUE goal g(t): kept where it reaches it."""
     goal = np.asarray(goal_trajectory(moving, guided.time))
     error = np.linalg.norm(goal - guided.tip, axis=1)
@@ -174,7 +174,6 @@ def _judge(first: TrackResult, guided: TrackResult, moving: MovingScenario, opts
         jnp.asarray(error), guided.iterations, engine, opts.plan.goal_tolerance, opts.hold_tolerance))
     if not bool(reached):
         return first._replace(reason="the guided run did not reach the goal")
-    dt = float(guided.time[1] - guided.time[0]) if guided.time.shape[0] > 1 else 0.0
     return guided._replace(status=status_name(int(status)), reached=True, held_to_end=bool(held_to_end),
                            reached_step=int(reached_step), held_steps=int(held_steps),
                            held_time=int(held_steps) * dt, final_error=float(error[-1]), goal=goal, error=error,
