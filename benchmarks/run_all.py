@@ -44,6 +44,7 @@ SCRIPTS = {
     ],
     "science": [[]],
     "tuning": [[]],
+    "tuners": [[]],
     "reach": [[]],
     "moving": [[]],
     "evasion": [[]],

@@ -44,6 +44,10 @@ def _gain_function():
                        seg_weights=jnp.asarray([0.2, 0.0, -1.0 / 7.0]))
 
 
+def _goal_function():
+    return _gain_function()._replace(goal_profile=jnp.asarray([[0.5, -0.25], [0.0, 0.125], [1.0, 2.0], [-1.0, 0.0]]))
+
+
 def _assert_same_gains(a, b):
     assert type(a) is type(b)
     for k in type(a)._fields:
@@ -62,13 +66,15 @@ def _valid(**gains_extra):
 # Round trips.
 
 
-@pytest.mark.parametrize("which", ["default", "paper", "function"])
+@pytest.mark.parametrize("which", ["default", "paper", "function", "goal-function"])
 def test_round_trip_dict_and_file(tmp_path, which):
-    gains = {"default": sp.default_gains, "paper": _paper_gains, "function": _gain_function}[which]()
+    gains = {"default": sp.default_gains, "paper": _paper_gains, "function": _gain_function,
+             "goal-function": _goal_function}[which]()
     d = sp.tuning.gains_to_dict(gains, "curve", 10)
     text = json.dumps(d, allow_nan=False)  # strict JSON: inf is written as null
     assert d["format"] == "softplan-gains/1" and d["method"] == "curve" and d["n_points"] == 10
-    assert ("rep_profile" in d["gains"]) == (which == "function") == ("seg_weights" in d["gains"])
+    assert ("rep_profile" in d["gains"]) == which.endswith("function") == ("seg_weights" in d["gains"])
+    assert ("goal_profile" in d["gains"]) == (which == "goal-function")
     if which == "paper":
         assert d["gains"]["rep_max"] is None and d["gains"]["damping"] == 0.0
     _assert_same_gains(sp.tuning.gains_from_dict(json.loads(text)), gains)
@@ -82,7 +88,7 @@ def test_round_trip_dict_and_file(tmp_path, which):
     assert on_disk["metadata"] == {"tuned_by": "hand", "scenes": [1, 2]}
     assert (on_disk["method"], on_disk["n_points"]) == ("points", 50)
     f32 = sp.load_gains(path, dtype=jnp.float32)
-    assert type(f32) is type(gains) and all(np.asarray(v).dtype == np.float32 for v in f32)
+    assert type(f32) is type(gains) and all(np.asarray(v).dtype == np.float32 for v in f32 if v is not None)
 
 
 def test_save_refuses_to_overwrite(tmp_path):

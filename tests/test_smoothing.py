@@ -18,6 +18,7 @@ import pytest
 import softplan_jax as sp
 from softplan_jax.tuning import (
     GainSpace,
+    ScoreWeights,
     estimate_objective,
     smoothed_objective,
     smoothing_sample,
@@ -27,6 +28,9 @@ from softplan_jax.tuning import (
 PAIRS, STEPS, SIGMA = 4, 20, 0.2
 SIGMA_EACH = (0.15, 0.4, 0.25)  # one smoothing scale per coordinate of the default GainSpace
 SETTINGS = [dict(), dict(d0=0.2, dt=0.4, eta=0.002), dict(d0=0.3, dt=0.6, eta=0.004)]
+# The plain SGD of the checks below (tune_smoothed's defaults are the recipe: natural gradient,
+# clip, recipe start and objective).
+PLAIN = dict(gains=sp.default_gains(), natural=False, max_step=None, weights=ScoreWeights())
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +109,7 @@ def test_gradient_agrees_with_rerun_differences_of_the_smoothed_objective(sigma)
 
 def test_tune_smoothed_history_budget_progress_and_file(suite, tmp_path, capsys):
     space = GainSpace()
-    res = tune_smoothed(suite, space, updates=3, pairs=PAIRS, sigma=SIGMA, max_steps=STEPS, learning_rate=0.2,
+    res = tune_smoothed(suite, space, **PLAIN, updates=3, pairs=PAIRS, sigma=SIGMA, max_steps=STEPS, learning_rate=0.2,
                         average=1.0)
     err = capsys.readouterr().err
     assert err.count("[tune ") == 3 and "rollouts" in err
@@ -140,14 +144,14 @@ def test_tune_smoothed_guards_bound_and_clip_the_steps(suite):
     space = GainSpace()
     box = dict(d0=(0.05, 0.1), dt=(0.05, 0.2), eta=(0.0005, 0.002))
     lo, hi = (np.log([box[k][i] for k in space.names]) for i in (0, 1))
-    kw = dict(updates=2, pairs=PAIRS, sigma=SIGMA, max_steps=STEPS, learning_rate=50.0, progress=False)
+    kw = dict(PLAIN, updates=2, pairs=PAIRS, sigma=SIGMA, max_steps=STEPS, learning_rate=50.0, progress=False)
     first = estimate_objective(smoothing_sample(space.encode(sp.default_gains()), space, sp.default_gains(), suite,
                                                 jax.random.fold_in(jax.random.PRNGKey(0), 0), pairs=PAIRS,
                                                 sigma=SIGMA, max_steps=STEPS))
     step = -50.0 * first.grad
     free = tune_smoothed(suite, space, **kw)
     boxed = tune_smoothed(suite, space, bounds=box, **kw)
-    clipped = tune_smoothed(suite, space, max_step=0.05, **kw)
+    clipped = tune_smoothed(suite, space, **dict(kw, max_step=0.05))
     t0 = free.history["theta"][0]
     np.testing.assert_allclose(free.history["theta"][1], t0 + step, rtol=1e-10)
     assert np.any((t0 + step < lo) | (t0 + step > hi))  # unguarded, the step leaves the box
@@ -166,8 +170,8 @@ def test_tune_smoothed_natural_gradient_steps(suite):
     recomputed from the update's key; with one sigma for every coordinate the whole run
     equals the plain one with the learning rate times sigma^2."""
     space = GainSpace()
-    kw = dict(updates=2, pairs=PAIRS, max_steps=STEPS, progress=False)
-    nat = tune_smoothed(suite, space, sigma=SIGMA_EACH, learning_rate=2.0, natural=True, **kw)
+    kw = dict(PLAIN, updates=2, pairs=PAIRS, max_steps=STEPS, progress=False)
+    nat = tune_smoothed(suite, space, **dict(kw, sigma=SIGMA_EACH, learning_rate=2.0, natural=True))
     t0 = nat.history["theta"][0]
     first = estimate_objective(smoothing_sample(t0, space, sp.default_gains(), suite,
                                                 jax.random.fold_in(jax.random.PRNGKey(0), 0), pairs=PAIRS,
@@ -175,7 +179,7 @@ def test_tune_smoothed_natural_gradient_steps(suite):
     step = -2.0 * np.square(SIGMA_EACH) * first.grad
     assert np.all(step != 0)
     np.testing.assert_allclose(nat.history["theta"][1], t0 + step, rtol=1e-10)
-    one = tune_smoothed(suite, space, sigma=SIGMA, learning_rate=2.0, natural=True, **kw)
+    one = tune_smoothed(suite, space, **dict(kw, sigma=SIGMA, learning_rate=2.0, natural=True))
     plain = tune_smoothed(suite, space, sigma=SIGMA, learning_rate=2.0 * SIGMA**2, **kw)
     np.testing.assert_allclose(one.history["theta"], plain.history["theta"], rtol=1e-10)
     np.testing.assert_allclose(one.theta, plain.theta, rtol=1e-10)
@@ -187,7 +191,7 @@ def test_tune_smoothed_reshuffle_uses_every_scene_once_per_epoch(suite):
     (with the update's own key for perturbations and escapes). Without it, the recorded
     scenes are smoothing_sample's own draw."""
     space = GainSpace()
-    kw = dict(updates=4, pairs=PAIRS, sigma=SIGMA, max_steps=STEPS, learning_rate=0.2, progress=False)
+    kw = dict(PLAIN, updates=4, pairs=PAIRS, sigma=SIGMA, max_steps=STEPS, learning_rate=0.2, progress=False)
     res = tune_smoothed(suite, space, reshuffle=True, **kw)
     scenes = res.history["scenes"]
     assert scenes.shape == (4, PAIRS)
@@ -306,10 +310,16 @@ def test_stable_dt_keeps_dt_below_the_euler_bound():
         (dict(max_step=float("nan")), "max_step"),
         (dict(max_step=True), "max_step"),
         (dict(reshuffle="yes"), "reshuffle"),
+        (dict(space=GainSpace(goal_knots=1)), "goal_knots"),
+        (dict(space=GainSpace(goal_knots=2.0)), "goal_knots must be an int"),
+        (dict(space="recipe"), "must be a GainSpace"),
+        (dict(weights=ScoreWeights(steps=-1.0)), "ScoreWeights.steps"),
+        (dict(weights=ScoreWeights(fallback=float("inf"))), "ScoreWeights.fallback"),
+        (dict(weights=(1.0, 1.0, 2.0)), "must be a ScoreWeights"),
     ],
 )
 def test_tune_smoothed_rejects_bad_input(suite, kwargs, match):
-    kw = dict(updates=1, pairs=PAIRS, max_steps=STEPS, progress=False)
+    kw = dict(updates=1, pairs=PAIRS, max_steps=STEPS, progress=False, space=GainSpace(), gains=sp.default_gains())
     kw.update(kwargs)
     with pytest.raises(ValueError, match=match):
         tune_smoothed(suite, **kw)

@@ -67,7 +67,10 @@ def fmt_gain_values(values: dict) -> str:
         if v is None:
             return f"{k} none (no cap)"
         if isinstance(v, list):
-            return f"{k} [{', '.join(f'{x:.4g}' for x in v)}]"
+            def row(r):
+                return f"[{', '.join(f'{x:.4g}' for x in r)}]"
+
+            return f"{k} [{', '.join(row(x) for x in v)}]" if v and isinstance(v[0], list) else f"{k} {row(v)}"
         return f"{k} {v:.4g}"
 
     return ", ".join(fmt(k, v) for k, v in values.items())

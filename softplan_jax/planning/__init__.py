@@ -1,6 +1,7 @@
 """Planning: the potential-field planner of paper eq. (9) on one rollout engine.
 
-* :mod:`.step` -- the gains, the field of eq. (9), the safe step, one planner step;
+* :mod:`.gains` -- the gains of eq. (9) and the gain functions beyond the paper;
+* :mod:`.step` -- the field of eq. (9), the safe step, one planner step;
 * :mod:`.engine` -- the rollout loop (plan to the goal or track a moving one),
   paid by the step, and the batch loop that refills its lanes;
 * :mod:`.programs` -- :func:`rollout` (pure) and its compiled programs,
@@ -14,17 +15,15 @@
 """
 
 from ..base.status import STATUS_NAMES, Status, status_name
+from .gains import GainFunction, Gains, default_gains
 from .planner import PlanResult, make_options, plan, plan_batch, result_from_rollout
 from .presets import PRESETS, Preset, apply_preset, preset
 from .programs import rollout, rollout_batch, rollout_jit
 from .records import Rollout
 from .step import (
     PAPER_STEP,
-    GainFunction,
-    Gains,
     PlanOptions,
     attraction,
-    default_gains,
     planner_step,
     repulsion,
 )

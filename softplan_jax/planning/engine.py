@@ -67,7 +67,7 @@ from ..geometry.obstacles import placeholder_closest, radius_and_mask, true_clos
 from ..scenarios.motion import MovingScenario, goal_velocity, moved_cells, scenario_at, speed_bounds
 from .evasion import evasive_target, slot_clearance
 from .records import Record, Rollout, finish, record_zeros, setup
-from .step import attraction, scaled_step, step_target, tracking_attraction
+from .step import attraction, goal_scaled, scaled_step, step_target, tracking_attraction
 
 __all__ = ["Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "ACCELERATOR_LANES", "default_lanes", "run",
            "run_lanes", "check_engine_sizes"]
@@ -295,13 +295,13 @@ def make_step(world, gains, options, max_steps: int, prepared=None):
             escapes = escapes + start.astype(jnp.int32)
             since = jnp.where(start, 0, since)
         if su.moving:
-            F_e = tracking_attraction(V_e, goal_velocity(world, t), gains, track.feedforward)
+            F_e = tracking_attraction(V_e, goal_velocity(world, t), goal_scaled(gains, V_e), track.feedforward)
             # The field sees each curve inflated by its look-ahead; the safe step gets the true clearance.
             field = sc._replace(curves=sc.curves.__class__.tree_unflatten(
                 None, [sc.curves.coeffs, sc.curves.u_range, sc.curves.radius + lead[:m_c]]))
             extra = dict(travel=travel, lead=lead)
         else:
-            F_e, field, extra = attraction(V_e, gains), sc, {}
+            F_e, field, extra = attraction(V_e, goal_scaled(gains, V_e)), sc, {}
         # An escape's random walk replaces the attraction (paper eq. 9's F_e).
         F_e = jnp.where(walk_left > 0, walk_velocity, F_e)
         q_full, field_c = step_target(q, field, gains, truth, plan, (jnp.ones((), bool), F_e), extra.get("lead"))

@@ -34,7 +34,7 @@ from .batching import Progress, batch_mesh, gather, is_global, pad_batch, round_
 from .engine import check_engine_sizes, default_lanes
 from .programs import batch_keys, prng_key, rollout_batch, rollout_jit, start_configuration, strong_gains
 from .records import Rollout, check_rollout_memory
-from .step import GainFunction, Gains, PlanOptions, check_options, default_gains
+from .step import GOAL_GAINS, GainFunction, Gains, PlanOptions, check_options, default_gains
 
 __all__ = ["PlanResult", "make_options", "check_gains", "plan", "plan_device", "unreachable_result",
            "result_from_rollout", "plan_batch", "run_batch"]
@@ -98,7 +98,8 @@ EULER_BOUND = 2.0
 def check_gains(gains: Gains | GainFunction | None, dtype, n_segments: int | None = None, q0=None):
     """Validate gains on the host: a :class:`Gains` or :class:`GainFunction` of finite
     positive scalars (``damping`` may be 0, ``rep_max`` inf) and, for a GainFunction,
-    finite ``rep_profile`` (K >= 2) and ``seg_weights`` (``n_segments``, when given);
+    finite ``rep_profile`` (K >= 2), ``seg_weights`` (``n_segments``, when given) and
+    ``goal_profile`` (None, or 4 rows of K >= 2);
     returned as arrays of ``dtype``. None gives :func:`default_gains`.
 
     Soundness: ``k_att * dt >= 2`` is past the stability bound of the explicit Euler step
@@ -113,6 +114,9 @@ def check_gains(gains: Gains | GainFunction | None, dtype, n_segments: int | Non
         raise ValueError(f"gains must be a Gains or a GainFunction, got {type(gains).__name__}")
     vals = {}
     for k, v in gains._asdict().items():
+        if k == "goal_profile" and v is None:  # a GainFunction without a dependence on the goal distance
+            vals[k] = None
+            continue
         if np.asarray(v).dtype == bool:
             raise ValueError(f"gain {k} must be a number, got {v!r}")
         try:
@@ -132,6 +136,11 @@ def check_gains(gains: Gains | GainFunction | None, dtype, n_segments: int | Non
             raise ValueError(f"seg_weights must be a finite (n,) array, got shape {w.shape}")
         if n_segments is not None and w.shape[0] != int(n_segments):
             raise ValueError(f"seg_weights has {w.shape[0]} entries for an arm of {n_segments} segments")
+        g = vals["goal_profile"]
+        if g is not None and (g.ndim != 2 or g.shape[0] != len(GOAL_GAINS) or g.shape[1] < 2
+                              or not np.all(np.isfinite(g))):
+            raise ValueError(f"goal_profile must be None or a finite ({len(GOAL_GAINS)}, K) array with K >= 2 "
+                             f"(rows {', '.join(GOAL_GAINS)}), got shape {g.shape}")
     k_dt = float(vals["k_att"] * vals["dt"])
     if k_dt >= EULER_BOUND:
         warnings.warn(f"gain dt = {float(vals['dt']):g} with k_att = {float(vals['k_att']):g}: k_att * dt = {k_dt:g} "
@@ -145,7 +154,7 @@ def check_gains(gains: Gains | GainFunction | None, dtype, n_segments: int | Non
             raise ValueError("gain damping = 0 (the plain pseudo-inverse J^T (J J^T)^-1) does not exist at this "
                              "start pose: its tip Jacobian has rank < 3 (a straight arm bending in one plane); use "
                              "damping > 0 (default 0.05) or bend the start pose (the paper preset: theta 0.1)")
-    return type(gains)(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
+    return type(gains)(**{k: v if v is None else jnp.asarray(v, dtype) for k, v in vals.items()})
 
 
 def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,

@@ -62,7 +62,7 @@ def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: i
 def strong_gains(gains: Gains, dtype) -> Gains:
     """Gains as arrays of the scenario's dtype, never weakly typed: a gain given as
     a Python float or ``jnp.asarray(0.1)`` (weak) would otherwise compile anew."""
-    return type(gains)(*(jnp.asarray(v, dtype) for v in gains))
+    return type(gains)(*(v if v is None else jnp.asarray(v, dtype) for v in gains))
 
 
 def prng_key(seed):

@@ -1,4 +1,5 @@
-"""One planner step: the gain functions and the potential field of paper eq. (9), and the safe step.
+"""One planner step: the potential field of paper eq. (9) and the safe step (the gains
+are in :mod:`.gains`, re-exported here).
 
 One step::
 
@@ -42,6 +43,7 @@ from ..geometry.closest_grid import GridSolverOptions
 from ..geometry.kinematics import motion_bound, points_jacobian, tip_position
 from ..geometry.obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
 from ..scenarios import Scenario
+from .gains import GOAL_GAINS, GainFunction, Gains, default_gains, goal_scaled, repulsion_scale
 
 __all__ = [
     "Gains",
@@ -51,6 +53,8 @@ __all__ = [
     "tracking_attraction",
     "repulsion",
     "repulsion_scale",
+    "GOAL_GAINS",
+    "goal_scaled",
     "PlanOptions",
     "PAPER_STEP",
     "check_options",
@@ -62,100 +66,6 @@ __all__ = [
     "next_q",
     "planner_step",
 ]
-
-
-class Gains(NamedTuple):
-    """Gains of the gain functions and of the integration (a pytree of arrays;
-    every field is differentiable).
-
-    Attributes:
-      k_att: attraction gain [1/s]: F_e(V_e) = k_att V_e below saturation.
-      v_max: saturation speed of the attraction [m/s].
-      eta: repulsion gain.
-      d0: influence distance of the repulsion [m] (clearance beyond it: no force).
-      rep_max: smooth cap on the repulsion speed [m/s].
-      damping: damping lambda of the pseudo-inverse J^T (J J^T + lambda^2 I)^-1.
-      dt: integration step [s]: q <- q + dt * qdot.
-    """
-
-    k_att: jax.Array
-    v_max: jax.Array
-    eta: jax.Array
-    d0: jax.Array
-    rep_max: jax.Array
-    damping: jax.Array
-    dt: jax.Array
-
-
-class GainFunction(NamedTuple):
-    """Gains with the repulsion as a tunable FUNCTION of clearance and of the arm
-    segment (a pytree of arrays; beyond the paper, tuned by :mod:`softplan_jax.tuning`).
-
-    The first seven fields are those of :class:`Gains`, with the same meaning.
-    The repulsion of paper eq. (9) for an obstacle whose closest arm point lies
-    on segment i at clearance d is :func:`repulsion`'s magnitude times::
-
-        exp(profile(d / d0) + seg_weights[i])
-
-    where ``profile`` interpolates ``rep_profile`` linearly between K knots evenly
-    spaced in ``d / d0`` over [0, 1] (clipped outside). With all zeros it is the
-    field of its :class:`Gains` exactly (:meth:`from_gains` builds that).
-
-    Attributes:
-      rep_profile: (K,) log-multipliers of the repulsion at the knots, K >= 2.
-      seg_weights: (n,) log-multipliers of the repulsion per arm segment
-        (n: the arm's segment count).
-    """
-
-    k_att: jax.Array
-    v_max: jax.Array
-    eta: jax.Array
-    d0: jax.Array
-    rep_max: jax.Array
-    damping: jax.Array
-    dt: jax.Array
-    rep_profile: jax.Array
-    seg_weights: jax.Array
-
-    @classmethod
-    def from_gains(cls, gains: Gains, knots: int, segments: int) -> GainFunction:
-        """The gain function equal to ``gains`` (zero profile and weights)."""
-        if int(knots) < 2 or int(segments) < 1:
-            raise ValueError(f"a GainFunction needs knots >= 2 and segments >= 1, got {knots}, {segments}")
-        dtype = jnp.result_type(gains.k_att)
-        return cls(*gains[:7], jnp.zeros((int(knots),), dtype), jnp.zeros((int(segments),), dtype))
-
-    def scalars(self) -> Gains:
-        """The seven scalar gains (without the profile and weights)."""
-        return Gains(*self[:7])
-
-
-def repulsion_scale(gains, clearance, segment):
-    """The multiplier of the repulsion of a :class:`GainFunction` (1 for :class:`Gains`):
-    ``exp(profile(clearance / d0) + seg_weights[segment])``; shapes broadcast."""
-    if not isinstance(gains, GainFunction):
-        return jnp.ones_like(clearance)
-    K = gains.rep_profile.shape[-1]
-    x = jnp.clip(clearance / gains.d0, 0.0, 1.0) * (K - 1)
-    lo = jnp.clip(jnp.floor(x), 0, K - 2).astype(jnp.int32)
-    t = x - lo.astype(x.dtype)
-    log_scale = (1 - t) * gains.rep_profile[lo] + t * gains.rep_profile[lo + 1] + gains.seg_weights[segment]
-    return jnp.exp(log_scale)
-
-
-def default_gains(dtype=None) -> Gains:
-    """The default gains (chosen by measurement on the paper's scenarios; see
-    the documentation's Conventions page, "Gains").
-
-    The tip moves at most ``v_max * dt = 0.05`` per step; the attraction is
-    linear within ``v_max / k_att = 0.25`` of the goal. The influence distance
-    ``d0 = 0.07`` is below the 0.080 between the tree goal and its nearest
-    branch, so the goal lies outside every obstacle's field (d0 = 0.1 stalls
-    the tree 0.03 short of its goal).
-    """
-    dtype = dtype or jnp.result_type(float)
-    vals = dict(k_att=2.0, v_max=0.5, eta=1e-3, d0=0.07, rep_max=1.0, damping=0.05, dt=0.1)
-    return Gains(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
 
 
 def attraction(V_e, gains: Gains):
@@ -348,6 +258,7 @@ def field_velocity(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, opt
     """
     n = q.shape[0]
     V_e = scenario.goal - tip_position(q)
+    gains = goal_scaled(gains, V_e)  # a GainFunction's dependence on the goal distance (else as given)
     cps = model_closest(q, scenario, truth, options.method, options.n_points, options.points_per_segment)
     radius, mask = radius_and_mask(scenario)
     # J_e (the tip: s = 1 of the last segment) and every J_sj in one pass.

@@ -1,9 +1,12 @@
 """Tuning the gains of eq. (9) on a suite of scenes, and gains files.
 
+* :mod:`.space` -- what is tuned: :class:`GainSpace`, the parameters of the gains
+  and of a gain function;
 * :mod:`.objective` -- the objective: Gaussian smoothing of the rollout score
-  over a box of gains (:class:`GainSpace`) and its unbiased gradient estimate;
+  over those parameters and its unbiased gradient estimate;
 * :mod:`.tuner` -- the tuner, :func:`tune_smoothed` (stochastic gradient descent
-  on that estimate, with optax);
+  on that estimate, with optax), whose defaults are the recommended recipe
+  (:data:`RECIPE_SPACE`, :data:`RECIPE_WEIGHTS`, :func:`recipe_start`, :func:`recipe_sigma`);
 * :mod:`.gains_file` -- tuned gains as JSON, with the obstacle model they were
   tuned for;
 * :mod:`.pathwise` -- the earlier pathwise-gradient tuner (``tune_gains``),
@@ -17,7 +20,6 @@ import warnings as _warnings
 from . import pathwise as pathwise
 from .gains_file import gains_from_dict, gains_to_dict, load_gains, save_gains
 from .objective import (
-    GainSpace,
     ObjectiveEstimate,
     ScoreWeights,
     SmoothingSample,
@@ -27,7 +29,8 @@ from .objective import (
     smoothed_objective,
     smoothing_sample,
 )
-from .tuner import TuneResult, tune_smoothed
+from .space import GainSpace
+from .tuner import RECIPE_SPACE, RECIPE_WEIGHTS, TuneResult, recipe_sigma, recipe_start, tune_smoothed
 
 __all__ = [
     "GainSpace",
@@ -41,6 +44,10 @@ __all__ = [
     "estimate_objective",
     "TuneResult",
     "tune_smoothed",
+    "RECIPE_SPACE",
+    "RECIPE_WEIGHTS",
+    "recipe_start",
+    "recipe_sigma",
     "save_gains",
     "load_gains",
     "gains_to_dict",

@@ -19,7 +19,9 @@
   (no cap on the repulsion, ``inf`` in :class:`Gains`), ``damping`` may be 0.
   With ``rep_profile`` (K numbers, K >= 2) AND ``seg_weights`` (n numbers, one
   per arm segment) the file holds a :class:`GainFunction`; with neither, a
-  :class:`Gains`.
+  :class:`Gains`. A gain function may also have ``goal_profile``: 4 lists of
+  K >= 2 numbers, the log-multipliers of k_att, v_max, eta and d0 over the
+  distance to the goal (absent: none).
 * ``metadata``: optional, any JSON object (how and on what the gains were
   tuned); written as given and not interpreted.
 
@@ -40,7 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..planning.planner import check_gains
-from ..planning.step import GainFunction, Gains
+from ..planning.step import GOAL_GAINS, GainFunction, Gains
 from ..scenarios.json_format import read_json_file, write_json_file
 
 __all__ = ["GAINS_FORMAT", "gains_to_dict", "gains_from_dict", "save_gains", "load_gains"]
@@ -114,6 +116,8 @@ def gains_to_dict(gains: Gains | GainFunction, method: str = "curve", n_points: 
     if isinstance(gains, GainFunction):
         for k in _ARRAYS:
             values[k] = [float(x) for x in np.asarray(getattr(gains, k)).reshape(-1)]
+        if gains.goal_profile is not None:
+            values["goal_profile"] = np.asarray(gains.goal_profile, np.float64).tolist()
     out = {"format": GAINS_FORMAT, "method": method, "n_points": int(n_points), "gains": values}
     if metadata is not None:
         out["metadata"] = metadata
@@ -149,7 +153,7 @@ def _parse(data) -> tuple[Gains | GainFunction, str, int | None]:
     g = data["gains"]
     if not isinstance(g, dict):
         raise _err("gains", f"must be a JSON object of gain values, got {g!r}")
-    allowed = list(Gains._fields) + list(_ARRAYS)
+    allowed = list(Gains._fields) + list(_ARRAYS) + ["goal_profile"]
     unknown = sorted(set(g) - set(allowed))
     if unknown:
         raise _err(f"gains.{unknown[0]}", f"unknown gain (allowed: {allowed})")
@@ -184,6 +188,18 @@ def _parse(data) -> tuple[Gains | GainFunction, str, int | None]:
         if len(v) < least:
             raise _err(field, f"needs at least {least} numbers, got {len(v)}")
         vals[k] = np.asarray(v, dtype=np.float64)
+    if "goal_profile" in g:
+        v = g["goal_profile"]
+        if not present:
+            raise _err("gains.goal_profile", "needs rep_profile and seg_weights (a gain function)")
+        rows_ok = isinstance(v, list) and len(v) == len(GOAL_GAINS) and all(
+            isinstance(r, list) and len(r) >= 2 and all(_is_number(x) for x in r) for r in v)
+        if not rows_ok or len({len(r) for r in v}) != 1:
+            raise _err("gains.goal_profile", f"must be {len(GOAL_GAINS)} lists of K >= 2 numbers (rows "
+                       f"{', '.join(GOAL_GAINS)}), all of one length, got {v!r}")
+        if not all(_finite(x) for r in v for x in r):
+            raise _err("gains.goal_profile", f"must be finite numbers, got {v!r}")
+        vals["goal_profile"] = np.asarray(v, dtype=np.float64)
     gains = GainFunction(**vals) if present else Gains(**vals)
     return gains, method, n_points
 
@@ -195,7 +211,7 @@ def _validated(gains, dtype):
     try:
         checked = check_gains(gains, dtype)
     except ValueError as err:
-        m = re.match(r"gain (\w+) ", str(err)) or re.match(r"(rep_profile|seg_weights) ", str(err))
+        m = re.match(r"gain (\w+) ", str(err)) or re.match(r"(rep_profile|seg_weights|goal_profile) ", str(err))
         raise _err(f"gains.{m.group(1)}" if m else "gains", str(err)) from None
     return checked
 

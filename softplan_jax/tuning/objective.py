@@ -16,7 +16,7 @@ horizons).
 
 The objective here. Parameters ``theta`` (a :class:`GainSpace`: log scalar
 gains, and optionally a repulsion profile and per-segment weights of a
-:class:`~softplan_jax.planning.step.GainFunction`) are perturbed per ROLLOUT, and the
+:class:`~softplan_jax.planning.gains.GainFunction`) are perturbed per ROLLOUT, and the
 objective is the expectation over the perturbation and the scenes::
 
     J(theta) = E_scene E_{eps ~ N(0, I)} [ L(decode(theta + sigma eps), scene) ]
@@ -67,12 +67,13 @@ import numpy as np
 from ..base.compilation_cache import rollout_compiler_options
 from ..planning.planner import make_options
 from ..planning.programs import rollout
-from ..planning.step import GainFunction, Gains, PlanOptions
+from ..planning.step import PlanOptions
 from ..scenarios import Scenario
+from .space import GainSpace
 
 __all__ = [
-    "GainSpace",
     "ScoreWeights",
+    "check_weights",
     "rollout_score",
     "score_batch",
     "scores_jit",
@@ -84,136 +85,66 @@ __all__ = [
     "estimate_objective",
 ]
 
-SCALAR_GAINS = Gains._fields
-
-
-class GainSpace(NamedTuple):
-    """Which gains are tuned, and how they are parametrised (static, hashable).
-
-    ``theta`` (shape ``(size,)``) is laid out as: the logarithms of the scalar
-    gains ``names`` (they stay positive; a step is relative), then, with
-    ``knots >= 2``, the K log-multipliers ``rep_profile`` of the repulsion over
-    ``d / d0`` in [0, 1], then, with ``segments >= 1``, the n log-multipliers
-    ``seg_weights`` of each segment's repulsion (see
-    :class:`~softplan_jax.planning.step.GainFunction`). With neither, :meth:`decode`
-    returns :class:`~softplan_jax.planning.step.Gains`.
-
-    With ``stable_dt``, ``dt`` is not log-parametrised but as the logit of
-    ``r = dt k_att / 2``, its fraction of the Euler step's stability bound: within
-    ``v_max / k_att`` of the goal the attraction of eq. (9) is linear, so the
-    tip's error obeys ``e <- (1 - dt k_att) e`` (with ``J J^+`` close to the
-    identity away from singularities) and converges only for ``dt < 2 / k_att``
-    (1.0 at the default ``k_att = 2``). Beyond it the arm oscillates about its
-    goal: on random scenes success falls from 71-95 % at dt = 0.8 to 15-32 % at
-    dt = 1.1 (``benchmarks/tuning_validation/landscape.py``, b850131), a cliff in every
-    score, which a smoothing scale of 0.2 in log dt straddles from dt = 0.8. In
-    logit coordinates the bound lies at infinity, so neither a step nor the
-    smoothing's perturbations cross it.
-
-    Attributes:
-      names: scalar Gains fields tuned (log-parametrised; ``dt`` see ``stable_dt``).
-      knots: repulsion profile knots (0: none; else >= 2).
-      segments: per-segment repulsion weights (0: none; else the arm's n).
-      stable_dt: parametrise ``dt`` as ``logit(dt k_att / 2)`` (bool).
-    """
-
-    names: tuple = ("d0", "dt", "eta")
-    knots: int = 0
-    segments: int = 0
-    stable_dt: bool = False
-
-    @property
-    def size(self) -> int:
-        return len(self.names) + self.knots + self.segments
-
-    @property
-    def is_function(self) -> bool:
-        return self.knots > 0 or self.segments > 0
-
-    def check(self, n_segments: int | None = None) -> GainSpace:
-        names = tuple(self.names)
-        unknown = [k for k in names if k not in SCALAR_GAINS]
-        if unknown or len(set(names)) != len(names):
-            raise ValueError(f"GainSpace.names must be distinct Gains fields {list(SCALAR_GAINS)}; got {list(names)}")
-        if self.knots == 1 or self.knots < 0 or self.segments < 0:
-            raise ValueError(f"GainSpace needs knots 0 or >= 2 and segments >= 0; got {self.knots}, {self.segments}")
-        if self.segments and n_segments is not None and self.segments != n_segments:
-            raise ValueError(f"GainSpace.segments = {self.segments} for an arm of {n_segments} segments")
-        if self.size == 0:
-            raise ValueError("GainSpace tunes nothing: give names, knots or segments")
-        if not isinstance(self.stable_dt, (bool, np.bool_)):
-            raise ValueError(f"GainSpace.stable_dt must be a bool, got {self.stable_dt!r}")
-        return self._replace(names=names)
-
-    def base(self, gains, n_segments: int):
-        """``gains`` as the type this space decodes to (a GainFunction gets a zero
-        profile / weights where ``gains`` has none)."""
-        if not self.is_function:
-            return gains.scalars() if isinstance(gains, GainFunction) else gains
-        if isinstance(gains, GainFunction):
-            return gains
-        return GainFunction.from_gains(gains, max(self.knots, 2), self.segments or n_segments)
-
-    def encode(self, gains) -> jax.Array:
-        """theta of ``gains`` (a Gains or GainFunction; zeros where it has no profile).
-        With ``stable_dt``, a ``dt`` at or beyond ``2 / k_att`` encodes to +inf or nan."""
-
-        def coord(k):
-            v = jnp.asarray(getattr(gains, k))
-            if k == "dt" and self.stable_dt:
-                r = v * jnp.asarray(gains.k_att) / 2  # fraction of the stability bound 2 / k_att
-                return jnp.log(r) - jnp.log1p(-r)
-            return jnp.log(v)
-
-        parts = [jnp.stack([coord(k) for k in self.names])] if self.names else []
-        if self.knots:
-            p = gains.rep_profile if isinstance(gains, GainFunction) else None
-            parts.append(jnp.zeros((self.knots,), jnp.result_type(gains.k_att)) if p is None else p)
-        if self.segments:
-            w = gains.seg_weights if isinstance(gains, GainFunction) else None
-            parts.append(jnp.zeros((self.segments,), jnp.result_type(gains.k_att)) if w is None else w)
-        return jnp.concatenate(parts)
-
-    def decode(self, theta, base):
-        """The gains at ``theta``: ``base`` (as :meth:`base` returns it) with the tuned
-        entries replaced. Traceable; vmap over theta for many."""
-        nn = len(self.names)
-        stable = self.stable_dt and "dt" in self.names
-        g = base._replace(**{k: jnp.exp(theta[i]).astype(base.k_att.dtype) for i, k in enumerate(self.names)
-                             if not (stable and k == "dt")})
-        if stable:  # dt = (2 / k_att) sigmoid(theta_dt), with the (possibly tuned) k_att
-            g = g._replace(dt=(2 * jax.nn.sigmoid(theta[self.names.index("dt")]) / g.k_att).astype(g.k_att.dtype))
-        if self.knots:
-            g = g._replace(rep_profile=theta[nn : nn + self.knots].astype(base.k_att.dtype))
-        if self.segments:
-            g = g._replace(seg_weights=theta[nn + self.knots :].astype(base.k_att.dtype))
-        return g
-
-
 class ScoreWeights(NamedTuple):
-    """Weights of :func:`rollout_score` (floats).
+    """Weights of :func:`rollout_score` (floats; the user's choice of what a plan costs).
 
     Attributes:
       progress: weight of the area under the tip-error curve, normalised by the
         start's error (1: the tip never moved closer; near 0: reached at once).
       unreached: added when the rollout did not reach the goal.
       collided: added (on top of ``unreached``) when it collided.
+      steps: weight of the time to a plan, in units of the rollout's length
+        ``max_steps``: the steps taken / max_steps for a rollout that reached its
+        goal; for one that did not, 1 + ``fallback`` (it ran to its end, then the
+        fallback plans).
+      fallback: the fallback's time (:func:`softplan_jax.plan_fallback`), in
+        rollouts of ``max_steps`` steps, charged by ``steps`` to a rollout that
+        does not reach (``benchmarks/tuning_gain_function.py`` measures it).
+      path_length: weight of the tip's path length, normalised by the start's
+        tip error (1: a straight line to the goal).
     """
 
     progress: float = 1.0
     unreached: float = 1.0
     collided: float = 2.0
+    steps: float = 0.0
+    fallback: float = 0.0
+    path_length: float = 0.0
+
+
+def check_weights(weights) -> ScoreWeights:
+    """``weights`` if it is a :class:`ScoreWeights` of finite numbers >= 0, else a ValueError."""
+    if not isinstance(weights, ScoreWeights):
+        raise ValueError(f"weights must be a ScoreWeights, got {type(weights).__name__}")
+    for k, v in weights._asdict().items():
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
+                or not math.isfinite(v) or v < 0:
+            raise ValueError(f"ScoreWeights.{k} must be a finite number >= 0, got {v!r}")
+    return weights
 
 
 def rollout_score(r, scenario: Scenario, weights: ScoreWeights = ScoreWeights()):
     """The per-rollout score L of the smoothed objective (lower is better): a
-    failure indicator plus a progress term, bounded (at most about
-    ``progress + unreached + collided`` for an arm that never moves away from its
-    goal by more than its start error). ``r``: one (unbatched) Rollout."""
+    failure indicator plus a progress term and, with their weights, the time to a
+    plan (the fallback's included) and the tip's path length. Bounded (at most
+    about ``progress + unreached + collided + steps (1 + fallback)`` plus the path
+    term for an arm that never moves away from its goal by more than its start
+    error). ``r``: one (unbatched) Rollout of ``max_steps + 1`` records."""
     err = jnp.linalg.norm(scenario.goal - r.tip, axis=-1)
-    progress = jnp.mean(err) / jnp.maximum(err[0], jnp.finfo(err.dtype).tiny)
-    return (weights.progress * progress + weights.unreached * (~r.reached).astype(err.dtype)
-            + weights.collided * r.collided.astype(err.dtype))
+    start = jnp.maximum(err[0], jnp.finfo(err.dtype).tiny)
+    progress = jnp.mean(err) / start
+    unreached = (~r.reached).astype(err.dtype)
+    score = (weights.progress * progress + weights.unreached * unreached
+             + weights.collided * r.collided.astype(err.dtype))
+    # Terms with weight 0 stay out of the program (the default score, bit for bit).
+    if weights.steps:
+        max_steps = r.tip.shape[0] - 1
+        taken = r.iterations.astype(err.dtype) / max_steps
+        score = score + weights.steps * jnp.where(r.reached, taken, 1.0 + weights.fallback)
+    if weights.path_length:
+        travelled = jnp.sum(jnp.linalg.norm(jnp.diff(r.tip, axis=0), axis=-1))
+        score = score + weights.path_length * travelled / start
+    return score
 
 
 def _scores(thetas, space: GainSpace, base, scenarios: Scenario, keys, options: PlanOptions, max_steps: int,
