@@ -7,6 +7,7 @@ zero profile (the same arrays, bit for bit, from the single-scene program).
 """
 
 import math
+import warnings
 from types import SimpleNamespace
 
 import jax
@@ -159,3 +160,20 @@ def test_tune_smoothed_defaults_are_the_recipe():
     step = np.clip(-3.75 * sigma**2 * first.grad, -0.3, 0.3)
     assert np.any(step != 0)
     np.testing.assert_allclose(res.history["theta"][1], np.asarray(theta0) + step, rtol=1e-10, atol=1e-14)
+
+
+def test_euler_warning_sees_the_goal_profile_and_the_space_its_knots():
+    """k_att * dt below 2 for the constants, past it with a profile that doubles k_att near
+    the goal (and not with one that doubles it only far away); a start whose goal profile
+    has other knots than the space is refused."""
+    g = sp.GainFunction.from_gains(sp.default_gains()._replace(dt=jnp.asarray(0.6)), 2, 3, goal_knots=3)
+    near = g._replace(goal_profile=jnp.zeros((4, 3)).at[0, 0].set(math.log(2.0)))
+    far = g._replace(goal_profile=jnp.zeros((4, 3)).at[0, 2].set(math.log(2.0)))
+    with pytest.warns(UserWarning, match="goal profile"):
+        sp.planning.planner.check_gains(near, jnp.float64)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sp.planning.planner.check_gains(far, jnp.float64)
+        sp.planning.planner.check_gains(g, jnp.float64)
+    with pytest.raises(ValueError, match="goal_knots = 6"):
+        tune_smoothed(sp.random_scenarios(0, 2), gains=g, updates=1, pairs=2, max_steps=5, progress=False)

@@ -142,8 +142,17 @@ def check_gains(gains: Gains | GainFunction | None, dtype, n_segments: int | Non
             raise ValueError(f"goal_profile must be None or a finite ({len(GOAL_GAINS)}, K) array with K >= 2 "
                              f"(rows {', '.join(GOAL_GAINS)}), got shape {g.shape}")
     k_dt = float(vals["k_att"] * vals["dt"])
+    g = vals.get("goal_profile")
+    if g is not None:
+        # A goal profile scales k_att with the goal distance: the bound holds for the largest k_att
+        # within the linear zone, u <= 1/2 (the profile is piecewise linear: its knots there and u = 1/2).
+        knots = np.linspace(0.0, 1.0, g.shape[1])
+        row = g[GOAL_GAINS.index("k_att")]
+        near = np.append(row[knots <= 0.5], np.interp(0.5, knots, row))
+        k_dt *= float(np.exp(near.max()))
     if k_dt >= EULER_BOUND:
-        warnings.warn(f"gain dt = {float(vals['dt']):g} with k_att = {float(vals['k_att']):g}: k_att * dt = {k_dt:g} "
+        warnings.warn(f"gain dt = {float(vals['dt']):g} with k_att = {float(vals['k_att']):g}"
+                      f"{' (times its goal profile near the goal)' if g is not None else ''}: k_att * dt = {k_dt:g} "
                       f">= {EULER_BOUND:g}, past the stability bound of the explicit Euler step (dt < 2 / k_att = "
                       f"{EULER_BOUND / float(vals['k_att']):g}): near the goal the tip's error e <- (1 - k_att dt) e "
                       "grows instead of shrinking, so the arm oscillates about the goal and may never settle on it",

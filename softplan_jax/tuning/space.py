@@ -98,6 +98,11 @@ class GainSpace(NamedTuple):
         if self.goal_knots and gains.goal_profile is None:
             gains = gains._replace(goal_profile=jnp.zeros((len(GOAL_GAINS), self.goal_knots),
                                                           jnp.result_type(gains.k_att)))
+        for name, k, have in (("knots", self.knots, gains.rep_profile),
+                              ("goal_knots", self.goal_knots, gains.goal_profile)):
+            if k and have.shape[-1] != k:
+                raise ValueError(f"GainSpace.{name} = {k}, but the start gain function's "
+                                 f"{'rep_profile' if name == 'knots' else 'goal_profile'} has {have.shape[-1]} knots")
         return gains
 
     def encode(self, gains) -> jax.Array:
