@@ -141,7 +141,7 @@ def main(argv=None) -> dict:
 
     import softplan_jax as sp
     from softplan_jax.planning.planner import make_options
-    from softplan_jax.tuning import GainSpace, ScoreWeights, score_batch, tune_smoothed
+    from softplan_jax.tuning import GainSpace, ScoreWeights, rollout_score, score_batch, tune_smoothed
     from softplan_jax.tuning.objective import check_weights
     from softplan_jax.tuning.tuner import RECIPE_SPACE, recipe_sigma, recipe_start
 
@@ -239,19 +239,11 @@ def main(argv=None) -> dict:
 
     def heldout_eval(gains):
         r = sp.plan_batch(heldout, gains=gains, max_steps=args.max_steps, seed=args.eval_seed)
-        tip, goal = np.asarray(r.tip), np.asarray(heldout.goal)
-        err = np.linalg.norm(goal[:, None] - tip, axis=-1)
         reached, collided = np.asarray(r.reached), np.asarray(r.collided)
         its = np.asarray(r.iterations)
-        path = np.linalg.norm(np.diff(tip, axis=1), axis=-1).sum(1)
-        start_err = np.maximum(err[:, 0], np.finfo(float).tiny)
-        # The tuning objective (rollout_score) at the held-out length.
-        score = (weights.progress * err.mean(1) / start_err + weights.unreached * ~reached
-                 + weights.collided * collided)
-        if weights.steps:
-            score = score + weights.steps * np.where(reached, its / args.max_steps, 1 + weights.fallback)
-        if weights.path_length:
-            score = score + weights.path_length * path / start_err
+        path = np.linalg.norm(np.diff(np.asarray(r.tip), axis=1), axis=-1).sum(1)
+        # The tuning objective itself (rollout_score) at the held-out length.
+        score = np.asarray(jax.vmap(lambda ro, sc: rollout_score(ro, sc, weights))(r, heldout))
         plan_time = np.where(reached, its, args.max_steps + args.fallback_steps)
         return dict(success=reached & ~collided, collided=collided, steps=its, path=path, score=score,
                     plan_time=plan_time)

@@ -83,7 +83,7 @@ class GainSpace(NamedTuple):
         if self.segments and n_segments is not None and self.segments != n_segments:
             raise ValueError(f"GainSpace.segments = {self.segments} for an arm of {n_segments} segments")
         if self.size == 0:
-            raise ValueError("GainSpace tunes nothing: give names, knots or segments")
+            raise ValueError("GainSpace tunes nothing: give names, knots, segments or goal_knots")
         if not isinstance(self.stable_dt, (bool, np.bool_)):
             raise ValueError(f"GainSpace.stable_dt must be a bool, got {self.stable_dt!r}")
         return self._replace(names=names)
@@ -98,11 +98,11 @@ class GainSpace(NamedTuple):
         if self.goal_knots and gains.goal_profile is None:
             gains = gains._replace(goal_profile=jnp.zeros((len(GOAL_GAINS), self.goal_knots),
                                                           jnp.result_type(gains.k_att)))
-        for name, k, have in (("knots", self.knots, gains.rep_profile),
-                              ("goal_knots", self.goal_knots, gains.goal_profile)):
+        for name, field in (("knots", "rep_profile"), ("goal_knots", "goal_profile")):
+            k, have = getattr(self, name), getattr(gains, field)
             if k and have.shape[-1] != k:
-                raise ValueError(f"GainSpace.{name} = {k}, but the start gain function's "
-                                 f"{'rep_profile' if name == 'knots' else 'goal_profile'} has {have.shape[-1]} knots")
+                raise ValueError(f"GainSpace.{name} = {k}, but the start gain function's {field} has "
+                                 f"{have.shape[-1]} knots")
         return gains
 
     def encode(self, gains) -> jax.Array:
