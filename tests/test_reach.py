@@ -67,6 +67,25 @@ def test_reachable_goal_has_certified_configuration(decided):
     assert np.all(np.diff(c) <= 0)
 
 
+def test_goal_configurations_hold_one_exact_solve(monkeypatch):
+    """The IK's program holds one copy of the exact solver (issue 34: the fallback's compile
+    time): the starts, the tip IK from them and every null-space round are assessed at one
+    site, the body of one loop. Traced only (make_jaxpr): nothing compiles."""
+    from softplan_jax.search import reach as reach_module
+
+    sites = []
+    real = reach_module.clearances
+
+    def counting(*args, **kwargs):
+        sites.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(reach_module, "clearances", counting)
+    s = scene()
+    jax.make_jaxpr(lambda s, key, q: reach_module.goal_configurations(s, key, q, OPTS))(s, jax.random.PRNGKey(0), s.q0)
+    assert len(sites) == 1
+
+
 def test_beyond_reach_is_proven_and_best_error_is_sound(decided):
     _, r = decided
     assert not r.reachable[1] and r.reason[1] == "beyond_reach"

@@ -45,7 +45,7 @@ import numpy as np
 from ..base.numerics import damped_pinv, safe_norm, solve_small
 from ..geometry.closest import DEFAULT_OPTIONS, SolverOptions
 from ..geometry.kinematics import points_jacobian, tip_position
-from ..geometry.obstacles import radius_and_mask, true_closest
+from ..geometry.obstacles import placeholder_closest, radius_and_mask, true_closest
 from ..scenarios import Scenario
 from ..scenarios.scenario import unreachable_reason
 
@@ -263,7 +263,8 @@ def goal_configurations(scenario: Scenario, key, q_extra, options: ReachOptions,
     Tip IK from every start, then the exact clearances; while no start is
     certified (and at most ``ik_clear_iterations`` times), one null-space
     clearance step and a tip polish for every start, and the clearances anew
-    (a ``while_loop``: a goal certified at once pays one exact solve per start).
+    (a ``while_loop``: a goal certified at once pays two exact solves per start,
+    one at the start itself and one after the IK).
 
     Returns ``(q (S, n, 3), certified (S,), clearance (S,), tip_error (S,),
     best_error ())``, sorted: certified first, then by clearance (largest first).
@@ -287,26 +288,34 @@ def goal_configurations(scenario: Scenario, key, q_extra, options: ReachOptions,
         free = finite & ok & (c > contact)
         return (c_all, truth), c, err, certified, free
 
-    # The starts themselves count for the best collision-free tip distance (the start pose
-    # is clear in a valid scene: a goal inside an obstacle still gets a finite distance).
-    _, _, err0, _, free0 = jax.vmap(assess)(starts)
-    q = jax.vmap(lambda q: _tip_lm(q, scenario, options.ik_iterations))(starts)
-    solved, c, err, certified, free = jax.vmap(assess)(q)
-    best = jnp.minimum(jnp.min(jnp.where(free0, err0, jnp.inf)), jnp.min(jnp.where(free, err, jnp.inf)))
+    # One exact solve site, the loop's body (one copy of the solver in the compiled
+    # program). Round 0 assesses the starts themselves: they count for the best
+    # collision-free tip distance (the start pose is clear in a valid scene: a goal inside
+    # an obstacle still gets a finite distance). Round 1: the tip IK from the starts
+    # (ik_iterations Levenberg-Marquardt steps, taken before the loop: no solve in them).
+    # Rounds 2, 3, ...: while no start is certified (at most ik_clear_iterations times),
+    # one null-space push from the clearances the last round found and a 3-step tip polish.
+    q_ik = jax.vmap(lambda q: _tip_lm(q, scenario, options.ik_iterations))(starts)
 
     def cond(state):
-        k, _, _, _, _, certified, _, _ = state
-        return (k < options.ik_clear_iterations) & ~jnp.any(certified)
+        r, _, _, _, _, certified, _, _ = state
+        return (r < 2) | ((r - 2 < options.ik_clear_iterations) & ~jnp.any(certified))
 
     def body(state):
-        # The push step at q starts from the clearances assess found there: one solve per start.
-        k, q, solved, _, _, _, _, best = state
-        q = jax.vmap(lambda q, s: _tip_lm(_push_step(q, *s, scenario, options), scenario, 3))(q, solved)
+        r, q, solved, _, _, _, _, best = state
+        pushed = jax.vmap(lambda q, s: _tip_lm(_push_step(q, *s, scenario, options), scenario, 3))(q, solved)
+        q = jnp.where(r == 0, starts, jnp.where(r == 1, q_ik, pushed))
         solved, c, err, certified, free = jax.vmap(assess)(q)
         best = jnp.minimum(best, jnp.min(jnp.where(free, err, jnp.inf)))
-        return k + 1, q, solved, c, err, certified, free, best
+        return r + 1, q, solved, c, err, certified, free, best
 
-    state = (jnp.zeros((), jnp.int32), q, solved, c, err, certified, free, best)
+    # Rounds 0 and 1 compute a push from these placeholders and the starts' clearances; it is not taken.
+    dtype = q0.dtype
+    truth = jax.vmap(lambda q: placeholder_closest(q, scenario))(starts)
+    solved = (jnp.zeros(truth.distance.shape, dtype), truth)
+    none = jnp.zeros((S,), bool)
+    state = (jnp.zeros((), jnp.int32), starts, solved, jnp.zeros((S,), dtype), jnp.zeros((S,), dtype), none, none,
+             jnp.asarray(jnp.inf, dtype))
     _, q, _, c, err, certified, _, best = jax.lax.while_loop(cond, body, state)
     order = jnp.argsort(jnp.where(certified, -c, jnp.inf))  # certified, widest clearance first
     return q[order], certified[order], c[order], err[order], best
