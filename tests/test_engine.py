@@ -11,7 +11,15 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.base.compilation_cache import rollout_compiler_options
-from softplan_jax.planning.engine import ACCELERATOR_LANES, DEFAULT_LANES, check_engine_sizes, default_lanes, run
+from softplan_jax.planning.engine import (
+    ACCELERATOR_LANES,
+    DEFAULT_LANES,
+    DEFAULT_QUANTUM,
+    check_engine_sizes,
+    default_lanes,
+    run,
+    run_lanes,
+)
 from softplan_jax.planning.planner import make_options, plan_device
 from softplan_jax.planning.programs import batch_keys, rollout, rollout_jit
 from softplan_jax.planning.step import safe_scale
@@ -66,18 +74,47 @@ def test_records_frozen_after_the_end(paper):
     assert float(r.final_error) == float(np.linalg.norm(np.asarray(paper["tree"].goal) - r.tip[it]))
 
 
+def _suspensions(held_steps, lanes, quantum):
+    """The scenes run_lanes suspends, in order, for scenes that hold a lane for ``held_steps``
+    steps each (iterations + 1: the last step judges): its queue in plain Python."""
+    queue = list(range(lanes, len(held_steps)))
+    lane = [[b, 0, 0] for b in range(lanes)]  # scene, steps it has taken, steps held in this lane
+    left, suspended = list(held_steps), []
+    while any(b is not None for b, _, _ in lane):
+        for ln in lane:
+            if ln[0] is not None:
+                ln[1] += 1
+                ln[2] += 1
+        done = [ln[0] is not None and ln[1] == left[ln[0]] for ln in lane]
+        spare = len(queue) - sum(done)
+        due = [ln[0] is not None and not d and ln[2] >= quantum for ln, d in zip(lane, done, strict=True)]
+        suspend = [d and sum(due[: i + 1]) <= spare for i, d in enumerate(due)]
+        for ln, s in zip(lane, suspend, strict=True):
+            if s:
+                left[ln[0]] -= ln[1]
+                queue.append(ln[0])
+                suspended.append(ln[0])
+        for ln, d, s in zip(lane, done, suspend, strict=True):
+            if d or s:
+                ln[:] = [queue.pop(0) if queue else None, 0, 0]
+    return suspended
+
+
 def test_lanes_refill_matches_single_rollouts(five):
-    """Five scenes on two lanes (three refills, one idle lane at the end): bit for bit the
-    rollouts of five lanes (no refill), and against a Python loop of single rollouts with the
-    same keys: the same status, steps and escapes, and q to rounding (a vmapped program rounds
-    differently). The scene beyond reach escapes at random (its key matters): there a near-tie
-    amplifies the rounding difference from about step 46 on (1e-14 to 1e-2 by the end), so
-    its q is compared over the first 40 steps; the others over the whole horizon."""
+    """Five scenes on two lanes (refills, scenes suspended after DEFAULT_QUANTUM steps and
+    resumed, one idle lane at the end): bit for bit the rollouts of five lanes (no refill, no
+    suspension), and against a Python loop of single rollouts with the same keys: the same
+    status, steps and escapes, and q to rounding (a vmapped program rounds differently). The
+    scene beyond reach escapes at random (its key and walk follow it through its suspensions):
+    there a near-tie amplifies the rounding difference from about step 46 on (1e-14 to 1e-2 by
+    the end), so its q is compared over the first 40 steps; the others over the whole horizon."""
     stack = sp.scenarios.stack_scenarios(five)
     two = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, lanes=2, devices=1))
     all5 = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, lanes=5, devices=1))
     for f, x in _fields(all5).items():
         np.testing.assert_array_equal(np.asarray(getattr(two, f)), x, err_msg=f)
+    # The two lanes did suspend scenes, among them the escaping one: the check above covers it.
+    assert 3 in _suspensions([int(i) + 1 for i in two.iterations], 2, DEFAULT_QUANTUM)
     keys = batch_keys(0, len(five))
     assert int(two.escapes[3]) > 0
     for b, sc in enumerate(five):
@@ -162,6 +199,14 @@ def test_bad_sizes_refused_before_compiling(paper, kwargs, field):
             sp.plan(paper["tree"], **kwargs)
     with pytest.raises(ValueError, match="lanes"):
         check_engine_sizes(10, 8, "4")
+
+
+@pytest.mark.parametrize("quantum", [0, 2.5, True, "64"])
+def test_bad_quantum_refused_before_tracing(paper, quantum):
+    stack = sp.scenarios.stack_scenarios(list(paper.values()))
+    keys = batch_keys(0, 3)
+    with pytest.raises(ValueError, match="quantum must be an int >= 1"):
+        run_lanes(stack, sp.default_gains(), make_options("curve"), 10, keys, quantum=quantum)
 
 
 def test_tracking_a_static_scene_plans_it_then_holds(paper):

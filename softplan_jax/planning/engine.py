@@ -39,8 +39,10 @@ Paid by the step. :func:`run` has three drivers of the same step:
   ``while_loop`` that stops after the chunk in which the rollout finished;
 * ``"lanes"`` (a batch, :func:`run_lanes`): ``lanes`` scenes step side by
   side (vmapped); when one finishes, its lane takes the next scene of the
-  batch at the next step, so a batch costs about the sum of its scenes'
-  steps, not batch size x the slowest scene.
+  batch at the next step, and a scene that has held its lane for ``quantum``
+  steps while others wait goes back to the queue (round robin), so a batch
+  costs about the sum of its scenes' steps, not batch size x the slowest
+  scene, nor a tail of long scenes started last in otherwise idle lanes.
 
 Every driver returns the same arrays, padded to max_steps + 1 along time:
 after the step where a rollout ended, the records hold its last state
@@ -69,7 +71,7 @@ from .evasion import evasive_target, slot_clearance
 from .records import Record, Rollout, finish, record_zeros, setup
 from .step import attraction, goal_scaled, scaled_step, step_target, tracking_attraction
 
-__all__ = ["Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "ACCELERATOR_LANES", "default_lanes", "run",
+__all__ = ["Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "DEFAULT_QUANTUM", "ACCELERATOR_LANES", "default_lanes", "run",
            "run_lanes", "check_engine_sizes"]
 
 DEFAULT_STEP_CHUNK = 8  # steps between two checks of "done": at most 7 steps computed past the end
@@ -78,6 +80,7 @@ DEFAULT_LANES = 64  # scenes stepped side by side in a batch on a CPU (benchmark
 # float64, a batch of 1,024 ran 8x faster with 1,024 lanes than with 64, and 16,384 lanes took
 # 3.7e6 scene-steps/s (benchmarks/gpu.py); wider was not measured.
 ACCELERATOR_LANES = 16384
+DEFAULT_QUANTUM = 64  # steps a lane holds a scene while others wait (run_lanes; benchmarks/engine.py)
 
 
 def default_lanes(platform: str | None = None) -> int:
@@ -109,18 +112,19 @@ class Carry(NamedTuple):
     certified: jax.Array  # the motion from q_{k-1} to q_k was proven clear by the evasive step
 
 
+def _whole(name, v) -> int:
+    """v as an int; ValueError for anything but an int >= 1 (a bool, a float such as 2.5, a string)."""
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
+        raise ValueError(f"{name} must be an int >= 1, got {v!r}")
+    return int(v)
+
+
 def check_engine_sizes(max_steps, step_chunk=DEFAULT_STEP_CHUNK, lanes=None) -> tuple:
     """Validate the engine's sizes on the host, before anything compiles: ``(max_steps,
     step_chunk, lanes)`` as ints (``lanes`` may be None). ValueError for anything but an
     int >= 1 (a bool, a float such as 2.5, a string)."""
-
-    def whole(name, v):
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
-            raise ValueError(f"{name} must be an int >= 1, got {v!r}")
-        return int(v)
-
-    return (whole("max_steps", max_steps), whole("step_chunk", step_chunk),
-            None if lanes is None else whole("lanes", lanes))
+    return (_whole("max_steps", max_steps), _whole("step_chunk", step_chunk),
+            None if lanes is None else _whole("lanes", lanes))
 
 
 def _moving_cells(cells, moving: MovingScenario, t):
@@ -400,70 +404,95 @@ def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
 
 
 def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFAULT_LANES,
-              step_chunk: int = DEFAULT_STEP_CHUNK) -> Rollout:
+              step_chunk: int = DEFAULT_STEP_CHUNK, quantum: int = DEFAULT_QUANTUM) -> Rollout:
     """A batch of rollouts (``worlds``: a stacked Scenario or MovingScenario, leading
     axis B; ``keys`` (B,) keys), ``lanes`` at a time, refilled as they finish.
 
-    Each lane steps one scene; after the step where its scene finished (or reached
-    max_steps) it loads the next scene of the batch not yet started, with that
-    scene's key, so the lanes stay busy until the batch runs out. The scenes are
-    the same rollouts as :func:`run`'s (each its own carry, key and step count),
-    vmapped over the lanes: they agree with one-at-a-time rollouts to rounding.
-    The loop stops after the ``step_chunk`` steps in which the last scene finished.
+    Each lane steps one scene (:func:`run`'s rollout, its own carry, key and step count;
+    vmapped: equal to one-at-a-time rollouts to rounding). A lane whose scene finished (or
+    reached max_steps) takes the next scene of the queue: the scenes not yet started, in
+    batch order, then the suspended ones. A lane that has held its scene ``quantum`` steps
+    while others wait suspends it (carry and step kept) and takes the next (round robin),
+    so that the scenes started last do not run alone at the end in otherwise idle lanes;
+    the results do not depend on the quantum. The loop stops after the ``step_chunk``
+    steps in which the last scene finished.
 
     Returns a batched :class:`Rollout` (leading axis B).
     """
+    max_steps, step_chunk, lanes = check_engine_sizes(max_steps, step_chunk, lanes)
+    quantum = _whole("quantum", quantum)
     B = jax.tree_util.tree_leaves(worlds)[0].shape[0]
-    L = min(int(lanes), B)
-    T1 = max_steps + 1
-    C = int(step_chunk)
+    L = min(lanes, B)
     prepared = jax.vmap(lambda w: prepare(w, options))(worlds)  # once per scene
 
-    def take(b):
-        """Scene b's world, prepared data, key and first carry (b: (L,) indices)."""
-        w, p, key = jax.tree_util.tree_map(lambda x: x[b], (worlds, prepared, keys))
-        return w, p, jax.vmap(lambda w, key: init_carry(w, options, key))(w, key)
+    def take(b, kept, k_kept):
+        """Scene b's world, prepared data, carry and step kept (b: (L,) indices)."""
+        w, p, carry = jax.tree_util.tree_map(lambda x: x[b], (worlds, prepared, kept))
+        return (w, p, carry), k_kept[b]
 
     def step_one(world, prep, carry, k):
         return make_step(world, gains, options, max_steps, prep)(carry, k)
 
+    # kept: each scene's carry: its first until it starts, its last once suspended (until it
+    # resumes) or finished; k_kept: the step it resumes at (0: not started).
+    kept0 = jax.vmap(lambda w, key: init_carry(w, options, key))(worlds, keys)
+    k_kept0 = jnp.zeros((B,), jnp.int32)
     idx0 = jnp.arange(L, dtype=jnp.int32)
-    w0, p0, carry0 = take(idx0)
+    lane0, k0 = take(idx0, kept0, k_kept0)
     one = jax.tree_util.tree_map(lambda x: x[0], worlds)
     out = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape), x.dtype),
-                                 record_zeros(one, options, T1))
-    final0 = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape[1:]), x.dtype), carry0)
-    state0 = (out, final0, idx0, jnp.zeros((L,), jnp.int32), (w0, p0, carry0), jnp.asarray(L, jnp.int32))
+                                 record_zeros(one, options, max_steps + 1))
+    # The queue, a ring of B scene indices read at head and written at tail: first the scenes
+    # L, ..., B - 1 (not started), then each suspended scene in the order of its suspension.
+    queue0 = jnp.arange(L, L + B, dtype=jnp.int32) % B
+    ring0 = (queue0, jnp.zeros((), jnp.int32), jnp.asarray(B - L, jnp.int32))  # queue, head, tail
+    state0 = (out, kept0, k_kept0, idx0, k0, jnp.zeros((L,), jnp.int32), lane0, ring0)
 
     def lane_step(state, _):
-        out, final, idx, k, (w, p, carry), nxt = state
+        out, kept, k_kept, idx, k, held, (w, p, carry), ring = state
         active = idx < B
         carry, rec = jax.vmap(step_one)(w, p, carry, k)
         row = jnp.where(active, idx, B)  # B: out of range, dropped
         out = jax.tree_util.tree_map(lambda o, r: o.at[row, k].set(r, mode="drop"), out, rec)
         done = active & ((carry.status != Status.RUNNING) | (k >= max_steps))
+        # Suspend (in lane order) as many scenes at the end of their quantum as wait in the
+        # queue beyond those the finished lanes take: none gets its own scene back.
+        queue, head, tail = ring
+        spare = tail - head - jnp.sum(done, dtype=jnp.int32)
+        due = active & ~done & (held + 1 >= quantum)
+        suspend = due & (jnp.cumsum(due.astype(jnp.int32)) <= spare)
+        vacated = done | suspend
 
         def refill(state):
-            # The finished scenes' last carries, then the next scenes into their lanes, in lane
-            # order (none left: index B, idle).
-            final, idx, nxt, lane = state
-            final = jax.tree_util.tree_map(lambda f, c: f.at[jnp.where(done, idx, B)].set(c, mode="drop"), final,
-                                           lane[2])
-            idx = jnp.where(done, jnp.minimum(nxt + jnp.cumsum(done.astype(jnp.int32)) - 1, B), idx)
-            fresh = take(jnp.minimum(idx, B - 1))
+            kept, k_kept, idx, (queue, head, tail), lane = state
+            kept = jax.tree_util.tree_map(lambda f, c: f.at[jnp.where(vacated, idx, B)].set(c, mode="drop"), kept,
+                                          lane[2])
+            parked = jnp.where(suspend, idx, B)
+            k_kept = k_kept.at[parked].set(k + 1, mode="drop")
+            queue = queue.at[jnp.where(suspend, (tail + jnp.cumsum(suspend.astype(jnp.int32)) - 1) % B, B)].set(
+                idx, mode="drop")
+            tail = tail + jnp.sum(suspend, dtype=jnp.int32)
+            # The vacated lanes take the queue's next scenes, in lane order (none left: index B, idle).
+            rank = jnp.cumsum(vacated.astype(jnp.int32)) - 1
+            gets = vacated & (rank < tail - head)
+            idx = jnp.where(vacated, jnp.where(gets, queue[(head + rank) % B], B), idx)
+            head = head + jnp.sum(gets, dtype=jnp.int32)
+            fresh, k_fresh = take(jnp.minimum(idx, B - 1), kept, k_kept)
             lane = jax.tree_util.tree_map(
-                lambda a, b: jnp.where(done.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), fresh, lane)
-            return final, idx, nxt + jnp.sum(done, dtype=jnp.int32), lane
+                lambda a, b: jnp.where(vacated.reshape((-1,) + (1,) * (a.ndim - 1)), a, b), fresh, lane)
+            return kept, k_kept, idx, (queue, head, tail), lane, k_fresh
 
-        final, idx, nxt, lane = jax.lax.cond(jnp.any(done), refill, lambda state: state, (final, idx, nxt, (w, p, carry)))
-        k = jnp.where(done, 0, k + 1)
-        return (out, final, idx, k, lane, nxt), None
+        kept, k_kept, idx, ring, lane, k_fresh = jax.lax.cond(
+            jnp.any(vacated), refill, lambda state: (*state, k), (kept, k_kept, idx, ring, (w, p, carry)))
+        k = jnp.where(vacated, k_fresh, k + 1)
+        held = jnp.where(vacated, 0, held + 1)
+        return (out, kept, k_kept, idx, k, held, lane, ring), None
 
     def cond(state):
-        return jnp.any(state[2] < B)
+        return jnp.any(state[3] < B)
 
     def body(state):
-        return jax.lax.scan(lane_step, state, None, length=C)[0]
+        return jax.lax.scan(lane_step, state, None, length=step_chunk)[0]
 
-    out, final, *_ = jax.lax.while_loop(cond, body, state0)
-    return jax.vmap(lambda w, rec, fin: finish(w, options, rec, fin))(worlds, out, final)
+    out, kept, *_ = jax.lax.while_loop(cond, body, state0)
+    return jax.vmap(lambda w, rec, fin: finish(w, options, rec, fin))(worlds, out, kept)
