@@ -112,8 +112,7 @@ class Carry(NamedTuple):
     certified: jax.Array  # the motion from q_{k-1} to q_k was proven clear by the evasive step
 
 
-def _whole(name, v) -> int:
-    """v as an int; ValueError for anything but an int >= 1 (a bool, a float such as 2.5, a string)."""
+def _whole(name, v) -> int:  # v as an int; ValueError for anything but an int >= 1
     if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
         raise ValueError(f"{name} must be an int >= 1, got {v!r}")
     return int(v)
@@ -404,7 +403,7 @@ def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
 
 
 def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFAULT_LANES,
-              step_chunk: int = DEFAULT_STEP_CHUNK, quantum: int = DEFAULT_QUANTUM) -> Rollout:
+              step_chunk: int = DEFAULT_STEP_CHUNK, quantum: int | None = None) -> Rollout:
     """A batch of rollouts (``worlds``: a stacked Scenario or MovingScenario, leading
     axis B; ``keys`` (B,) keys), ``lanes`` at a time, refilled as they finish.
 
@@ -414,13 +413,17 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFA
     batch order, then the suspended ones. A lane that has held its scene ``quantum`` steps
     while others wait suspends it (carry and step kept) and takes the next (round robin),
     so that the scenes started last do not run alone at the end in otherwise idle lanes;
-    the results do not depend on the quantum. The loop stops after the ``step_chunk``
-    steps in which the last scene finished.
+    the results do not depend on the quantum. None: :data:`DEFAULT_QUANTUM` when planning,
+    none when tracking (every scene holds to the horizon: nothing to balance, and each
+    suspension costs a refill). The loop stops after the ``step_chunk`` steps in which the
+    last scene finished.
 
     Returns a batched :class:`Rollout` (leading axis B).
     """
     max_steps, step_chunk, lanes = check_engine_sizes(max_steps, step_chunk, lanes)
-    quantum = _whole("quantum", quantum)
+    one = jax.tree_util.tree_map(lambda x: x[0], worlds)
+    planning = setup(one, options).stop_at_goal
+    quantum = _whole("quantum", (DEFAULT_QUANTUM if planning else max_steps + 1) if quantum is None else quantum)
     B = jax.tree_util.tree_leaves(worlds)[0].shape[0]
     L = min(lanes, B)
     prepared = jax.vmap(lambda w: prepare(w, options))(worlds)  # once per scene
@@ -439,7 +442,6 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFA
     k_kept0 = jnp.zeros((B,), jnp.int32)
     idx0 = jnp.arange(L, dtype=jnp.int32)
     lane0, k0 = take(idx0, kept0, k_kept0)
-    one = jax.tree_util.tree_map(lambda x: x[0], worlds)
     out = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape), x.dtype),
                                  record_zeros(one, options, max_steps + 1))
     # The queue, a ring of B scene indices read at head and written at tail: first the scenes
