@@ -246,3 +246,63 @@ def test_fit_matches_least_squares_on_chord_parameter():
         if degree >= 3:
             fitted = np.stack([P.polyval(u, np.asarray(c.coeffs)[k]) for k in range(3)], 1)
             assert np.abs(fitted - pts).max() < 5e-3
+
+
+def test_point_curve_lower_bound_never_exceeds_the_distance():
+    """point_curve_lower_bound (the cheap skip of the goal-in-obstacle check) stays at or below
+    the exact point-curve distance and a dense sampling of the curve, for degrees 1 to 9, ranges
+    inside and beyond [-1, 1] and points on, near and far from the curve; far away it is within
+    its slack of the distance (it does skip)."""
+    from softplan_jax.geometry.point_curve import point_curve_distance, point_curve_lower_bound
+
+    rng = np.random.default_rng(7)
+    for trial in range(60):
+        degree = 1 + trial % 9
+        coeffs = rng.normal(size=(3, degree + 1)) / np.arange(1, degree + 2) ** 1.5
+        lo = rng.uniform(-2.0, 0.5)
+        hi = lo + rng.uniform(0.01, 2.0)
+        u = np.linspace(lo, hi, 200_001)
+        curve = np.stack([P.polyval(u, coeffs[k]) for k in range(3)], 1)
+        on = curve[rng.integers(u.size)]
+        for p in (on, on + rng.normal(scale=1e-3, size=3), on + rng.normal(scale=0.3, size=3),
+                  on + rng.normal(scale=30.0, size=3)):
+            bound = point_curve_lower_bound(coeffs, (lo, hi), p)
+            exact = point_curve_distance(coeffs, (lo, hi), p)
+            dense = np.linalg.norm(curve - p, axis=1).min()
+            assert bound <= exact + 1e-12 and bound <= dense, (trial, bound, exact, dense)
+    far = np.array([5.0, 5.0, 5.0])
+    coeffs = np.array([[0.0, 1.0, 0.3], [0.0, 0.2, -0.5], [0.0, 0.4, 0.1]])
+    exact = point_curve_distance(coeffs, (0.0, 1.0), far)
+    assert exact - 0.01 < point_curve_lower_bound(coeffs, (0.0, 1.0), far) <= exact
+
+
+def test_goal_obstacle_hits_skip_only_far_curves():
+    """goal_obstacle_hits asks point_obstacle_distances for exact distances only where the bound
+    does not clear the radius plus the arm's: the same hits, clearances and exactness as the
+    exact distance of every curve, for goals inside, on, just outside and far from the tree's
+    obstacles."""
+    from softplan_jax.geometry.obstacles import point_obstacle_distances
+    from softplan_jax.scenarios.scenario import goal_obstacle_hits
+
+    tree = sp.paper_scenario("tree")
+    arm_r = float(tree.arm_radius)
+    coeffs, u_range = np.asarray(tree.curves.coeffs), np.asarray(tree.curves.u_range)
+    radius = np.asarray(tree.curves.radius)
+    rng = np.random.default_rng(3)
+    goals, skipped = [], 0
+    for k in np.nonzero(np.asarray(tree.curve_mask))[0]:
+        u = rng.uniform(*u_range[k], 4)
+        on = np.stack([P.polyval(u, coeffs[k][a]) for a in range(3)], 1)
+        for c in on:
+            direction = rng.normal(size=3)
+            direction /= np.linalg.norm(direction)
+            for offset in (0.0, radius[k] + arm_r - 1e-9, radius[k] + arm_r + 1e-9, 0.05, 1.0):
+                goals.append(c + offset * direction)
+    for g in goals:
+        scene = tree._replace(goal=jnp.asarray(g))
+        every = point_obstacle_distances(scene, g)
+        want = [(o["slot"], o["distance"] - o["radius"] - arm_r, o["exact"]) for o in every
+                if o["distance"] - o["radius"] - arm_r <= 0]
+        assert goal_obstacle_hits(scene) == want
+        skipped += sum(not o["exact"] for o in point_obstacle_distances(scene, g, beyond=arm_r))
+    assert skipped > len(goals)  # most curves are skipped for most goals

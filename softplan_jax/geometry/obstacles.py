@@ -29,7 +29,7 @@ import numpy as np
 
 from .closest import ClosestPoint, SolverOptions, curve_closest
 from .curves import curve_points
-from .point_curve import point_curve_distance
+from .point_curve import point_curve_distance, point_curve_lower_bound
 from .point_sets import point_set_closest, points_closest
 from .warm_start import curve_data, warm_curves
 
@@ -304,21 +304,28 @@ def obstacle_labels(scenario) -> list[str]:
     )
 
 
-def point_obstacle_distances(scenario, p, parametric_samples: int = 2049) -> list[dict]:
+def point_obstacle_distances(scenario, p, parametric_samples: int = 2049, beyond: float | None = None) -> list[dict]:
     """The distance from one point p (3,) to every real obstacle (host side, NumPy), in slot
     order: ``dict(kind, distance, radius, slot, exact)``. Polynomial curves: the exact
     point-curve distance (:func:`~softplan_jax.geometry.point_curve.point_curve_distance`);
     point sets: the nearest point; parametric curves: ``parametric_samples`` samples
     less half their largest spacing (never above the true distance, ``exact`` False: a
-    function has no closed form)."""
+    function has no closed form). ``beyond`` (a distance), if given: a polynomial curve
+    proven farther than its radius plus ``beyond``
+    (:func:`~softplan_jax.geometry.point_curve.point_curve_lower_bound`) gets that bound
+    instead of the exact distance (``exact`` False), for a caller that only asks which
+    obstacles lie within ``beyond`` of their surface."""
     p = np.asarray(p, np.float64)
     out = []
     coeffs = np.asarray(scenario.curves.coeffs, dtype=np.float64)
     u_range = np.asarray(scenario.curves.u_range, dtype=np.float64)
     radius = np.asarray(scenario.curves.radius, dtype=np.float64)
     for k in np.nonzero(np.asarray(scenario.curve_mask))[0]:
-        out.append(dict(kind="curve", distance=point_curve_distance(coeffs[k], u_range[k], p),
-                        radius=float(radius[k]), slot=int(k), exact=True))
+        d = None if beyond is None else point_curve_lower_bound(coeffs[k], u_range[k], p)
+        exact = d is None or not d > float(radius[k]) + beyond
+        if exact:
+            d = point_curve_distance(coeffs[k], u_range[k], p)
+        out.append(dict(kind="curve", distance=float(d), radius=float(radius[k]), slot=int(k), exact=exact))
     for o in obstacle_samples(scenario, parametric_samples):
         if o["kind"] == "points":
             d = float(np.min(np.linalg.norm(o["pts"] - p, axis=-1)))

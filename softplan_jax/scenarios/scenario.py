@@ -210,7 +210,8 @@ def goal_obstacle_hits(scenario: Scenario) -> list[tuple[int, float, bool]]:
     goal = np.asarray(scenario.goal, np.float64)
     arm_r = float(scenario.arm_radius)
     hits = []
-    for o in point_obstacle_distances(scenario, goal):
+    # beyond=arm_r: a curve proven farther than radius + arm_r needs no exact distance (no hit).
+    for o in point_obstacle_distances(scenario, goal, beyond=arm_r):
         clearance = o["distance"] - o["radius"] - arm_r
         if clearance <= 0:
             hits.append((o["slot"], clearance, o["exact"]))
