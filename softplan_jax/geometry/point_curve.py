@@ -10,8 +10,8 @@ from warm starts). :func:`point_curve_distance` combines both for one point
 (the roots, polished, and a polished grid as a guard against the rounding of a
 high degree's roots): what the scene checks (a goal inside an obstacle) and
 the reachability proofs use; :func:`point_curve_lower_bound` is the cheap
-bound from below that lets them skip the curves that are clearly far. Point clouds fitted with these live in
-:mod:`softplan_jax.clouds`.
+bound from below that lets the goal check skip the curves that are clearly
+far. Point clouds fitted with these live in :mod:`softplan_jax.clouds`.
 """
 
 from __future__ import annotations
