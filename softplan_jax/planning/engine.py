@@ -80,7 +80,7 @@ DEFAULT_LANES = 64  # scenes stepped side by side in a batch on a CPU (benchmark
 # float64, a batch of 1,024 ran 8x faster with 1,024 lanes than with 64, and 16,384 lanes took
 # 3.7e6 scene-steps/s (benchmarks/gpu.py); wider was not measured.
 ACCELERATOR_LANES = 16384
-DEFAULT_QUANTUM = 64  # steps a lane holds a scene while others wait (run_lanes; benchmarks/engine.py)
+DEFAULT_QUANTUM = 64  # steps a lane holds a scene while others wait (run_lanes); faster than 32 or 128 here
 
 
 def default_lanes(platform: str | None = None) -> int:
