@@ -15,6 +15,7 @@ from softplan_jax.planning.engine import (
     ACCELERATOR_LANES,
     DEFAULT_LANES,
     DEFAULT_QUANTUM,
+    TRACK_LANES,
     check_engine_sizes,
     default_lanes,
     run,
@@ -131,11 +132,41 @@ def test_lanes_refill_matches_single_rollouts(five):
 
 
 def test_default_lanes_by_platform():
-    """A batch's lanes when none are given: 64 on a CPU, the whole share (up to 16,384) on an
-    accelerator, where a wide vmapped step costs little more than a narrow one."""
+    """A batch's lanes when none are given: on a CPU 64 when planning and up to 1,024 when
+    tracking (a tracked scene holds its lane to the horizon), the whole share (up to 16,384)
+    on an accelerator, where a wide vmapped step costs little more than a narrow one."""
     assert default_lanes("cpu") == DEFAULT_LANES == 64
-    assert default_lanes("gpu") == default_lanes("cuda") == default_lanes("tpu") == ACCELERATOR_LANES == 16384
+    assert default_lanes("cpu", tracking=True) == TRACK_LANES == 1024
+    for tracking in (False, True):
+        assert default_lanes("gpu", tracking) == default_lanes("cuda", tracking) == ACCELERATOR_LANES == 16384
+        assert default_lanes("tpu", tracking) == ACCELERATOR_LANES
     assert default_lanes() == default_lanes(jax.default_backend())
+
+
+@pytest.mark.parametrize("entry", ["plan_batch", "track_batch"])
+def test_batch_entry_points_default_lanes(entry, monkeypatch):
+    """plan_batch and track_batch without ``lanes`` hand the engine the CPU's width for their
+    mode: 64 lanes when planning, the whole batch (up to 1,024) when tracking. Caught at the
+    engine's door (run_lanes replaced), so nothing compiles."""
+    from softplan_jax.planning import programs
+
+    seen = {}
+
+    def spy(worlds, gains, options, max_steps, keys, **kw):
+        seen.update(kw, batch=keys.shape[0])
+        raise KeyboardInterrupt  # not an Exception: no caller turns it into another error
+
+    monkeypatch.setattr(programs, "run_lanes", spy)
+    if entry == "plan_batch":
+        batch = sp.random_scenarios(7, 70)
+        call = lambda: sp.plan_batch(batch, max_steps=13)  # noqa: E731
+    else:
+        batch = sp.moving.random_moving_scenarios(7, 70)
+        call = lambda: sp.track_batch(batch, max_steps=13)  # noqa: E731
+    with pytest.raises(KeyboardInterrupt):
+        call()
+    want = 64 if entry == "plan_batch" else TRACK_LANES
+    assert seen["batch"] == 70 and seen["lanes"] == (want if jax.default_backend() == "cpu" else ACCELERATOR_LANES)
 
 
 def test_plan_device(paper, monkeypatch):

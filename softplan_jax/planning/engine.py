@@ -33,16 +33,15 @@ Barraquand & Latombe 1991); the PRNG key is in the carry.
 
 Paid by the step. :func:`run` has three drivers of the same step:
 
-* ``"scan"``: one ``lax.scan`` of max_steps + 1 steps (reverse-mode
-  differentiable; what the gradient tuner differentiates);
-* ``"chunks"``: ``lax.scan`` over ``step_chunk`` steps inside a
-  ``while_loop`` that stops after the chunk in which the rollout finished;
-* ``"lanes"`` (a batch, :func:`run_lanes`): ``lanes`` scenes step side by
-  side (vmapped); when one finishes, its lane takes the next scene of the
-  batch at the next step, and a scene that has held its lane for ``quantum``
-  steps while others wait goes back to the queue (round robin), so a batch
-  costs about the sum of its scenes' steps, not batch size x the slowest
-  scene, nor a tail of long scenes started last in otherwise idle lanes.
+* ``"scan"``: one ``lax.scan`` of max_steps + 1 steps (reverse-mode differentiable;
+  what the gradient tuner differentiates);
+* ``"chunks"``: ``lax.scan`` over ``step_chunk`` steps inside a ``while_loop`` that
+  stops after the chunk in which the rollout finished;
+* ``"lanes"`` (a batch, :func:`run_lanes`): ``lanes`` scenes step side by side
+  (vmapped); when one finishes, its lane takes the next scene of the batch at the next
+  step, and a scene that has held its lane for ``quantum`` steps while others wait goes
+  back to the queue (round robin), so a batch costs about the sum of its scenes' steps,
+  not batch size x the slowest scene, nor a tail of long scenes in idle lanes.
 
 Every driver returns the same arrays, padded to max_steps + 1 along time:
 after the step where a rollout ended, the records hold its last state
@@ -71,25 +70,28 @@ from .evasion import evasive_target, slot_clearance
 from .records import Record, Rollout, finish, record_zeros, setup
 from .step import attraction, goal_scaled, scaled_step, step_target, tracking_attraction
 
-__all__ = ["Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "DEFAULT_QUANTUM", "ACCELERATOR_LANES", "default_lanes", "run",
-           "run_lanes", "check_engine_sizes"]
+__all__ = ["Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "TRACK_LANES", "DEFAULT_QUANTUM", "ACCELERATOR_LANES",
+           "default_lanes", "run", "run_lanes", "check_engine_sizes"]
 
 DEFAULT_STEP_CHUNK = 8  # steps between two checks of "done": at most 7 steps computed past the end
-DEFAULT_LANES = 64  # scenes stepped side by side in a batch on a CPU (benchmarks/engine.py)
-# ... and on an accelerator: every scene of a device's share at once, up to this many. On one H200,
-# float64, a batch of 1,024 ran 8x faster with 1,024 lanes than with 64, and 16,384 lanes took
-# 3.7e6 scene-steps/s (benchmarks/gpu.py); wider was not measured.
+DEFAULT_LANES = 64  # scenes planned side by side in a batch on a CPU (benchmarks/engine.py)
+# ... tracked on a CPU: a tracked scene holds its lane to the horizon, so refills buy nothing and a
+# wider step costs less per scene (1,024 moving scenes: 17.6 / 19.2 / 21.0 s with 1,024 / 256 / 64).
+TRACK_LANES = 1024
+# ... and on an accelerator: every scene of a device's share at once, up to this many (one H200,
+# float64: 1,024 lanes 8x faster than 64; 16,384 lanes 3.7e6 scene-steps/s; benchmarks/gpu.py).
 ACCELERATOR_LANES = 16384
 DEFAULT_QUANTUM = 64  # steps a lane holds a scene while others wait (run_lanes); faster than 32 or 128 here
 
 
-def default_lanes(platform: str | None = None) -> int:
-    """The lanes of a batch when none are given: :data:`DEFAULT_LANES` (64) on a CPU,
-    :data:`ACCELERATOR_LANES` (16,384; at most the batch) on a GPU or TPU, where a wide
-    vmapped step is nearly as fast as a narrow one. ``platform``: a jax platform name
-    ("cpu", "gpu", "cuda", "rocm", "tpu"); None: ``jax.default_backend()``."""
+def default_lanes(platform: str | None = None, tracking: bool = False) -> int:
+    """The lanes of a batch when none are given (at most the batch): on a CPU
+    :data:`DEFAULT_LANES` (64) when planning, :data:`TRACK_LANES` (1,024) when tracking;
+    :data:`ACCELERATOR_LANES` (16,384) on a GPU or TPU, where a wide vmapped step is nearly
+    as fast as a narrow one. ``platform``: a jax platform name ("cpu", "gpu", "cuda",
+    "rocm", "tpu"); None: ``jax.default_backend()``."""
     platform = jax.default_backend() if platform is None else platform
-    return DEFAULT_LANES if platform == "cpu" else ACCELERATOR_LANES
+    return ACCELERATOR_LANES if platform != "cpu" else TRACK_LANES if tracking else DEFAULT_LANES
 
 
 class Carry(NamedTuple):
@@ -119,11 +121,10 @@ def _whole(name, v) -> int:  # v as an int; ValueError for anything but an int >
 
 
 def check_engine_sizes(max_steps, step_chunk=DEFAULT_STEP_CHUNK, lanes=None) -> tuple:
-    """Validate the engine's sizes on the host, before anything compiles: ``(max_steps,
-    step_chunk, lanes)`` as ints (``lanes`` may be None). ValueError for anything but an
-    int >= 1 (a bool, a float such as 2.5, a string)."""
-    return (_whole("max_steps", max_steps), _whole("step_chunk", step_chunk),
-            None if lanes is None else _whole("lanes", lanes))
+    """Validate the engine's sizes on the host, before anything compiles: ``(max_steps, step_chunk,
+    lanes)`` as ints (``lanes`` may be None). ValueError for anything but an int >= 1 (a bool, 2.5, "8")."""
+    sizes = _whole("max_steps", max_steps), _whole("step_chunk", step_chunk)
+    return (*sizes, None if lanes is None else _whole("lanes", lanes))
 
 
 def _moving_cells(cells, moving: MovingScenario, t):
@@ -139,7 +140,6 @@ def init_carry(world, options, key) -> Carry:
     _, mask = radius_and_mask(scene)
     q0 = scene.q0
     dtype = q0.dtype
-    warm = _warm(plan)
     carry0 = Carry(
         q=q0,
         q_prev=q0,
@@ -154,7 +154,7 @@ def init_carry(world, options, key) -> Carry:
         escapes=jnp.zeros((), jnp.int32),
         walk_left=jnp.zeros((), jnp.int32),
         walk_velocity=jnp.zeros((3,), dtype),
-        warm=warm_state(scene) if warm else (),
+        warm=warm_state(scene) if _warm(plan) else (),
         certified=jnp.zeros((), bool),
     )
     return tie(carry0, q0)  # under vmap (a batch), the carry is batched from the start (see tie)
@@ -402,27 +402,28 @@ def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
     return finish(world, options, records, final)
 
 
-def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFAULT_LANES,
+def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int | None = None,
               step_chunk: int = DEFAULT_STEP_CHUNK, quantum: int | None = None) -> Rollout:
     """A batch of rollouts (``worlds``: a stacked Scenario or MovingScenario, leading
-    axis B; ``keys`` (B,) keys), ``lanes`` at a time, refilled as they finish.
+    axis B; ``keys`` (B,) keys), ``lanes`` at a time (None: :func:`default_lanes`),
+    refilled as they finish.
 
     Each lane steps one scene (:func:`run`'s rollout, its own carry, key and step count;
     vmapped: equal to one-at-a-time rollouts to rounding). A lane whose scene finished (or
     reached max_steps) takes the next scene of the queue: the scenes not yet started, in
     batch order, then the suspended ones. A lane that has held its scene ``quantum`` steps
     while others wait suspends it (carry and step kept) and takes the next (round robin),
-    so that the scenes started last do not run alone at the end in otherwise idle lanes;
-    the results do not depend on the quantum. None: :data:`DEFAULT_QUANTUM` when planning,
-    none when tracking (every scene holds to the horizon: nothing to balance, and each
-    suspension costs a refill). The loop stops after the ``step_chunk`` steps in which the
-    last scene finished.
+    so that the scenes started last do not run alone in otherwise idle lanes; the results
+    do not depend on the quantum. None: :data:`DEFAULT_QUANTUM` when planning, none when
+    tracking (every scene holds to the horizon: nothing to balance). The loop stops after
+    the ``step_chunk`` steps in which the last scene finished.
 
     Returns a batched :class:`Rollout` (leading axis B).
     """
     max_steps, step_chunk, lanes = check_engine_sizes(max_steps, step_chunk, lanes)
     one = jax.tree_util.tree_map(lambda x: x[0], worlds)
     planning = setup(one, options).stop_at_goal
+    lanes = default_lanes(tracking=not planning) if lanes is None else lanes
     quantum = _whole("quantum", (DEFAULT_QUANTUM if planning else max_steps + 1) if quantum is None else quantum)
     B = jax.tree_util.tree_leaves(worlds)[0].shape[0]
     L = min(lanes, B)
@@ -436,14 +437,13 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int = DEFA
     def step_one(world, prep, carry, k):
         return make_step(world, gains, options, max_steps, prep)(carry, k)
 
-    # kept: each scene's carry: its first until it starts, its last once suspended (until it
-    # resumes) or finished; k_kept: the step it resumes at (0: not started).
+    # kept: each scene's carry: its first until it starts, its last once suspended (until it resumes)
+    # or finished; k_kept: the step it resumes at (0: not started).
     kept0 = jax.vmap(lambda w, key: init_carry(w, options, key))(worlds, keys)
     k_kept0 = jnp.zeros((B,), jnp.int32)
     idx0 = jnp.arange(L, dtype=jnp.int32)
     lane0, k0 = take(idx0, kept0, k_kept0)
-    out = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape), x.dtype),
-                                 record_zeros(one, options, max_steps + 1))
+    out = jax.tree_util.tree_map(lambda x: jnp.zeros((B, *x.shape), x.dtype), record_zeros(one, options, max_steps + 1))
     # The queue, a ring of B scene indices read at head and written at tail: first the scenes
     # L, ..., B - 1 (not started), then each suspended scene in the order of its suspension.
     queue0 = jnp.arange(L, L + B, dtype=jnp.int32) % B

@@ -365,7 +365,8 @@ def run_batch(worlds, gains, options, max_steps: int, seed=0, *, chunk: int | No
     n_dev = 1 if mesh is None else mesh.size
     batch = start_configuration(worlds).shape[0]
     size = round_chunk(chunk, batch, n_dev)
-    check_rollout_memory(worlds, options, T, batch, min(size, lanes or default_lanes()))
+    tracking = not isinstance(options, PlanOptions)
+    check_rollout_memory(worlds, options, T, batch, min(size, lanes or default_lanes(tracking=tracking)))
     n_chunks = math.ceil(batch / size)
     bar = Progress(n_chunks, batch, n_dev, label=label) if progress else None
     spread = is_global(mesh)  # several processes: results are gathered on every host

@@ -99,7 +99,7 @@ def _rollout_jit(world, gains: Gains, options, max_steps: int, key) -> Rollout:
 
 def _rollout_batch(worlds, gains: Gains, options, max_steps: int, keys, mesh=None, lanes=None) -> Rollout:
     platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
-    width = default_lanes(platform) if lanes is None else lanes
+    width = default_lanes(platform, tracking=not isinstance(options, PlanOptions)) if lanes is None else lanes
 
     def laned(worlds, gains, keys):
         return run_lanes(worlds, gains, options, max_steps, keys, lanes=width,
@@ -172,7 +172,8 @@ class CompiledRollout:
         max_steps = check_engine_sizes(max_steps)[0]
         scenes = q0.shape[0] if self._batched else 1
         # Before anything is allocated: the records of max_steps steps must fit in memory.
-        check_rollout_memory(scenario, options, max_steps, scenes, min(scenes, default_lanes()))
+        lanes = default_lanes(tracking=not isinstance(options, PlanOptions))
+        check_rollout_memory(scenario, options, max_steps, scenes, min(scenes, lanes))
         key = batch_keys(seed, scenes) if self._batched else prng_key(seed)
         return scenario, strong_gains(gains, q0.dtype), options, max_steps, key
 
@@ -278,9 +279,10 @@ scenarios of one padded shape (every leaf of ``scenarios`` has a leading batch a
 jitted: ``rollout_batch(scenarios, gains, options, max_steps, seed=0, devices=None, lanes=None)``.
 Scenario b's escapes use ``jax.random.split(key(seed), B)[b]`` (or ``seed[b]`` when ``seed`` holds B
 keys). ``lanes`` scenes step side by side, each lane taking the next scene when its scene finishes
-(:func:`softplan_jax.planning.engine.run_lanes`; None: :func:`~softplan_jax.planning.engine.default_lanes`, 64
-on a CPU, the whole batch up to 16,384 on an accelerator), so the cost follows the steps taken. A
-stacked MovingScenario with TrackOptions tracks instead (:func:`~softplan_jax.track_batch`).
+(:func:`softplan_jax.planning.engine.run_lanes`; None: :func:`~softplan_jax.planning.engine.default_lanes`: on
+a CPU 64 when planning and up to 1,024 when tracking, the whole batch up to 16,384 on an accelerator), so
+the cost follows the steps taken. A stacked MovingScenario with TrackOptions tracks instead
+(:func:`~softplan_jax.track_batch`).
 
 With more than one local device the batch is sharded over all of them (``devices``: None = every
 local device, an int k = the first k, 1 = no sharding, a sequence of jax devices, or ``"global"``:

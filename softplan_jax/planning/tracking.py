@@ -298,7 +298,9 @@ def track_batch(movings: MovingScenario, method: str = "curve", n_points: int = 
     Arguments as :func:`track` and :func:`~softplan_jax.plan_batch` (``chunk``:
     scenarios per call, the last padded; ``progress``: a line per chunk on
     stderr; ``lanes``: scenes stepped side by side, see
-    :func:`~softplan_jax.planning.engine.run_lanes`). Returns a batched :class:`Track`
+    :func:`~softplan_jax.planning.engine.run_lanes`; None: the whole batch up to
+    :data:`~softplan_jax.planning.engine.TRACK_LANES` (1,024) on a CPU, as every tracked scene
+    holds its lane to the horizon). Returns a batched :class:`Track`
     (an engine Rollout with the tracking fields) of NumPy arrays.
     """
     _check_moving(movings, batched=True)
