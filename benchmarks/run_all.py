@@ -49,6 +49,7 @@ SCRIPTS = {
     "moving": [[]],
     "evasion": [[]],
     "engine": [[]],
+    "step_profile": [[]],
     "throughput": [[]],
     "devices": [[]],
     "baselines": [["save", "--fallback"]],
