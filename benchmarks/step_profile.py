@@ -11,9 +11,10 @@ lane's step at that width. This script measures both halves of that product on
 * **a profile** at ``--profile-lanes``: a ``jax.profiler`` trace of those steps, each
   XLA operation's time attributed to the package function that emitted it (from the
   compiled program's stack frames), summed at ``--depth`` calls below the step;
-* **the bound** it sets: ``plan_batch(random_scenarios(1, --batch), max_steps=600)``
-  takes S steps, so at L lanes it cannot take less than S times the cost per
-  lane-step at L, however well the lanes are kept busy.
+* **the floor** it sets: ``plan_batch(random_scenarios(1, --batch), max_steps=600)``
+  takes S steps, so at L lanes it takes about S times the cost per lane-step at L
+  even with every lane busy at every step (the cost measured over the scenes' first
+  steps; a scene's later steps may cost somewhat more or less).
 
     python benchmarks/step_profile.py            # ~5 min on 2 CPUs
     python benchmarks/step_profile.py --quick    # small widths, no bound, into results/quick/
@@ -228,9 +229,9 @@ def main(argv=None) -> int:
            f"{r['median_per_lane_step_us']:.1f} |" for r in rows]
     if steps_taken:
         md += ["", f"`plan_batch(random_scenarios(1, {batch}), max_steps=600)` takes {steps_taken:,} steps "
-               "(iterations + 1 summed). At L lanes it cannot take less than that times the cost per "
-               "lane-step at L, with every lane busy at every step:", "",
-               "| lanes | lower bound |", "|---|---|"]
+               "(iterations + 1 summed). At L lanes, with every lane busy at every step, it would take "
+               "about that times the cost per lane-step at L (measured over the scenes' first steps):", "",
+               "| lanes | floor |", "|---|---|"]
         md += [f"| {r['lanes']} | {steps_taken * r['per_lane_step_us'] * 1e-6:.2f} s |" for r in rows]
     if prof.get("share"):
         md += ["", f"Profile at {prof['lanes']} lanes ({STEPS} steps; `jax.profiler` trace, each XLA op's time "
