@@ -48,7 +48,7 @@ STEPS = 10  # steps timed and profiled, after the first
 
 
 def _stepper(L: int):
-    """(jitted n-step function, its arguments) for the vmapped step of L running scenes."""
+    """(compiled program of STEPS steps, its arguments) for the vmapped step of L running scenes."""
     import jax.numpy as jnp
 
     import softplan_jax as sp
@@ -76,7 +76,8 @@ def _stepper(L: int):
     f = jax.jit(steps, static_argnums=4, compiler_options=rollout_compiler_options("curve"))
     k = jnp.zeros((L,), jnp.int32)
     carry1 = f(scenes, prepared, carry0, k, 1)  # the first step: the full solves, the warm start's state
-    return f, (scenes, prepared, carry1, k + 1, STEPS)
+    args = (scenes, prepared, carry1, k + 1)
+    return f.lower(*args, STEPS).compile(), args
 
 
 def _frames(hlo: str) -> tuple[dict, callable]:
@@ -113,10 +114,11 @@ def _frames(hlo: str) -> tuple[dict, callable]:
     return op_frame, chain
 
 
-def profile(L: int, depth: int) -> dict:
-    """Trace STEPS steps of L lanes; each op's time summed by the functions ``depth`` calls
-    below the engine's step (``other``: ops outside it or without a frame)."""
-    f, args = _stepper(L)
+def profile(L: int, depth: int, stepper=None) -> dict:
+    """Trace STEPS steps of L lanes (``stepper``: :func:`_stepper` of L, None: built here);
+    each op's time summed by the functions ``depth`` calls below the engine's step
+    (``other``: ops outside it or without a frame)."""
+    f, args = _stepper(L) if stepper is None else stepper
     jax.block_until_ready(f(*args))
     with tempfile.TemporaryDirectory() as tmp:
         jax.profiler.start_trace(tmp, create_perfetto_trace=True)
@@ -128,7 +130,7 @@ def profile(L: int, depth: int) -> dict:
         with gzip.open(found[0]) as fh:
             trace = json.load(fh)
     events = trace["traceEvents"] if isinstance(trace, dict) else trace
-    op_frame, chain = _frames(f.lower(*args).compile().as_text())
+    op_frame, chain = _frames(f.as_text())
     skip = ("$", "Thunk", "while", "cond", "Pjit", "end:")
     by = collections.Counter()
     for e in events:
@@ -215,8 +217,8 @@ def main(argv=None) -> int:
         log(f"round {r + 1}/{rounds}")
     rows = [{"lanes": L, "per_step_ms": 1e3 * min(times[L]) / STEPS, "per_lane_step_us": 1e6 * min(times[L]) / STEPS / L,
              "median_per_lane_step_us": 1e6 * float(np.median(times[L])) / STEPS / L} for L in lanes]
+    prof = profile(prof_lanes, args.depth, runs.get(prof_lanes)) if prof_lanes else {}
     del runs
-    prof = profile(prof_lanes, args.depth) if prof_lanes else {}
     steps_taken = bound(batch) if batch else None
 
     md = ["# Where a planner step's time goes", "", *machine_lines(finish_machine(machine)),
