@@ -256,8 +256,8 @@ def cli_runs(runs=2):
         env.pop("SOFTPLAN_COMPILATION_CACHE", None)
         for _ in range(runs):
             t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-c", "from softplan_jax.cli import main; raise SystemExit(main())",
-                            "run", "tree"], env=env, check=True, stdout=subprocess.DEVNULL)
+            subprocess.run([sys.executable, "-m", "softplan_jax.cli", "run", "tree"], env=env, check=True,
+                           stdout=subprocess.DEVNULL)
             walls.append(time.perf_counter() - t0)
     return walls
 

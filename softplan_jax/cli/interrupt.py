@@ -17,6 +17,15 @@ call (an XLA compilation). So the guard also asks the C-level handler to
 write the signal's number to a pipe (``signal.set_wakeup_fd``), watched by a
 daemon thread that ends the process the same way as soon as the byte
 arrives (the compilation runs without the GIL).
+
+When the command's work is done, the process still has to exit: jax's exit
+handlers run, then the interpreter finalizes, and finalization resets Python's
+signal handlers to the system default, under which SIGINT kills the process
+(exit status -2, no message) or raises a KeyboardInterrupt into jax's exit
+handlers (a traceback after a complete run). So the process's own entry point
+(:func:`~softplan_jax.cli.main.console_main`) leaves the guard with SIGINT
+*ignored* (``restore=False``), a setting that survives finalization: a Ctrl-C
+after the command finished changes nothing, and the exit code is the command's.
 """
 
 from __future__ import annotations
@@ -71,10 +80,12 @@ def _watch(fd: int) -> None:
 
 
 @contextlib.contextmanager
-def interrupt_guard():
+def interrupt_guard(restore: bool = True):
     """While active, SIGINT ends the process with :func:`exit_interrupted`. A no-op outside
-    the main thread (signal handlers can only be set there); the previous handler and
-    wakeup fd are restored on exit."""
+    the main thread (signal handlers can only be set there). On exit the previous wakeup fd
+    is restored, and the previous SIGINT handler too, unless ``restore`` is False: then
+    SIGINT is ignored from there on (the process is about to exit; see the module's text).
+    The handler is swapped in one call, so no SIGINT falls between the two."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -93,7 +104,7 @@ def interrupt_guard():
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, old_handler)
+        signal.signal(signal.SIGINT, old_handler if restore else signal.SIG_IGN)
         signal.set_wakeup_fd(old_fd)
         os.close(w)  # the watcher reads end-of-file and returns
         watcher.join(timeout=1.0)

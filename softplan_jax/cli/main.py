@@ -47,7 +47,9 @@ output path that cannot be written, a size too large for memory), with one
 line ``softplan: error: ...`` on stderr; 3 ``run --require-reached`` and the
 run did not succeed (any status but "reached", or "held" for a moving goal);
 130 interrupted (Ctrl-C: one line ``softplan: interrupted`` on stderr, no
-output file left behind).
+partial output file left behind: an output is written whole under its name or
+not at all). A Ctrl-C that comes after the command finished, while the process
+exits, is ignored: the exit code is the command's.
 
 ``run`` keeps compiled rollouts in jax's persistent compilation cache
 (``~/.cache/softplan_jax/jax``; see :mod:`softplan_jax.base.compilation_cache`;
@@ -79,14 +81,24 @@ from .run import cmd_run
 from .scenario_list import cmd_scenarios
 from .sweep import cmd_sweep
 
-__all__ = ["main"]
+__all__ = ["main", "console_main"]
 
 
 def main(argv=None) -> int:
-    """Entry point of the ``softplan`` command; returns the exit code (Ctrl-C: the
-    process ends with 130, see :mod:`.interrupt`)."""
+    """The ``softplan`` command called in-process (``argv`` as on the command line, default
+    ``sys.argv[1:]``); returns the exit code (Ctrl-C: the process ends with 130, see
+    :mod:`.interrupt`). Python's SIGINT handler is as it was afterwards."""
     with interrupt_guard():
         return _main(argv)
+
+
+def console_main() -> int:
+    """The ``softplan`` process's entry point (the console script, ``python -m
+    softplan_jax.cli``): :func:`main` on ``sys.argv[1:]``, after which SIGINT stays ignored
+    while the process exits (see :mod:`.interrupt`)."""
+    with interrupt_guard(restore=False):
+        rc = _main(None)
+    return rc
 
 
 def _main(argv) -> int:
