@@ -210,6 +210,17 @@ def test_segment_transform_theta_zero_exact():
     assert_allclose(R, [[c, -s, 0], [s, c, 0], [0, 0, 1]], atol=1e-16)
 
 
+def test_oracle_arm_points_many_is_the_loop():
+    """The oracle's vectorised arm points (the brute-force checks' sampling of a motion) equal
+    its one-configuration arm_points on every test configuration of the same segment count,
+    theta = 0 included, to rounding."""
+    s = np.linspace(0.0, 1.0, 17)
+    for n in sorted({q.shape[0] for q in CONFIGS}):
+        qs = np.stack([q for q in CONFIGS if q.shape[0] == n])
+        loop = np.stack([oracle.arm_points(q, s) for q in qs])
+        np.testing.assert_allclose(oracle.arm_points_many(qs, s), loop, rtol=0, atol=1e-14 * qs[..., 0].sum(1).max())
+
+
 @pytest.mark.parametrize("k", range(len(CONFIGS)))
 def test_segment_frames_points_tip_backbone(k):
     q = CONFIGS[k]

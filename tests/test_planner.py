@@ -115,13 +115,11 @@ def _wire_clearance(q_a, q_b, a, b, substeps, arm_samples):
     ``arm_samples`` points per segment. Sampling can only over-estimate it."""
     s = np.linspace(0.0, 1.0, arm_samples)
     ab = b - a
-    best = np.inf
-    for t in np.linspace(0.0, 1.0, substeps + 1):
-        q = q_a + t * (q_b - q_a)
-        pts = oracle.arm_points(q, s)
-        w = np.clip((pts - a) @ ab / (ab @ ab), 0.0, 1.0)
-        best = min(best, float(np.min(np.linalg.norm(pts - (a + w[:, None] * ab), axis=1))))
-    return best
+    t = np.linspace(0.0, 1.0, substeps + 1)
+    q_a, q_b = np.asarray(q_a), np.asarray(q_b)
+    pts = oracle.arm_points_many(q_a + t[:, None, None] * (q_b - q_a), s).reshape(-1, 3)
+    w = np.clip((pts - a) @ ab / (ab @ ab), 0.0, 1.0)
+    return float(np.min(np.linalg.norm(pts - (a + w[:, None] * ab), axis=1)))
 
 
 def test_collision_flag_agrees_with_dense_check_on_random_scenes(paper, paper_plans):

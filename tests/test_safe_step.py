@@ -86,12 +86,11 @@ def _brute_clearance(q_a, q_b, coeffs, substeps=8, arm_samples=60, curve_samples
     u = np.linspace(0.0, 1.0, curve_samples)
     curves = np.stack([np.einsum("ak,uk->ua", c, u[:, None] ** np.arange(c.shape[1])) for c in coeffs])
     pts_c = curves.reshape(-1, 3)
+    t = np.linspace(0.0, 1.0, substeps + 1)
+    q_a, q_b = np.asarray(q_a), np.asarray(q_b)
     best = np.inf
-    for t in np.linspace(0.0, 1.0, substeps + 1):
-        q = q_a + t * (q_b - q_a)
-        arm = oracle.arm_points(q, s)
-        d = np.sqrt(((arm[:, None, :] - pts_c[None, :, :]) ** 2).sum(-1))
-        best = min(best, float(d.min()))
+    for arm in oracle.arm_points_many(q_a + t[:, None, None] * (q_b - q_a), s):
+        best = min(best, float(np.sqrt(((arm[:, None, :] - pts_c[None, :, :]) ** 2).sum(-1).min())))
     return best
 
 

@@ -36,6 +36,7 @@ from .oracle_geometry import (
     OPoly,
     arc_coeffs,
     arm_points,
+    arm_points_many,
     backbone_points,
     central_difference,
     helix,
@@ -59,7 +60,8 @@ from .oracle_geometry import (
 __all__ = [
     # kinematics (paper section 2.1), from oracle_geometry
     "segment_transform", "segment_frames", "tip_frame", "tip_position", "segment_points", "segment_point_derivs",
-    "segment_point", "backbone_points", "arm_points", "jacobian_complex_step", "point_jacobian", "tip_jacobian",
+    "segment_point", "backbone_points", "arm_points", "arm_points_many", "jacobian_complex_step", "point_jacobian",
+    "tip_jacobian",
     "central_difference", "arc_coeffs", "local_arc",
     # curves, from oracle_geometry
     "OPoly", "OFunc", "OHelix", "helix", "line",

@@ -37,7 +37,8 @@ import numpy as np
 __all__ = [
     # kinematics (paper section 2.1)
     "segment_transform", "segment_frames", "tip_frame", "tip_position", "segment_points", "segment_point_derivs",
-    "segment_point", "backbone_points", "arm_points", "jacobian_complex_step", "point_jacobian", "tip_jacobian",
+    "segment_point", "backbone_points", "arm_points", "arm_points_many", "jacobian_complex_step", "point_jacobian",
+    "tip_jacobian",
     "central_difference", "arc_coeffs", "local_arc",
     # curves
     "OPoly", "OFunc", "OHelix", "helix", "line",
@@ -58,13 +59,15 @@ def _sinc(x):
     """
     x = np.asarray(x)
     small = np.abs(x) < 0.1
-    xs = np.where(small, x, 0.0)
-    x2 = xs * xs
-    series = np.zeros_like(x2)
-    for k in range(9, -1, -1):  # Horner in x**2 of sum (-1)^k x^2k / (2k+1)!
-        series = series * x2 + (-1) ** k / math.factorial(2 * k + 1)
     xl = np.where(small, 1.0, x)
-    return np.where(small, series, np.sin(xl) / xl)
+    out = np.asarray(np.sin(xl) / xl)
+    if small.any():  # the series on the small entries only (the brute-force checks call this often)
+        x2 = x[small] * x[small]
+        series = np.zeros_like(x2)
+        for k in range(9, -1, -1):  # Horner in x**2 of sum (-1)^k x^2k / (2k+1)!
+            series = series * x2 + (-1) ** k / math.factorial(2 * k + 1)
+        out[small] = series
+    return out
 
 
 _SINC_TAYLOR = [(-1) ** k / math.factorial(2 * k + 1) for k in range(10)]
@@ -155,13 +158,20 @@ def tip_position(q):
     return tip_frame(q)[1]
 
 
+def _local_points(q_i, s):
+    """Local arc points of segment row q_i at fractions s (m,) -> (m, 3) (paper eq. (2))."""
+    L, th, ph = q_i[0], q_i[1], q_i[2]
+    a, b = arc_coeffs(th, np.asarray(s))
+    cp, sp_ = np.cos(ph), np.sin(ph)
+    return L * np.stack([a * cp, a * sp_, b], axis=-1)
+
+
 def local_arc(q_i, s):
     """Local arc point(s) and s-derivatives for segment row q_i, s array (m,)."""
     L, th, ph = q_i[0], q_i[1], q_i[2]
     s = np.asarray(s)
-    a, b = arc_coeffs(th, s)
+    p = _local_points(q_i, s)
     cp, sp_ = np.cos(ph), np.sin(ph)
-    p = L * np.stack([a * cp, a * sp_, b], axis=-1)
     # d/ds: [sin(th s) L cos phi, sin(th s) L sin phi, cos(th s) L]
     sn, cs = np.sin(th * s), np.cos(th * s)
     dp = L * np.stack([sn * cp, sn * sp_, cs], axis=-1)
@@ -201,7 +211,29 @@ def arm_points(q, s):
     points of :func:`segment_points`, the frames computed once."""
     q = np.asarray(q)
     Rs, Ps = segment_frames(q)
-    return np.concatenate([local_arc(q[i], s)[0] @ Rs[i].T + Ps[i] for i in range(q.shape[0])])
+    return np.concatenate([_local_points(q[i], s) @ Rs[i].T + Ps[i] for i in range(q.shape[0])])
+
+
+def arm_points_many(qs, s):
+    """:func:`arm_points` of K configurations at once: qs (K, n, 3) -> (K, n m, 3). The same
+    formulas (paper eqs. (1)-(2)) broadcast over K, for the brute-force checks that sample
+    many configurations of a motion (equal to a loop of :func:`arm_points` to rounding)."""
+    qs = np.asarray(qs, dtype=np.float64)
+    s = np.asarray(s, dtype=np.float64)
+    K, n = qs.shape[:2]
+    R = np.broadcast_to(np.eye(3), (K, 3, 3))
+    P = np.zeros((K, 3))
+    out = []
+    for i in range(n):
+        L, th, ph = qs[:, i, 0], qs[:, i, 1], qs[:, i, 2]
+        a, b = arc_coeffs(th[:, None], s[None, :])  # (K, m)
+        cp, sp_ = np.cos(ph)[:, None], np.sin(ph)[:, None]
+        local = L[:, None, None] * np.stack([a * cp, a * sp_, b], axis=-1)  # (K, m, 3)
+        out.append(local @ np.swapaxes(R, 1, 2) + P[:, None, :])  # R p + P, point by point
+        Ri, Pi = segment_transform(qs[:, i].T)  # (3, 3, K), (3, K)
+        P = P + np.einsum("kij,jk->ki", R, Pi)  # H_i^0 = H_{i-1}^0 H_i^{i-1}
+        R = np.einsum("kij,jlk->kil", R, Ri)
+    return np.concatenate(out, axis=1)
 
 
 def jacobian_complex_step(fn, q, h=1e-30):
@@ -390,13 +422,13 @@ def moving_min_clearance(qs, times, coeffs, u_ranges, radii, motions, arm_radius
     best = np.inf
     T = qs.shape[0]
     steps = [(k, k + 1) for k in range(T - 1)] or [(0, 0)]
+    taus = np.linspace(0.0, 1.0, substeps + 1)
     for a, b in steps:
-        for tau in np.linspace(0.0, 1.0, substeps + 1):
-            q = qs[a] + tau * (qs[b] - qs[a])
+        arms = arm_points_many(qs[a] + taus[:, None, None] * (qs[b] - qs[a]), s)
+        for tau, arm in zip(taus, arms, strict=True):
             t = float(times[a]) + tau * (float(times[b]) - float(times[a]))
-            arm = arm_points(q, s)
             for c, ur, r, m in zip(coeffs, u_ranges, radii, motions, strict=True):
                 pts = moving_curve_points(c, ur, m, t, curve_samples)
-                d = np.sqrt(((arm[:, None, :] - pts[None]) ** 2).sum(-1)).min()
+                d = np.sqrt(((arm[:, None, :] - pts[None]) ** 2).sum(-1).min())  # = the least distance
                 best = min(best, d - float(r) - float(arm_radius))
     return best
