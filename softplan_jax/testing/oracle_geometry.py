@@ -423,12 +423,19 @@ def moving_min_clearance(qs, times, coeffs, u_ranges, radii, motions, arm_radius
     T = qs.shape[0]
     steps = [(k, k + 1) for k in range(T - 1)] or [(0, 0)]
     taus = np.linspace(0.0, 1.0, substeps + 1)
+    radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+    if len(coeffs) != len(u_ranges) or len(coeffs) != len(motions) or len(coeffs) != radii.size:
+        raise ValueError("coeffs, u_ranges, radii and motions must have one entry per curve")
+    if not len(coeffs):
+        return best
     for a, b in steps:
         arms = arm_points_many(qs[a] + taus[:, None, None] * (qs[b] - qs[a]), s)
         for tau, arm in zip(taus, arms, strict=True):
             t = float(times[a]) + tau * (float(times[b]) - float(times[a]))
-            for c, ur, r, m in zip(coeffs, u_ranges, radii, motions, strict=True):
-                pts = moving_curve_points(c, ur, m, t, curve_samples)
-                d = np.sqrt(((arm[:, None, :] - pts[None]) ** 2).sum(-1).min())  # = the least distance
-                best = min(best, d - float(r) - float(arm_radius))
+            pts = np.stack([moving_curve_points(c, ur, m, t, curve_samples)
+                            for c, ur, m in zip(coeffs, u_ranges, motions, strict=True)])  # (curves, n, 3)
+            # Squared distances plane by plane ((dx + dy) + dz), the least per curve, then its root.
+            d2 = sum((arm[:, None, None, k] - pts[None, :, :, k]) ** 2 for k in range(3))  # (arm, curves, n)
+            d = np.sqrt(d2.min(axis=(0, 2)))
+            best = min(best, float(np.min(d - radii - float(arm_radius))))
     return best
