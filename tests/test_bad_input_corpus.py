@@ -206,8 +206,8 @@ def test_start_in_collision_has_its_own_status():
     wire = sp.line_segment([-1.0, 0.0, 1.5], [1.0, 0.0, 1.5])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        s = sp.make_scenario([1.1, -0.8, 0.9], [wire])
-    r = sp.plan(s, max_steps=STEPS)
+        s = sp.make_scenario([1.1, -0.8, 0.9], [wire], curve_slots=5, degree=2)
+    r = sp.plan(s, max_steps=200)  # test_planner's padded shape and horizon: its compiled program
     assert r.status == "start_in_collision" and r.iterations == 0 and r.collided and not r.reached
     assert r.min_clearance <= 0
 
