@@ -33,7 +33,7 @@ from ..scenarios.scenario import check_scenario, unreachable_reason
 from .batching import Progress, batch_mesh, gather, is_global, pad_batch, round_chunk, shard_batch
 from .engine import check_engine_sizes, default_lanes
 from .programs import batch_keys, prng_key, rollout_batch, rollout_jit, start_configuration, strong_gains
-from .records import Rollout, check_rollout_memory
+from .records import Rollout, check_rollout_memory, tracks
 from .step import GOAL_GAINS, GainFunction, Gains, PlanOptions, check_options, default_gains
 
 __all__ = ["PlanResult", "make_options", "check_gains", "plan", "plan_device", "unreachable_result",
@@ -365,8 +365,7 @@ def run_batch(worlds, gains, options, max_steps: int, seed=0, *, chunk: int | No
     n_dev = 1 if mesh is None else mesh.size
     batch = start_configuration(worlds).shape[0]
     size = round_chunk(chunk, batch, n_dev)
-    tracking = not isinstance(options, PlanOptions)
-    check_rollout_memory(worlds, options, T, batch, min(size, lanes or default_lanes(tracking=tracking)))
+    check_rollout_memory(worlds, options, T, batch, min(size, lanes or default_lanes(tracking=tracks(options))))
     n_chunks = math.ceil(batch / size)
     bar = Progress(n_chunks, batch, n_dev, label=label) if progress else None
     spread = is_global(mesh)  # several processes: results are gathered on every host

@@ -20,7 +20,7 @@ from ..base.compilation_cache import load_or_export, rollout_compiler_options
 from ..scenarios import Scenario
 from .batching import BATCH_AXIS, batch_mesh, pad_batch, round_chunk, shard_batch
 from .engine import check_engine_sizes, default_lanes, run, run_lanes
-from .records import Rollout, check_rollout_memory
+from .records import Rollout, check_rollout_memory, tracks
 from .step import Gains, PlanOptions
 
 __all__ = ["rollout", "strong_gains", "prng_key", "start_configuration", "batch_keys", "CompiledRollout",
@@ -99,7 +99,7 @@ def _rollout_jit(world, gains: Gains, options, max_steps: int, key) -> Rollout:
 
 def _rollout_batch(worlds, gains: Gains, options, max_steps: int, keys, mesh=None, lanes=None) -> Rollout:
     platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
-    width = default_lanes(platform, tracking=not isinstance(options, PlanOptions)) if lanes is None else lanes
+    width = default_lanes(platform, tracking=tracks(options)) if lanes is None else lanes
 
     def laned(worlds, gains, keys):
         return run_lanes(worlds, gains, options, max_steps, keys, lanes=width,
@@ -172,8 +172,7 @@ class CompiledRollout:
         max_steps = check_engine_sizes(max_steps)[0]
         scenes = q0.shape[0] if self._batched else 1
         # Before anything is allocated: the records of max_steps steps must fit in memory.
-        lanes = default_lanes(tracking=not isinstance(options, PlanOptions))
-        check_rollout_memory(scenario, options, max_steps, scenes, min(scenes, lanes))
+        check_rollout_memory(scenario, options, max_steps, scenes, min(scenes, default_lanes(tracking=tracks(options))))
         key = batch_keys(seed, scenes) if self._batched else prng_key(seed)
         return scenario, strong_gains(gains, q0.dtype), options, max_steps, key
 

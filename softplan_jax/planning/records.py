@@ -22,7 +22,7 @@ from ..base.status import Status
 from ..geometry.obstacles import obstacle_count, radius_and_mask
 from ..scenarios.motion import MovingScenario
 
-__all__ = ["Rollout", "Record", "Setup", "setup", "record_zeros", "check_rollout_memory", "freeze", "finish",
+__all__ = ["Rollout", "Record", "Setup", "setup", "tracks", "record_zeros", "check_rollout_memory", "freeze", "finish",
            "hold_statistics"]
 
 
@@ -126,11 +126,16 @@ class Setup(NamedTuple):
     stop_at_goal: bool
 
 
+def tracks(options) -> bool:
+    """The mode is the options': True for TrackOptions (hold the goal to the horizon), False
+    for PlanOptions (stop at the goal or at a stall)."""
+    return hasattr(options, "plan")
+
+
 def setup(world, options) -> Setup:
-    """The mode is the options': PlanOptions plan (stop at the goal or at a stall), TrackOptions
-    track (hold the goal to the horizon), for a static scene as for a moving one."""
+    """The mode is the options' (:func:`tracks`), for a static scene as for a moving one."""
     moving = isinstance(world, MovingScenario)
-    track = options if hasattr(options, "plan") else None
+    track = options if tracks(options) else None
     if moving and track is None:
         raise ValueError("a moving scene is tracked: pass TrackOptions (see make_track_options)")
     return Setup(moving, world.scene if moving else world, track.plan if track else options, track, track is None)
