@@ -47,18 +47,25 @@ def _fields(r):
     return {f: np.asarray(v) for f, v in r._asdict().items() if v is not None}
 
 
-def test_chunks_driver_equals_scan_driver(paper):
-    """rollout_jit (the "chunks" driver: stops after the chunk in which the rollout ended) gives
-    the fixed-length scan's arrays bit for bit, whatever the chunk (5 does not divide 201)."""
+@pytest.fixture(scope="module")
+def scan_driver(paper):
+    """The tree's rollout by the fixed-length scan driver (every step of the horizon)."""
     g = sp.default_gains()
-    sc = paper["tree"]
-    opts = make_options("curve")
-    scan = jax.jit(lambda s, k: rollout(s, g, opts, STEPS, k, driver="scan"),
-                   compiler_options=rollout_compiler_options("curve"))(sc, jax.random.PRNGKey(0))
-    for chunk in (8, 5):
-        r = rollout_jit(sc, g, make_options("curve", step_chunk=chunk), STEPS, 0)
-        for f, x in _fields(scan).items():
-            np.testing.assert_array_equal(np.asarray(getattr(r, f)), x, err_msg=f"{f}, step_chunk {chunk}")
+    return jax.device_get(jax.jit(lambda s, k: rollout(s, g, make_options("curve"), STEPS, k, driver="scan"),
+                                  compiler_options=rollout_compiler_options("curve"))(paper["tree"],
+                                                                                      jax.random.PRNGKey(0)))
+
+
+# The default chunk (8) is test_planner's program; another chunk is another program, so the
+# second chunk runs with the slow tests.
+@pytest.mark.parametrize("chunk", [8, pytest.param(5, marks=pytest.mark.slow)])
+def test_chunks_driver_equals_scan_driver(paper, scan_driver, chunk):
+    """rollout_jit (the "chunks" driver: stops after the chunk in which the rollout ended) gives
+    the fixed-length scan's arrays bit for bit, whatever the chunk (neither 8 nor 5 divides the
+    201 records)."""
+    r = rollout_jit(paper["tree"], sp.default_gains(), make_options("curve", step_chunk=chunk), STEPS, 0)
+    for f, x in _fields(scan_driver).items():
+        np.testing.assert_array_equal(np.asarray(getattr(r, f)), x, err_msg=f"{f}, step_chunk {chunk}")
 
 
 def test_records_frozen_after_the_end(paper):
@@ -103,16 +110,17 @@ def _suspensions(held_steps, lanes, quantum):
 
 def test_lanes_refill_matches_single_rollouts(five):
     """Five scenes on two lanes (refills, scenes suspended after DEFAULT_QUANTUM steps and
-    resumed, one idle lane at the end): bit for bit the rollouts of five lanes (no refill, no
-    suspension), and against a Python loop of single rollouts with the same keys: the same
+    resumed, one idle lane at the end): bit for bit the rollouts of a lane per scene (no refill,
+    no suspension: two chunks of three scenes on three lanes, test_planner's compiled batch of
+    the paper scenes), and against a Python loop of single rollouts with the same keys: the same
     status, steps and escapes, and q to rounding (a vmapped program rounds differently). The
     scene beyond reach escapes at random (its key and walk follow it through its suspensions):
     there a near-tie amplifies the rounding difference from about step 46 on (1e-14 to 1e-2 by
     the end), so its q is compared over the first 40 steps; the others over the whole horizon."""
     stack = sp.scenarios.stack_scenarios(five)
     two = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, lanes=2, devices=1))
-    all5 = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, lanes=5, devices=1))
-    for f, x in _fields(all5).items():
+    each = jax.device_get(sp.plan_batch(stack, max_steps=STEPS, chunk=3, devices=1))  # 3 lanes for 3 scenes
+    for f, x in _fields(each).items():
         np.testing.assert_array_equal(np.asarray(getattr(two, f)), x, err_msg=f)
     # The two lanes did suspend scenes, among them the escaping one: the check above covers it.
     assert 3 in _suspensions([int(i) + 1 for i in two.iterations], 2, DEFAULT_QUANTUM)
@@ -173,12 +181,16 @@ def test_batch_entry_points_default_lanes(entry, monkeypatch):
 
 
 def test_plan_device(paper, monkeypatch):
-    """plan(device=...): a named device runs the same rollout (here the one CPU: bit for bit);
+    """plan(device=...): a named device runs the same rollout (here the one CPU, jax's default
+    device: the same compiled program, bit for bit);
     bad values are refused before anything compiles; with an accelerator as the default
     backend, one scene goes to the host CPU."""
     cpu = jax.devices("cpu")[0]
     ref = sp.plan(paper["tree"], max_steps=STEPS)
+    compiled = sp.planning.rollout_jit.cache_size()
     on_cpu = sp.plan(paper["tree"], max_steps=STEPS, device=cpu)
+    # The default device already: the same compiled program (no device context, no device_put).
+    assert sp.planning.rollout_jit.cache_size() == compiled
     assert on_cpu.status == ref.status == "reached" and on_cpu.iterations == ref.iterations
     np.testing.assert_array_equal(np.asarray(on_cpu.q), np.asarray(ref.q))
     assert plan_device("default") is None and plan_device(cpu) is cpu

@@ -185,9 +185,10 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
         except where that is an accelerator: then the host CPU, which plans one
         scene faster (a step is a few hundred small kernels; on one H200 the
         tree took 29 ms on the GPU, 14 ms on its host's CPU, benchmarks/gpu.py);
-        ``"default"``: jax's default device whatever it is; or a ``jax.Device``.
-        Batches belong on the accelerator (:func:`plan_batch`). Results on
-        another device agree to rounding.
+        ``"default"``: jax's default device whatever it is; or a ``jax.Device``
+        (jax's default device itself, with the scenario on it, runs the same
+        compiled program as None). Batches belong on the accelerator
+        (:func:`plan_batch`). Results on another device agree to rounding.
       **options: further :class:`PlanOptions` fields (step, safe_fraction,
         escapes, goal_tolerance, repulsion, stall_window, solver, ...).
 
@@ -202,7 +203,9 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
         raise ValueError("plan takes one scenario; use plan_batch for a batch")
     check_scenario(scenario, batched=False)
     dev = plan_device(device)
-    if dev is None:
+    if dev is None or _already_there(scenario, dev):
+        # jax's default device already: no device context and no device_put, which
+        # would each key another compilation of the same program.
         return _plan_here(scenario, method, n_points, gains, max_steps, seed, options)
     # Everything on the chosen device from here: the checks too (each small op on an
     # accelerator would be a round trip).
@@ -221,6 +224,17 @@ def _plan_here(scenario, method, n_points, gains, max_steps, seed, options) -> P
         return unreachable_result(scenario, opts, reason)
     r = rollout_jit(scenario, g, opts, T, seed)
     return result_from_rollout(r, scenario)
+
+
+def _already_there(scenario, dev) -> bool:
+    """Whether ``dev`` is jax's default device and every array of ``scenario`` is on it."""
+    default = jax.config.jax_default_device
+    if default is None:
+        default = jax.devices()[0]
+    elif isinstance(default, str):
+        default = jax.devices(default)[0]
+    return dev == default and all(
+        getattr(leaf, "devices", lambda: {dev})() == {dev} for leaf in jax.tree.leaves(scenario))
 
 
 def plan_device(device=None):
