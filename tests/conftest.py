@@ -49,12 +49,15 @@ session.enable()
 # padded shapes, options and max_steps), where two workers would both compile them.
 # test_planner first: its programs (the paper scenes padded to 5 curve slots, 200
 # steps, default and paper step, 10 points; the loss-and-gradient of tune_gains)
-# are the ones test_safe_step and the notebooks use (test_moving's tracking rollout, the
-# tree shape at 200 steps, is the quickstart notebook's section 7); test_warm_start's plan_batch is
+# are the ones test_engine, test_safe_step, test_smoothing (the tree's planner_step),
+# test_goal_gains (the constant gains' plan of the tree) and the notebooks use
+# (test_moving's tracking rollout, the tree shape at 200 steps, is the quickstart
+# notebook's section 7); test_warm_start's plan_batch is
 # the program of test_cli's batch command; test_gains_file plans with test_cli's and
 # test_presets' programs.
 SHARED = {
-    "planner": ["test_planner", "test_engine", "test_safe_step", "test_smoothing", "test_moving", "test_notebooks"],
+    "planner": ["test_planner", "test_engine", "test_safe_step", "test_smoothing", "test_goal_gains", "test_moving",
+                "test_notebooks"],
     "cli": ["test_warm_start", "test_cli", "test_presets", "test_gains_file"],
     # test_sweep's fallback runs test_reach's search programs (same padded shape and options).
     "reach": ["test_reach", "test_sweep"],

@@ -17,6 +17,7 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.planning import planner_step
+from softplan_jax.planning.planner import make_options
 from softplan_jax.planning.step import GOAL_GAINS, goal_scaled
 from softplan_jax.tuning import GainSpace, ScoreWeights, estimate_objective, rollout_score, smoothing_sample
 from softplan_jax.tuning.tuner import (
@@ -73,13 +74,16 @@ def test_goal_scaled_interpolates_the_knots_and_is_finite_at_the_goal():
 
 def test_one_step_gradient_in_the_goal_profile_matches_central_differences():
     """jax.jacfwd of one planner step in the goal profile against central differences; the
-    repulsion rows (eta, d0) act on the tree's start, where d0 = 0.3 reaches the branches."""
-    tree = sp.paper_scenario("tree")
-    g = sp.GainFunction.from_gains(sp.default_gains()._replace(d0=jnp.asarray(0.3)), 2, 3)
+    repulsion rows (eta, d0) act on the tree's start, where d0 = 0.3 reaches the branches.
+    (The padded tree, default options and this GainFunction's structure: the central
+    differences step with test_smoothing's compiled planner_step.)"""
+    tree = sp.paper_scenario("tree", curve_slots=5, degree=2)
+    g = sp.GainFunction.from_gains(sp.default_gains()._replace(d0=jnp.asarray(0.3, jnp.float64)), 5, 3, goal_knots=3)
     P0 = _profile(3, seed=1)
+    opts = make_options("curve")
 
     def step(P):
-        return planner_step(tree.q0, tree, g._replace(goal_profile=P))
+        return planner_step(tree.q0, tree, g._replace(goal_profile=P), opts)
 
     jac = np.asarray(jax.jacfwd(step)(P0))  # (n, 3, G, K)
     h = 1e-6

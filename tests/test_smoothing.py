@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
+from softplan_jax.planning.planner import make_options
 from softplan_jax.tuning import (
     GainSpace,
     ScoreWeights,
@@ -214,16 +215,15 @@ def test_tune_smoothed_reshuffle_uses_every_scene_once_per_epoch(suite):
 
 
 def test_gain_function_generalises_gains():
-    """A GainFunction with zero profile and weights steps exactly as its Gains; a
+    """A GainFunction with zero profiles and weights steps exactly as its Gains; a
     constant log-profile c (or constant segment weights c) steps as eta * exp(c).
-    (One curve: small programs.)"""
-    line = sp.PolynomialCurve([[1.0, 0.0], [0.0, 1.0], [0.5, -1.0]], (-2.0, 2.0))
-    sc = sp.make_scenario([1.1, -0.8, 0.9], [line])
-    g = sp.default_gains()._replace(d0=jnp.asarray(3.0, jnp.float64))  # the obstacle within d0: the repulsion acts
+    (The Gains' step is test_planner's compiled planner_step: the padded tree, default options.)"""
+    sc = sp.paper_scenario("tree", curve_slots=5, degree=2)
+    g = sp.default_gains()._replace(d0=jnp.asarray(3.0, jnp.float64))  # the branches within d0: the repulsion acts
     q = sc.q0.at[:, 1].set(0.3)
-    opts = sp.PlanOptions(step="plain")
+    opts = make_options("curve")
     ref = np.asarray(sp.planning.planner_step(q, sc, g, opts))
-    fn = sp.GainFunction.from_gains(g, 5, 3)
+    fn = sp.GainFunction.from_gains(g, 5, 3, goal_knots=3)  # test_goal_gains' one-step structure: one program
     np.testing.assert_array_equal(np.asarray(sp.planning.planner_step(q, sc, fn, opts)), ref)
     c = 0.7
     scaled = np.asarray(sp.planning.planner_step(q, sc, g._replace(eta=g.eta * math.exp(c)), opts))
