@@ -264,6 +264,7 @@ def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gai
 
 def result_from_track(r: Track, moving: MovingScenario, dt: float) -> TrackResult:
     """Trim one (unbatched) Track to the steps taken, on the host."""
+    r = jax.device_get(r)  # NumPy slices below: no slice program compiled per step count
     it = int(r.iterations)
     _, mask = radius_and_mask(moving.scene)
     rs = int(r.reached_step)
@@ -278,14 +279,14 @@ def result_from_track(r: Track, moving: MovingScenario, dt: float) -> TrackResul
         iterations=it,
         min_clearance=float(r.min_clearance),
         final_error=float(r.final_error),
-        evasive_steps=int(np.sum(np.asarray(r.evasive))),
-        time=np.asarray(r.time[: it + 1]),
-        goal=np.asarray(r.goal[: it + 1]),
-        error=np.asarray(r.error[: it + 1]),
-        q=np.asarray(r.q[: it + 1]),
-        tip=np.asarray(r.tip[: it + 1]),
-        clearance=np.asarray(r.clearance[: it + 1])[:, np.asarray(mask)],
-        evasive=np.asarray(r.evasive[: it + 1]),
+        evasive_steps=int(np.sum(r.evasive)),
+        time=r.time[: it + 1],
+        goal=r.goal[: it + 1],
+        error=r.error[: it + 1],
+        q=r.q[: it + 1],
+        tip=r.tip[: it + 1],
+        clearance=r.clearance[: it + 1][:, np.asarray(mask)],
+        evasive=r.evasive[: it + 1],
         moving=moving,
     )
 
