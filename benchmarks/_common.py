@@ -1,6 +1,7 @@
 """Helpers shared by the benchmark scripts: machine header, formatting, a text
-progress bar, timing of compiled calls, writing results, and importing another
-version of the package side by side with this one.
+progress bar, timing of compiled calls, writing results, importing another
+version of the package side by side with this one, and running a measurement in
+a fresh process on a given checkout.
 
 Import this AFTER choosing jax's precision (``jax_enable_x64``) in the script:
 it imports jax but does not change its configuration.
@@ -196,6 +197,22 @@ class ProgressBar:
         if self.done >= self.total:
             self.stream.write("\n")
         self.stream.flush()
+
+
+def run_fresh(code: str, argv: list, path: str, timeout: float = 3600) -> dict:
+    """Run ``code`` (a Python program that prints one JSON object on its last line) in a fresh
+    process with the package of checkout ``path`` first on its path and the persistent
+    compilation cache off; returns that object. A RuntimeError with the end of its stderr if it
+    fails."""
+    import subprocess
+
+    env = dict(os.environ, SOFTPLAN_JAX_NO_CACHE="1", PYTHONPATH=path)
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    proc = subprocess.run([sys.executable, "-c", code, *map(str, argv)], env=env, cwd=path, capture_output=True,
+                          text=True, timeout=timeout)
+    if proc.returncode != 0:
+        raise RuntimeError(f"the worker failed for {path}:\n{proc.stderr[-3000:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
 def write_results(prefix: str, report: dict, markdown: str) -> None:

@@ -32,10 +32,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import os
 import statistics
-import subprocess
 import sys
 import time
 
@@ -118,12 +116,9 @@ def parse_args(argv=None):
 
 
 def run_variant(path: str, args) -> dict:
-    env = dict(os.environ, SOFTPLAN_JAX_NO_CACHE="1", PYTHONPATH=path)
-    proc = subprocess.run([sys.executable, "-c", WORKER, str(args.batch), str(args.scenes)], env=env, cwd=path,
-                          capture_output=True, text=True, timeout=3600)
-    if proc.returncode != 0:
-        raise RuntimeError(f"the worker failed for {path}:\n{proc.stderr[-3000:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    from _common import run_fresh
+
+    return run_fresh(WORKER, [args.batch, args.scenes], path)
 
 
 def main(argv=None) -> dict:

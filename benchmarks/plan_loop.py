@@ -24,10 +24,8 @@ Writes ``results/plan_loop.{md,json}`` and ``results/figures/plan_loop.png``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
-import subprocess
 import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -83,18 +81,8 @@ def parse_args(argv=None):
     return args
 
 
-def run_variant(path: str, args) -> dict:
-    env = dict(os.environ, SOFTPLAN_COMPILATION_CACHE="0", PYTHONPATH=path)
-    env.pop("JAX_COMPILATION_CACHE_DIR", None)
-    proc = subprocess.run([sys.executable, "-c", WORKER, str(args.scenes), str(args.max_steps)], env=env, cwd=path,
-                          capture_output=True, text=True, timeout=3600)
-    if proc.returncode != 0:
-        raise RuntimeError(f"the worker failed for {path}:\n{proc.stderr[-3000:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
-
-
 def main(argv=None) -> dict:
-    from _common import finish_machine, log, machine_info, machine_lines, output_paths, write_results
+    from _common import finish_machine, log, machine_info, machine_lines, output_paths, run_fresh, write_results
 
     args = parse_args(argv)
     variants = {"this": REPO} | ({"previous": os.path.abspath(args.base)} if args.base else {})
@@ -102,7 +90,7 @@ def main(argv=None) -> dict:
     runs = {v: [] for v in variants}
     for k in range(args.rounds):
         for v in (list(variants) if k % 2 == 0 else list(reversed(variants))):
-            r = run_variant(variants[v], args)
+            r = run_fresh(WORKER, [args.scenes, args.max_steps], variants[v])
             runs[v].append(r)
             log(f"round {k + 1}/{args.rounds} [{v}]: per plan, median pass 1 "
                 f"{1e3 * statistics.median(r['pass1']['times']):.1f} ms ({r['pass1']['compiles']} compilations), "
