@@ -13,7 +13,9 @@ On the paper's tree scenario (five curves, three segments), float64 and float32:
 4. compile time of a rollout (target <= 5 s; median and min of COMPILE_REPEATS
    compiles, the machine is shared), reported apart from run time;
    the number of compilations across scenes of one padded shape (target 0
-   after the first; counted with ``rollout_jit.cache_size()``); and the wall
+   after the first; ``sp.plan`` of the paper's three scenes, counted with
+   ``rollout_jit.cache_size()`` and, for every XLA program, with jax.monitoring's
+   backend-compile events); and the wall
    time of ``softplan run tree`` as a new user runs it, first and second call
    in fresh processes sharing an empty cache directory (target <= 3 s for the
    second: jax's persistent compilation cache and the exported traced rollout);
@@ -233,14 +235,26 @@ def checked_lines(name, r):
 
 
 def count_recompiles(steps):
-    """Compilations of rollout_jit across scenes of one padded shape (after the first)."""
-    opts = make_options("curve")
+    """Compilations across scenes of one padded shape after the first, through ``sp.plan`` as a
+    user calls it (each scene ends at another step count): ``(of rollout_jit, of any XLA
+    program)``, the second from jax.monitoring's backend-compile events (the rollout, the
+    checks, trimming the result: every eager operation too)."""
+    events = []
+    counting = [True]
+
+    def listener(event, seconds, **kwargs):
+        if counting[0] and event == "/jax/core/compile/backend_compile_duration":
+            events.append(seconds)
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
     scenes = [sp.paper_scenario(n, curve_slots=5, degree=2) for n in ("sim1", "sim2", "tree")]
-    rollout_jit(scenes[0], sp.default_gains(), opts, steps)
+    sp.plan(scenes[0], max_steps=steps)
     before = rollout_jit.cache_size()
+    del events[:]
     for s in scenes[1:]:
-        rollout_jit(s, sp.default_gains()._replace(eta=jnp.asarray(2e-3)), opts, steps)
-    return rollout_jit.cache_size() - before
+        sp.plan(s, gains=sp.default_gains()._replace(eta=jnp.asarray(2e-3)), max_steps=steps)
+    counting[0] = False
+    return rollout_jit.cache_size() - before, len(events)
 
 
 def cli_runs(runs=2):
@@ -310,7 +324,7 @@ def main(argv=None):
         results[jnp.dtype(dtype).name] = measure(dtype, args.steps, batch, repeats, compile_repeats)
         log(f"  checked / planning-only rollouts (batch of {checked_batch} random scenes) ...")
         results[jnp.dtype(dtype).name]["checked"] = measure_checked(dtype, args.steps, checked_batch, repeats)
-    recompiles = count_recompiles(args.steps)
+    recompiles, compilations = count_recompiles(args.steps)
     log("softplan run tree, twice, fresh processes, empty cache directory ...")
     cli = cli_runs()
     log("  " + ", ".join(f"{w:.1f} s" for w in cli))
@@ -353,7 +367,8 @@ def main(argv=None):
         "exact closest points by scipy.optimize.least_squares with analytic Jacobians seeded from a "
         "vectorised (s, u) grid, cKDTree for the N-point method (12-20 ms per tree step on 2 shared "
         "cores; the earlier finite-difference version took ~0.4-0.6 s, which inflated these ratios).",
-        f"- recompilations of `rollout_jit` across three scenes of one padded shape: **{recompiles}** (target 0)",
+        f"- compilations across three scenes of one padded shape after the first (`sp.plan`, each scene ending at "
+        f"another step count): of `rollout_jit` **{recompiles}**, of any XLA program **{compilations}** (target 0)",
         f"- `softplan run tree` wall time, first / second call (fresh processes, empty cache directory): "
         f"{cli[0]:.1f} s / {cli[1]:.1f} s",
         "",
@@ -371,7 +386,7 @@ def main(argv=None):
         lines.append(f"- {dt}, item 6: " + ", ".join(f"{k} {v:.4g}" for k, v in r["checked"].items()))
     md = "\n".join(lines) + "\n"
     report = dict(machine=machine, steps=args.steps, batch=batch, numpy_step_s=numpy_s, results=results,
-                  recompiles=recompiles, cli_run_wall_s=cli,
+                  recompiles=recompiles, compilations=compilations, cli_run_wall_s=cli,
                   targets=[dict(dtype=a, quantity=b, target=c, value=d, unit=e, met=bool(met[c](d)))
                            for a, b, c, d, e in rows])
     write_results(args.out, report, md)
