@@ -240,20 +240,20 @@ def count_recompiles(steps):
     program)``, the second from jax.monitoring's backend-compile events (the rollout, the
     checks, trimming the result: every eager operation too)."""
     events = []
-    counting = [True]
 
     def listener(event, seconds, **kwargs):
-        if counting[0] and event == "/jax/core/compile/backend_compile_duration":
+        if event == "/jax/core/compile/backend_compile_duration":
             events.append(seconds)
 
-    jax.monitoring.register_event_duration_secs_listener(listener)
     scenes = [sp.paper_scenario(n, curve_slots=5, degree=2) for n in ("sim1", "sim2", "tree")]
     sp.plan(scenes[0], max_steps=steps)
     before = rollout_jit.cache_size()
-    del events[:]
-    for s in scenes[1:]:
-        sp.plan(s, gains=sp.default_gains()._replace(eta=jnp.asarray(2e-3)), max_steps=steps)
-    counting[0] = False
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        for s in scenes[1:]:
+            sp.plan(s, gains=sp.default_gains()._replace(eta=jnp.asarray(2e-3)), max_steps=steps)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
     return rollout_jit.cache_size() - before, len(events)
 
 

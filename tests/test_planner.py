@@ -2,6 +2,8 @@
 gradients. References: a plain Python loop of steps, brute-force dense
 clearance of whole trajectories, central finite differences."""
 
+import logging
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -191,8 +193,6 @@ def test_trimming_a_rollout_compiles_nothing(paper, caplog):
     """result_from_rollout trims the records to the steps taken on the host: a new step count
     compiles no slice program (it cost ~25 ms a field on a CPU, 75 ms for a plan that ended at
     a step count not seen before). The same records, to the bit, as the device arrays'."""
-    import logging
-
     sc = paper["tree"]
     r = rollout_jit(sc, sp.default_gains(), make_options("curve"), 200)  # test_planner's program
     m = int(np.sum(np.asarray(sc.curve_mask)))
