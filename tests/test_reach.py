@@ -86,6 +86,29 @@ def test_goal_configurations_hold_one_exact_solve(monkeypatch):
     assert len(sites) == 1
 
 
+@pytest.mark.slow
+def test_batch_loop_equals_jax_vmap_of_the_scene_loop(decided):
+    """goal_configurations_batch runs one loop for the batch (each round every scene's round,
+    kept where that scene goes on); jax.vmap of the one-scene loop is the reference, and the
+    arrays agree bit for bit on scenes that end at different rounds (certified at once,
+    beyond reach: every null-space round). Slow: the reference is a 3-scene IK program of its
+    own (about 8 s to trace and compile) that nothing else uses."""
+    from softplan_jax.base.compilation_cache import rollout_compiler_options
+    from softplan_jax.search.reach import goal_configurations
+
+    batch, _ = decided
+    batch = jax.tree_util.tree_map(lambda x: x[:3], batch)
+    keys = jax.random.split(jax.random.PRNGKey(0), 3)
+    solver = sp.geometry.SolverOptions()
+    ours = _goal_configurations_jit(OPTS, solver, 1e-6, True)(batch, keys, batch.q0)
+    reference = jax.jit(jax.vmap(lambda s, k, e: goal_configurations(s, k, e, OPTS, solver, 1e-6)),
+                        compiler_options=rollout_compiler_options("curve"))(batch, keys, batch.q0)
+    for a, b in zip(ours, reference, strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    certified = np.asarray(ours[1])
+    assert certified[0].any() and not certified[1].any()  # the scenes end at different rounds
+
+
 def test_beyond_reach_is_proven_and_best_error_is_sound(decided):
     _, r = decided
     assert not r.reachable[1] and r.reason[1] == "beyond_reach"
@@ -166,6 +189,21 @@ def test_plot_shows_the_global_part(rescued):
         np.testing.assert_allclose(np.asarray(green.get_data_3d()).T, r.tip[r.global_start:])
     finally:
         plt.close(fig)
+
+
+def test_fallback_programs_compile_with_the_package_xla_options(rescued):
+    """The fallback's programs (IK, search, path check) compile with the package's XLA options
+    for exact solves (compilation_cache.rollout_compiler_options("curve")): no YNN fusions,
+    which XLA's defaults put in them (the plain jit of the same function below). Checked on
+    the path check, with the shapes the fixture compiled (its program comes from the
+    persistent cache); benchmarks/fallback_compile.py measures what the options buy."""
+    from softplan_jax.search.fallback import _path_check_jit
+
+    s, _, single = rescued
+    path = jnp.asarray(np.repeat(single.q[-1:], OPTS.path_steps + 1, axis=0))
+    check = _path_check_jit(sp.geometry.SolverOptions(), 1e-6)
+    assert "ynn_fusion" not in check.lower(s, path, path).compile().as_text()
+    assert "ynn_fusion" in jax.jit(check.__wrapped__).lower(s, path, path).compile().as_text()
 
 
 def test_batch_compiles_the_search_once_and_keeps_local_results(rescued):

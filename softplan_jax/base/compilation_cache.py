@@ -39,9 +39,10 @@ compilation.
 compiled with, per obstacle model: every rollout
 without XLA's YNN fusions, and the curve method's also without its MLIR fusion
 emitters (a quarter less compile time; the N-point model's batched step runs
-slower with it, so it keeps them). They are passed per program
-(``jax.jit(..., compiler_options=...)``), so they apply to this package's
-rollouts only and never to the user's other jax code: no ``XLA_FLAGS``, no
+slower with it, so it keeps them). The global fallback's three programs (the IK,
+the search, the path check: all exact solves) take the curve method's. They are passed
+per program (``jax.jit(..., compiler_options=...)``), so they apply to this package's
+rollouts and fallback only and never to the user's other jax code: no ``XLA_FLAGS``, no
 global jax configuration. ``SOFTPLAN_XLA_OPTIONS=0`` compiles with XLA's
 defaults instead.
 """
@@ -185,7 +186,8 @@ def _known_option(name: str, value) -> bool:
 def rollout_compiler_options(method: str = "curve") -> dict | None:
     """The XLA options that :data:`~softplan_jax.planning.planner.rollout_jit`,
     :data:`~softplan_jax.planning.planner.rollout_batch` and ``rollout_jit.cached`` compile a
-    rollout of the planner's ``method`` ("curve" or "points") with, on the CPU backend:
+    rollout of the planner's ``method`` ("curve" or "points") with (and the global fallback's
+    programs with the curve method's), on the CPU backend:
     :data:`CPU_COMPILER_OPTIONS`, and for "curve" also :data:`CURVE_CPU_COMPILER_OPTIONS`,
     each kept only if this jaxlib knows it. None (XLA's defaults) on other backends, when
     it knows none of them, or with ``SOFTPLAN_XLA_OPTIONS=0`` in the environment. Decided

@@ -42,6 +42,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.compilation_cache import rollout_compiler_options
 from ..base.numerics import damped_pinv, safe_norm, solve_small
 from ..geometry.closest import DEFAULT_OPTIONS, SolverOptions
 from ..geometry.kinematics import points_jacobian, tip_position
@@ -49,7 +50,8 @@ from ..geometry.obstacles import placeholder_closest, radius_and_mask, true_clos
 from ..scenarios import Scenario
 from ..scenarios.scenario import unreachable_reason
 
-__all__ = ["ReachOptions", "Reachability", "REACH_REASONS", "reachability", "goal_configurations", "scene_of"]
+__all__ = ["ReachOptions", "Reachability", "REACH_REASONS", "reachability", "goal_configurations",
+           "goal_configurations_batch", "scene_of"]
 
 
 class ReachOptions(NamedTuple):
@@ -256,9 +258,63 @@ def _push_step(q, c, truth, scenario: Scenario, options: ReachOptions):
     return jnp.where(jnp.all(jnp.isfinite(q_new)), q_new, q)
 
 
+def _ik_start(scenario: Scenario, key, q_extra, options: ReachOptions):
+    """The IK's starts (S, n, 3) (q0, the extra configuration if given, random ones), the
+    tip IK from them (no exact solve: taken before the loop) and the loop's first state."""
+    S = int(options.ik_starts)
+    q0 = scenario.q0
+    fixed = [q0] if q_extra is None else [q0, q_extra.astype(q0.dtype)]
+    fixed = jnp.stack(fixed)[:S]
+    starts = jnp.concatenate([fixed, random_configurations(key, scenario, options, S - fixed.shape[0])])
+    starts = jax.vmap(lambda q: clip_lengths(q, scenario))(starts)
+    q_ik = jax.vmap(lambda q: _tip_lm(q, scenario, options.ik_iterations))(starts)
+    # Rounds 0 and 1 compute a push from these placeholders and the starts' clearances; it is not taken.
+    dtype = q0.dtype
+    truth = jax.vmap(lambda q: placeholder_closest(q, scenario))(starts)
+    solved = (jnp.zeros(truth.distance.shape, dtype), truth)
+    none = jnp.zeros((S,), bool)
+    state = (jnp.zeros((), jnp.int32), starts, solved, jnp.zeros((S,), dtype), jnp.zeros((S,), dtype), none, none,
+             jnp.asarray(jnp.inf, dtype))
+    return starts, q_ik, state
+
+
+def _ik_more(state, options: ReachOptions):
+    """Whether the loop runs another round: rounds 0 and 1, then while no start is certified
+    (at most ik_clear_iterations times)."""
+    r, _, _, _, _, certified, _, _ = state
+    return (r < 2) | ((r - 2 < options.ik_clear_iterations) & ~jnp.any(certified))
+
+
+def _ik_round(state, scenario: Scenario, starts, q_ik, options: ReachOptions, solver, contact):
+    """One round of the IK's loop, its one exact solve site (see goal_configurations)."""
+
+    def assess(q):
+        """The exact clearances at q (kept: the next push step starts from them) and their verdict."""
+        c_all, truth, ok = clearances(q, scenario, solver)
+        err = safe_norm(scenario.goal - tip_position(q))
+        c = jnp.min(c_all, initial=jnp.inf)
+        finite = jnp.all(jnp.isfinite(q)) & jnp.isfinite(err)
+        certified = finite & ok & (c >= options.ik_clearance) & (err <= options.ik_tolerance)
+        free = finite & ok & (c > contact)
+        return (c_all, truth), c, err, certified, free
+
+    r, q, solved, _, _, _, _, best = state
+    pushed = jax.vmap(lambda q, s: _tip_lm(_push_step(q, *s, scenario, options), scenario, 3))(q, solved)
+    q = jnp.where(r == 0, starts, jnp.where(r == 1, q_ik, pushed))
+    solved, c, err, certified, free = jax.vmap(assess)(q)
+    best = jnp.minimum(best, jnp.min(jnp.where(free, err, jnp.inf)))
+    return r + 1, q, solved, c, err, certified, free, best
+
+
+def _ik_result(state):
+    _, q, _, c, err, certified, _, best = state
+    order = jnp.argsort(jnp.where(certified, -c, jnp.inf))  # certified, widest clearance first
+    return q[order], certified[order], c[order], err[order], best
+
+
 def goal_configurations(scenario: Scenario, key, q_extra, options: ReachOptions,
                         solver: SolverOptions = DEFAULT_OPTIONS, contact=1e-6):
-    """Multi-start IK for one scene (traceable; vmap over scenes).
+    """Multi-start IK for one scene (traceable; a batch: :func:`goal_configurations_batch`).
 
     Tip IK from every start, then the exact clearances; while no start is
     certified (and at most ``ik_clear_iterations`` times), one null-space
@@ -271,23 +327,6 @@ def goal_configurations(scenario: Scenario, key, q_extra, options: ReachOptions,
     ``contact``: a configuration counts as collision-free for ``best_error``
     when its clearance exceeds this.
     """
-    S = int(options.ik_starts)
-    q0 = scenario.q0
-    fixed = [q0] if q_extra is None else [q0, q_extra.astype(q0.dtype)]
-    fixed = jnp.stack(fixed)[:S]
-    starts = jnp.concatenate([fixed, random_configurations(key, scenario, options, S - fixed.shape[0])])
-    starts = jax.vmap(lambda q: clip_lengths(q, scenario))(starts)
-
-    def assess(q):
-        """The exact clearances at q (kept: the next push step starts from them) and their verdict."""
-        c_all, truth, ok = clearances(q, scenario, solver)
-        err = safe_norm(scenario.goal - tip_position(q))
-        c = jnp.min(c_all, initial=jnp.inf)
-        finite = jnp.all(jnp.isfinite(q)) & jnp.isfinite(err)
-        certified = finite & ok & (c >= options.ik_clearance) & (err <= options.ik_tolerance)
-        free = finite & ok & (c > contact)
-        return (c_all, truth), c, err, certified, free
-
     # One exact solve site, the loop's body (one copy of the solver in the compiled
     # program). Round 0 assesses the starts themselves: they count for the best
     # collision-free tip distance (the start pose is clear in a valid scene: a goal inside
@@ -295,38 +334,42 @@ def goal_configurations(scenario: Scenario, key, q_extra, options: ReachOptions,
     # (ik_iterations Levenberg-Marquardt steps, taken before the loop: no solve in them).
     # Rounds 2, 3, ...: while no start is certified (at most ik_clear_iterations times),
     # one null-space push from the clearances the last round found and a 3-step tip polish.
-    q_ik = jax.vmap(lambda q: _tip_lm(q, scenario, options.ik_iterations))(starts)
+    starts, q_ik, state = _ik_start(scenario, key, q_extra, options)
+    state = jax.lax.while_loop(lambda st: _ik_more(st, options),
+                               lambda st: _ik_round(st, scenario, starts, q_ik, options, solver, contact), state)
+    return _ik_result(state)
 
-    def cond(state):
-        r, _, _, _, _, certified, _, _ = state
-        return (r < 2) | ((r - 2 < options.ik_clear_iterations) & ~jnp.any(certified))
+
+def goal_configurations_batch(scenarios: Scenario, keys, q_extra, options: ReachOptions,
+                              solver: SolverOptions = DEFAULT_OPTIONS, contact=1e-6):
+    """:func:`goal_configurations` of a stacked batch of scenes (leading axis B; ``keys`` (B,),
+    ``q_extra`` (B, n, 3) or None), as ``jax.vmap`` of it computes them, with one loop for the
+    batch: each round runs every scene's round (vmapped) and keeps it where that scene's loop
+    goes on, until none does. (Under vmap, jax turns the per-scene loop into this same loop,
+    but traces and batches its body more than once: ~1.4 s of the fallback's compile.)"""
+    if q_extra is None:
+        starts, q_ik, state = jax.vmap(lambda s, k: _ik_start(s, k, None, options))(scenarios, keys)
+    else:
+        starts, q_ik, state = jax.vmap(lambda s, k, e: _ik_start(s, k, e, options))(scenarios, keys, q_extra)
+    more = jax.vmap(lambda st: _ik_more(st, options))
 
     def body(state):
-        r, q, solved, _, _, _, _, best = state
-        pushed = jax.vmap(lambda q, s: _tip_lm(_push_step(q, *s, scenario, options), scenario, 3))(q, solved)
-        q = jnp.where(r == 0, starts, jnp.where(r == 1, q_ik, pushed))
-        solved, c, err, certified, free = jax.vmap(assess)(q)
-        best = jnp.minimum(best, jnp.min(jnp.where(free, err, jnp.inf)))
-        return r + 1, q, solved, c, err, certified, free, best
+        going = more(state)
+        new = jax.vmap(lambda st, s, a, b: _ik_round(st, s, a, b, options, solver, contact))(state, scenarios, starts,
+                                                                                          q_ik)
+        return jax.tree_util.tree_map(
+            lambda x, y: jnp.where(going.reshape((-1,) + (1,) * (x.ndim - 1)), x, y), new, state)
 
-    # Rounds 0 and 1 compute a push from these placeholders and the starts' clearances; it is not taken.
-    dtype = q0.dtype
-    truth = jax.vmap(lambda q: placeholder_closest(q, scenario))(starts)
-    solved = (jnp.zeros(truth.distance.shape, dtype), truth)
-    none = jnp.zeros((S,), bool)
-    state = (jnp.zeros((), jnp.int32), starts, solved, jnp.zeros((S,), dtype), jnp.zeros((S,), dtype), none, none,
-             jnp.asarray(jnp.inf, dtype))
-    _, q, _, c, err, certified, _, best = jax.lax.while_loop(cond, body, state)
-    order = jnp.argsort(jnp.where(certified, -c, jnp.inf))  # certified, widest clearance first
-    return q[order], certified[order], c[order], err[order], best
+    state = jax.lax.while_loop(lambda st: jnp.any(more(st)), body, state)
+    return jax.vmap(_ik_result)(state)
 
 
 @functools.cache
 def _goal_configurations_jit(options: ReachOptions, solver, contact: float, extra: bool):
-    def goal_configs(scenario, key, q_extra):
-        return goal_configurations(scenario, key, q_extra if extra else None, options, solver, contact)
+    def goal_configs(scenarios, keys, q_extra):
+        return goal_configurations_batch(scenarios, keys, q_extra if extra else None, options, solver, contact)
 
-    return jax.jit(jax.vmap(goal_configs))
+    return jax.jit(goal_configs, compiler_options=rollout_compiler_options("curve"))
 
 
 # ----------------------------------------------------------------------------
