@@ -199,14 +199,14 @@ class ProgressBar:
         self.stream.flush()
 
 
-def run_fresh(code: str, argv: list, path: str, timeout: float = 3600) -> dict:
+def run_fresh(code: str, argv: list, path: str, timeout: float = 3600, env: dict | None = None) -> dict:
     """Run ``code`` (a Python program that prints one JSON object on its last line) in a fresh
     process with the package of checkout ``path`` first on its path and the persistent
-    compilation cache off; returns that object. A RuntimeError with the end of its stderr if it
-    fails."""
+    compilation cache off (``env``: more environment variables); returns that object. A
+    RuntimeError with the end of its stderr if it fails."""
     import subprocess
 
-    env = dict(os.environ, SOFTPLAN_JAX_NO_CACHE="1", PYTHONPATH=path)
+    env = dict(os.environ, **(env or {}), SOFTPLAN_JAX_NO_CACHE="1", PYTHONPATH=path)
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     proc = subprocess.run([sys.executable, "-c", code, *map(str, argv)], env=env, cwd=path, capture_output=True,
                           text=True, timeout=timeout)

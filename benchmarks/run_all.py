@@ -57,6 +57,7 @@ SCRIPTS = {
     "compile_by_degree": [[]],
     "fallback_compile": [[]],
     "plan_loop": [[]],
+    "package_programs": [[]],
     # made for one GPU (its docstring); here the single plan and plan_batch's defaults on this machine
     "gpu": [["--parts", "plan,defaults", "--out", os.path.join(RESULTS, "gpu_this_machine")]],
     # this version alone; against another: --against PATH (its docstring)

@@ -181,8 +181,8 @@ def test_run_all_rejects_unknown_scripts(capsys):
 
 # Scripts whose quick run no other test below runs: `NAME.py --quick --out DIR/NAME` in a subprocess.
 QUICK_ONLY = ["baselines", "closest", "compile_by_degree", "devices", "engine", "evasion", "fallback_compile", "gpu",
-              "numpy_baseline", "paper_presets", "plan_loop", "speed_targets", "step_profile", "suite_speed",
-              "sweep_scale", "throughput", "tuners", "warm_start"]
+              "numpy_baseline", "package_programs", "paper_presets", "plan_loop", "speed_targets", "step_profile",
+              "suite_speed", "sweep_scale", "throughput", "tuners", "warm_start"]
 
 
 @pytest.mark.bench
@@ -193,7 +193,7 @@ def test_quick_run_writes_its_report(tmp_path, name):
     _ok(_run([sys.executable, os.path.join(BENCH, f"{name}.py"), *args]))
     report = json.loads((tmp_path / f"{name}.json").read_text())
     assert report and (tmp_path / f"{name}.md").read_text().startswith("#")
-    if name in ("engine", "throughput", "fallback_compile", "tuners", "step_profile", "plan_loop"):
+    if name in ("engine", "throughput", "fallback_compile", "tuners", "step_profile", "plan_loop", "package_programs"):
         assert (tmp_path / "figures" / f"{name}.png").stat().st_size > 10_000
     if name == "baselines":
         assert (tmp_path / "baselines.npz").exists() and report["arrays"] > 0

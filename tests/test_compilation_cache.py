@@ -146,3 +146,44 @@ def test_xla_options_this_jaxlib_does_not_know_are_left_out(monkeypatch):
     finally:
         monkeypatch.undo()
         cc.rollout_compiler_options.cache_clear()
+
+
+def test_package_jit_inside_the_users_jit_and_transforms():
+    """package_jit (how the package jits closest_point, planner_step, the fallback's and the
+    brute-force programs): called at top level it compiles with the package's options (one
+    program, counted); inside the user's jit, where jax refuses compiler options on a nested
+    jit, a plain jit of the same function gives the same values; under grad (outside a jit)
+    the derivative is right; a ValueError of the function itself is not swallowed."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from softplan_jax.base.compilation_cache import package_jit, rollout_compiler_options
+
+    f = package_jit(lambda x, k: jnp.sin(x) * k, static_argnames=("k",))
+    x = jnp.linspace(0.0, 1.0, 5)
+    np.testing.assert_allclose(np.asarray(f(x, k=2)), 2 * np.sin(np.asarray(x)), rtol=1e-15)
+    assert f._cache_size() == 1
+    assert f.jitted().lower(x, k=2).compile()  # the top-level jit lowers ahead of time
+    inner = jax.jit(lambda x: f(x, k=2) + 1.0)(x)
+    np.testing.assert_allclose(np.asarray(inner), 2 * np.sin(np.asarray(x)) + 1.0, rtol=1e-15)
+    assert f._cache_size() == 1  # the nested call compiled nothing at top level
+    g = jax.grad(lambda x: jnp.sum(f(x, k=3)))(x)
+    np.testing.assert_allclose(np.asarray(g), 3 * np.cos(np.asarray(x)), rtol=1e-14)
+
+    def bad(x):
+        raise ValueError("bad input, not a nesting")
+
+    with pytest.raises(ValueError, match="bad input"):
+        package_jit(bad)(x)
+    with pytest.raises(ValueError, match="method"):
+        package_jit(lambda x: x, method="Curve")(x)
+    assert rollout_compiler_options("curve")  # the suite's CPU jaxlib knows the options
+
+
+def test_planner_step_rejects_options_that_are_not_plan_options():
+    import softplan_jax as sp
+
+    sc = sp.paper_scenario("sim1")
+    with pytest.raises(ValueError, match="PlanOptions"):
+        sp.planning.planner_step(sc.q0, sc, sp.default_gains(), {"method": "curve"})

@@ -39,10 +39,12 @@ compilation.
 compiled with, per obstacle model: every rollout
 without XLA's YNN fusions, and the curve method's also without its MLIR fusion
 emitters (a quarter less compile time; the N-point model's batched step runs
-slower with it, so it keeps them). The global fallback's three programs (the IK,
-the search, the path check: all exact solves) take the curve method's. They are passed
-per program (``jax.jit(..., compiler_options=...)``), so they apply to this package's
-rollouts and fallback only and never to the user's other jax code: no ``XLA_FLAGS``, no
+slower with it, so it keeps them). The package's other programs take the curve
+method's (:class:`package_jit`): the global fallback's three (the IK, the search, the path
+check), :func:`~softplan_jax.closest_point`, :func:`~softplan_jax.planning.planner_step`
+(its method's) and the brute-force :func:`~softplan_jax.dense_trajectory_clearance`. They
+are passed per program (``jax.jit(..., compiler_options=...)``), so they apply to this
+package's programs only and never to the user's other jax code: no ``XLA_FLAGS``, no
 global jax configuration. ``SOFTPLAN_XLA_OPTIONS=0`` compiles with XLA's
 defaults instead.
 """
@@ -55,7 +57,7 @@ import os
 import tempfile
 
 __all__ = ["compilation_cache_dir", "enable_compilation_cache", "enable_default_cache", "disable_compilation_cache",
-           "load_or_export", "rollout_compiler_options"]
+           "load_or_export", "package_jit", "rollout_compiler_options"]
 
 # XLA CPU options of the rollout programs, measured by
 # benchmarks/xla_options.py (results/xla_options.md; git history at b850131), float64, checked rollouts:
@@ -201,6 +203,49 @@ def rollout_compiler_options(method: str = "curve") -> dict | None:
     wanted = {**CPU_COMPILER_OPTIONS, **(CURVE_CPU_COMPILER_OPTIONS if method == "curve" else {})}
     known = {name: value for name, value in wanted.items() if _known_option(name, value)}
     return known or None
+
+
+class package_jit:
+    """``jax.jit(fn, **jit_kwargs)`` with :func:`rollout_compiler_options` ``(method)``: how this
+    package jits its programs (the rollouts, the fallback's, the exact closest point, the planner
+    step, the brute-force clearance). Built on the first call (the options depend on the
+    backend, which importing must not start). Inside the user's own jit, where jax takes
+    compiler options on top-level jits only, a plain jit of ``fn`` (compiled with the enclosing
+    program's options). ``lower``, ``trace`` and ``_cache_size`` are the top-level jit's."""
+
+    def __init__(self, fn, method: str = "curve", **jit_kwargs):
+        functools.update_wrapper(self, fn)
+        self._fn, self._method, self._jit_kwargs = fn, method, jit_kwargs
+        self._top = self._nested = None
+
+    def jitted(self):
+        """The top-level ``jax.jit`` (with the package's options)."""
+        if self._top is None:
+            import jax
+
+            self._top = jax.jit(self._fn, compiler_options=rollout_compiler_options(self._method), **self._jit_kwargs)
+        return self._top
+
+    def __call__(self, *args, **kwargs):
+        try:
+            return self.jitted()(*args, **kwargs)
+        except ValueError as e:
+            if "top-level" not in str(e):
+                raise
+        if self._nested is None:
+            import jax
+
+            self._nested = jax.jit(self._fn, **self._jit_kwargs)
+        return self._nested(*args, **kwargs)
+
+    def lower(self, *args, **kwargs):
+        return self.jitted().lower(*args, **kwargs)
+
+    def trace(self, *args, **kwargs):
+        return self.jitted().trace(*args, **kwargs)
+
+    def _cache_size(self) -> int:
+        return 0 if self._top is None else self._top._cache_size()
 
 
 def _source_hash() -> str:

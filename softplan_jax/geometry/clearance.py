@@ -43,6 +43,7 @@ from functools import partial
 import jax
 import jax.numpy as jnp
 
+from ..base.compilation_cache import package_jit
 from ..base.numerics import contact_floor, evaluate_where, get_epsilon, safe_norm, solve_small
 from ..base.status import Status
 from .closest import ClosestPoint
@@ -326,7 +327,7 @@ def apply_collision_checks(r, scenario, options):
     )
 
 
-@partial(jax.jit, static_argnames=("substeps", "arm_samples", "curve_samples"))
+@partial(package_jit, static_argnames=("substeps", "arm_samples", "curve_samples"))
 def dense_trajectory_clearance(qs, scenario, substeps: int = 20, arm_samples: int = 200, curve_samples: int = 2000):
     """Brute-force minimum clearance of a trajectory, for checking.
 

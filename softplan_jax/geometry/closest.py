@@ -47,6 +47,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ..base.compilation_cache import package_jit
 from ..base.numerics import psd_shift, safe_norm
 from ..base.validation import check_configuration
 from .closest_newton import Segment, pair_terms, solve_pair_reduced, u_samples
@@ -196,7 +197,7 @@ def closest_from_pairs(segs: Segment, curve, s_all, u_all, d2_all, conv_all) -> 
     return ClosestPoint(distance, i.astype(jnp.int32), s, u, arm_point, obstacle_point, conv_all[i])
 
 
-@partial(jax.jit, static_argnames="options")
+@partial(package_jit, static_argnames="options")
 def _closest_point_jit(q, curve, options):
     if isinstance(curve, PolynomialCurve) and curve.coeffs.ndim == 3:
         return jax.vmap(lambda c: curve_closest(q, c, options))(curve)

@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.compilation_cache import package_jit
 from ..base.status import Status, status_name
 from ..geometry.clearance import contact_tolerance
 from ..geometry.closest import DEFAULT_OPTIONS
@@ -266,7 +267,7 @@ def _start_clearance_program(solver):
         radius, mask = radius_and_mask(scenario)
         return jnp.where(mask, cp.distance - scenario.arm_radius - radius, jnp.inf)
 
-    return jax.jit(clearance)
+    return package_jit(clearance)
 
 
 def unreachable_result(scenario: Scenario, options: PlanOptions, reason: str) -> PlanResult:

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.compilation_cache import load_or_export, rollout_compiler_options
+from ..base.compilation_cache import load_or_export, package_jit, rollout_compiler_options
 from ..scenarios import Scenario
 from .batching import BATCH_AXIS, batch_mesh, pad_batch, round_chunk, shard_batch
 from .engine import check_engine_sizes, default_lanes, run, run_lanes
@@ -140,32 +140,25 @@ class CompiledRollout:
     def __init__(self, fn, static_argnames, batched: bool, doc: str):
         self._fn = fn
         self._static_argnames = static_argnames
-        self._jits = {}
-        self._nested = None
+        self._programs = {}
         self._batched = batched
         self.__doc__ = doc
 
-    def _jitted(self, options: PlanOptions):
-        """``jax.jit`` of the rollout with this package's XLA options for the options'
-        method (:func:`~softplan_jax.base.compilation_cache.rollout_compiler_options`), built
-        on first use: the options depend on the backend, which importing must not start."""
+    def _program(self, options: PlanOptions):
+        """The rollout jitted with this package's XLA options for the options' method
+        (:class:`~softplan_jax.base.compilation_cache.package_jit`), one per method."""
         method = _plan_options(options).method
-        if method not in self._jits:
-            self._jits[method] = jax.jit(self._fn, static_argnames=self._static_argnames,
-                                         compiler_options=rollout_compiler_options(method))
-        return self._jits[method]
+        if method not in self._programs:
+            self._programs[method] = package_jit(self._fn, method, static_argnames=self._static_argnames)
+        return self._programs[method]
+
+    def _jitted(self, options: PlanOptions):
+        """The top-level ``jax.jit`` of the rollout for the options' method."""
+        return self._program(options).jitted()
 
     def _call(self, *args):
-        """The jitted rollout; inside the user's own jit (jax allows compiler options on
-        top-level jits only) a plain jit of it, compiled with the enclosing program's options."""
-        try:
-            return self._jitted(args[2])(*args)
-        except ValueError as e:
-            if "top-level" not in str(e):
-                raise
-            if self._nested is None:
-                self._nested = jax.jit(self._fn, static_argnames=self._static_argnames)
-            return self._nested(*args)
+        """The jitted rollout; inside the user's own jit a plain jit of it (package_jit)."""
+        return self._program(args[2])(*args)
 
     def _args(self, scenario, gains, options, max_steps, seed):
         q0 = start_configuration(scenario)
@@ -185,7 +178,7 @@ class CompiledRollout:
 
     def cache_size(self) -> int:
         """Number of compilations so far (one per padded shape, dtype, options, max_steps)."""
-        return sum(j._cache_size() for j in self._jits.values())
+        return sum(p._cache_size() for p in self._programs.values())
 
     def cached(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int):
         """Compile ahead of time, keeping the TRACED program on disk for the next process

@@ -29,13 +29,13 @@ paper's step, unscaled (the paper tables use it).
 
 from __future__ import annotations
 
-from functools import partial
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.compilation_cache import package_jit
 from ..base.numerics import damped_pinv, safe_norm
 from ..geometry.clearance import contact_tolerance
 from ..geometry.closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
@@ -372,7 +372,17 @@ def next_q(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: Pl
     return scaled_step(q, q_full, clearance, options, travel)
 
 
-@partial(jax.jit, static_argnames=("options",))
+def _planner_step(q, scenario: Scenario, gains: Gains, options: PlanOptions):
+    truth = true_closest(q, scenario, options.solver) if options.method == "curve" else None
+    if truth is None:
+        # The points method never uses the exact solver: a placeholder of the right shape.
+        truth = placeholder_closest(q, scenario)
+    return next_q(q, scenario, gains, truth, options)[0]
+
+
+_PLANNER_STEP = {}  # method -> package_jit of _planner_step (the rollouts' XLA options for the method)
+
+
 def planner_step(q, scenario: Scenario, gains: Gains, options: PlanOptions = PlanOptions()):
     """One planner step (paper eq. 9) as a single jitted function.
 
@@ -386,9 +396,13 @@ def planner_step(q, scenario: Scenario, gains: Gains, options: PlanOptions = Pla
       (n, 3) next configuration: ``q + dt qdot`` with lengths clipped to their
       limits (``options.step = "plain"``), scaled down by the clearance-bounded
       step where it could reach an obstacle (``"safe"``, the default).
+
+    Compiled once per shape and options with the rollouts' XLA options for
+    ``options.method``
+    (:class:`~softplan_jax.base.compilation_cache.package_jit`).
     """
-    truth = true_closest(q, scenario, options.solver) if options.method == "curve" else None
-    if truth is None:
-        # The points method never uses the exact solver: a placeholder of the right shape.
-        truth = placeholder_closest(q, scenario)
-    return next_q(q, scenario, gains, truth, options)[0]
+    if not isinstance(options, PlanOptions):
+        raise ValueError(f"options must be a PlanOptions (see make_options), got {type(options).__name__}")
+    if options.method not in _PLANNER_STEP:
+        _PLANNER_STEP[options.method] = package_jit(_planner_step, options.method, static_argnames=("options",))
+    return _PLANNER_STEP[options.method](q, scenario, gains, options)

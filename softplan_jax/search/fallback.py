@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.compilation_cache import rollout_compiler_options
+from ..base.compilation_cache import package_jit
 from ..base.status import Status, status_name
 from ..geometry.clearance import contact_tolerance
 from ..geometry.closest import DEFAULT_OPTIONS
@@ -56,7 +56,7 @@ def _search_jit(options: ReachOptions, solver, contact: float):
     def search(scenarios, q_starts, n_starts, q_goals, n_goals, keys):
         return global_search_batch(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options, solver, contact)
 
-    return jax.jit(search, compiler_options=rollout_compiler_options("curve"))
+    return package_jit(search)
 
 
 @functools.cache
@@ -72,7 +72,7 @@ def _path_check_jit(solver, contact: float):
         proven = jnp.all(swept_clear(q_a, q_b, truth, c, contact) | ~mask)  # the metrics' own swept proof
         return c, proven
 
-    return jax.jit(jax.vmap(path_check, in_axes=(None, 0, 0)), compiler_options=rollout_compiler_options("curve"))
+    return package_jit(jax.vmap(path_check, in_axes=(None, 0, 0)))
 
 
 _tips_jit = jax.jit(jax.vmap(tip_position))

@@ -42,7 +42,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.compilation_cache import rollout_compiler_options
+from ..base.compilation_cache import package_jit
 from ..base.numerics import damped_pinv, safe_norm, solve_small
 from ..geometry.closest import DEFAULT_OPTIONS, SolverOptions
 from ..geometry.kinematics import points_jacobian, tip_position
@@ -369,7 +369,7 @@ def _goal_configurations_jit(options: ReachOptions, solver, contact: float, extr
     def goal_configs(scenarios, keys, q_extra):
         return goal_configurations_batch(scenarios, keys, q_extra if extra else None, options, solver, contact)
 
-    return jax.jit(goal_configs, compiler_options=rollout_compiler_options("curve"))
+    return package_jit(goal_configs)
 
 
 # ----------------------------------------------------------------------------
