@@ -188,8 +188,8 @@ def _known_option(name: str, value) -> bool:
 def rollout_compiler_options(method: str = "curve") -> dict | None:
     """The XLA options that :data:`~softplan_jax.planning.planner.rollout_jit`,
     :data:`~softplan_jax.planning.planner.rollout_batch` and ``rollout_jit.cached`` compile a
-    rollout of the planner's ``method`` ("curve" or "points") with (and the global fallback's
-    programs with the curve method's), on the CPU backend:
+    rollout of the planner's ``method`` ("curve" or "points") with (and, through
+    :class:`package_jit`, the package's other programs), on the CPU backend:
     :data:`CPU_COMPILER_OPTIONS`, and for "curve" also :data:`CURVE_CPU_COMPILER_OPTIONS`,
     each kept only if this jaxlib knows it. None (XLA's defaults) on other backends, when
     it knows none of them, or with ``SOFTPLAN_XLA_OPTIONS=0`` in the environment. Decided
