@@ -211,7 +211,7 @@ class package_jit:
     step, the brute-force clearance). Built on the first call (the options depend on the
     backend, which importing must not start). Inside the user's own jit, where jax takes
     compiler options on top-level jits only, a plain jit of ``fn`` (compiled with the enclosing
-    program's options). ``lower``, ``trace`` and ``_cache_size`` are the top-level jit's."""
+    program's options). ``lower`` and ``_cache_size`` are the top-level jit's (``jitted()``: the jit itself)."""
 
     def __init__(self, fn, method: str = "curve", **jit_kwargs):
         functools.update_wrapper(self, fn)
@@ -240,9 +240,6 @@ class package_jit:
 
     def lower(self, *args, **kwargs):
         return self.jitted().lower(*args, **kwargs)
-
-    def trace(self, *args, **kwargs):
-        return self.jitted().trace(*args, **kwargs)
 
     def _cache_size(self) -> int:
         return 0 if self._top is None else self._top._cache_size()
