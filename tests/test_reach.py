@@ -191,19 +191,23 @@ def test_plot_shows_the_global_part(rescued):
         plt.close(fig)
 
 
-def test_fallback_programs_compile_with_the_package_xla_options(rescued):
-    """The fallback's programs (IK, search, path check) compile with the package's XLA options
-    for exact solves (compilation_cache.rollout_compiler_options("curve")): no YNN fusions,
-    which XLA's defaults put in them (the plain jit of the same function below). Checked on
-    the path check, with the shapes the fixture compiled (its program comes from the
-    persistent cache); benchmarks/fallback_compile.py measures what the options buy."""
-    from softplan_jax.search.fallback import _path_check_jit
+def test_fallback_programs_compile_with_the_package_xla_options(decided):
+    """The fallback's programs (the IK, the search) compile with the package's XLA options for
+    exact solves (compilation_cache.rollout_compiler_options("curve")): no YNN fusions, which
+    XLA's defaults put in an exact solve's program (test_compilation_cache's rollout test
+    shows it on a plain jit). Checked on the IK, with the shapes the fixture compiled (its
+    program comes from the persistent cache); benchmarks/fallback_compile.py measures what
+    the options buy."""
+    from softplan_jax.base.compilation_cache import package_jit
 
-    s, _, single = rescued
-    path = jnp.asarray(np.repeat(single.q[-1:], OPTS.path_steps + 1, axis=0))
-    check = _path_check_jit(sp.geometry.SolverOptions(), 1e-6)
-    assert "ynn_fusion" not in check.lower(s, path, path).compile().as_text()
-    assert "ynn_fusion" in jax.jit(check.__wrapped__).lower(s, path, path).compile().as_text()
+    batch, _ = decided
+    one = jax.tree_util.tree_map(lambda x: x[:1], batch)
+    ik = _goal_configurations_jit(OPTS, sp.geometry.SolverOptions(), 1e-6, True)
+    search = _search_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
+    # Both are package_jit's with the curve method's options (test_compilation_cache tests package_jit).
+    assert all(isinstance(f, package_jit) and f._method == "curve" for f in (ik, search))
+    keys = jax.random.split(jax.random.PRNGKey(0), 1)
+    assert "ynn_fusion" not in ik.lower(one, keys, one.q0).compile().as_text()
 
 
 def test_batch_compiles_the_search_once_and_keeps_local_results(rescued):
@@ -233,9 +237,9 @@ def test_search_lanes_run_independently(rescued):
     """The search's batched loop (search.machine): a lane searching beside a lane with no
     goal root (done at once) finds the single-lane search's path: same trees, iterations
     and steps, q to rounding (a wider program may round differently), every step of it
-    proven by the swept check. Slow: the two-lane program (chunk > 1, not the default)
+    proven by the search's check. Slow: the two-lane program (chunk > 1, not the default)
     compiles for about 20 s, and only this test uses it."""
-    from softplan_jax.search.fallback import _path_check_jit, _start_roots
+    from softplan_jax.search.fallback import _start_roots
 
     s, local, _ = rescued
     R, G = OPTS.start_roots, OPTS.goal_roots
@@ -256,9 +260,8 @@ def test_search_lanes_run_independently(rescued):
         np.testing.assert_array_equal(getattr(two, f)[1], getattr(one, f)[0], err_msg=f)
     k = int(one.steps[0])
     np.testing.assert_allclose(two.q[1][: k + 1], one.q[0][: k + 1], rtol=0, atol=1e-12)
-    q = two.q[1]  # padded with its last step: plan_fallback's shape of the check
-    _, proven = jax.device_get(_path_check_jit(sp.geometry.SolverOptions(), 1e-6)(s, q, np.roll(q, -1, axis=0)))
-    assert proven[:k].all()
+    assert bool(two.proven[1]) and bool(one.proven[0]) and not bool(two.proven[0])
+    np.testing.assert_allclose(two.clearance[1][: k + 1], one.clearance[0][: k + 1], rtol=0, atol=1e-12)
 
 
 def test_unreachable_goal_gets_a_status_not_a_path():

@@ -45,7 +45,7 @@ from ..geometry.kinematics import tip_position
 from ..planning.batching import pad_batch
 from ..planning.planner import PlanResult, make_options, plan, plan_batch
 from ..scenarios import Scenario, stack_scenarios
-from .reach import Reachability, ReachOptions, check_reach_options, clearances, reachability, scene_of
+from .reach import Reachability, ReachOptions, check_reach_options, reachability, scene_of
 from .tree import global_search_batch
 
 __all__ = ["plan_fallback", "rescue", "rescue_batch"]
@@ -57,22 +57,6 @@ def _search_jit(options: ReachOptions, solver, contact: float):
         return global_search_batch(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options, solver, contact)
 
     return package_jit(search)
-
-
-@functools.cache
-def _path_check_jit(solver, contact: float):
-    """Per step of a path: the exact clearances (m,), and whether the motion to the
-    next step is proven clear by the swept proof (metrics.swept_clear)."""
-    from ..geometry.clearance import swept_clear
-    from ..geometry.obstacles import radius_and_mask
-
-    def path_check(scenario, q_a, q_b):
-        c, truth, _ = clearances(q_a, scenario, solver)
-        _, mask = radius_and_mask(scenario)
-        proven = jnp.all(swept_clear(q_a, q_b, truth, c, contact) | ~mask)  # the metrics' own swept proof
-        return c, proven
-
-    return package_jit(jax.vmap(path_check, in_axes=(None, 0, 0)))
 
 
 _tips_jit = jax.jit(jax.vmap(tip_position))
@@ -229,7 +213,6 @@ def _search_all(batch, results, scenes, decided, rows, reach: ReachOptions, solv
     G, R = int(reach.goal_roots), int(reach.start_roots)
     host = jax.device_get(batch)
     fn = _search_jit(reach, solver, float(contact))
-    check = _path_check_jit(solver, float(contact))
     keys = np.asarray(jax.random.split(jax.random.PRNGKey(int(seed) + 1), len(results)))
     n = host.q0.shape[-2]
     t0 = time.perf_counter()
@@ -259,6 +242,7 @@ def _search_all(batch, results, scenes, decided, rows, reach: ReachOptions, solv
             steps = int(out.steps[k])
             q_global = out.q[k][: steps + 1]
             q = np.concatenate([results[b].q[: k_root + 1], q_global[1:]])
+            check = out.clearance[k][: steps + 1], bool(out.proven[k])
             results[b] = _with_path(results[b], q, k_root, scene_of(host, b), check, tolerance, out.q.shape[1])
         if progress:
             done = min(a + size, len(scenes))
@@ -267,20 +251,20 @@ def _search_all(batch, results, scenes, decided, rows, reach: ReachOptions, solv
 
 def _with_path(local: PlanResult, q: np.ndarray, k_root: int, scenario: Scenario, check, tolerance,
                size: int) -> PlanResult:
-    """The result for the path q (the local path to step k_root, then the search's)."""
+    """The result for the path q (the local path to step k_root, then the search's).
+    ``check``: the search's check of its part ``q[k_root:]`` (SearchResult.clearance at
+    its steps, SearchResult.proven)."""
     from ..geometry.obstacles import radius_and_mask
 
-    # The search's part, padded with its last configuration to one shape (a program per
-    # length would compile anew for every path): clearance at every step, swept proof of every motion.
+    c, proven = check
     part = q[k_root:]
-    padded = np.concatenate([part, np.repeat(part[-1:], size - part.shape[0], axis=0)])
-    c, proven = jax.device_get(check(scenario, jnp.asarray(padded), jnp.asarray(np.roll(padded, -1, axis=0))))
-    c, proven = c[: part.shape[0]], proven[: part.shape[0] - 1]
     _, mask = radius_and_mask(scenario)
     mask = np.asarray(mask)
-    # The local part was checked by the rollout itself; every step of the search's part must be proven.
-    if not bool(np.all(proven)):
+    # The local part was checked by the rollout itself; every motion of the search's part must be proven.
+    if not proven:
         return local._replace(reason="uncertified_step")  # cannot happen by construction; never reported as reached
+    # The search's part padded with its last configuration to one shape (one program for every length).
+    padded = np.concatenate([part, np.repeat(part[-1:], size - part.shape[0], axis=0)])
     tips = np.concatenate([local.tip[:k_root], np.asarray(_tips_jit(jnp.asarray(padded)))[: part.shape[0]]])
     err = float(np.linalg.norm(np.asarray(scenario.goal) - tips[-1]))
     clearance = np.concatenate([local.clearance[:k_root], c[:, mask]])

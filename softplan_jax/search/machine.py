@@ -20,7 +20,11 @@ of the nested loops in the same order, so the search's results are the same.
 Phases, in order (``_P_*``): grow the trees (extend tree a, then connect tree b,
 until connected or out of iterations), the connected path, shortcut attempts,
 smoothing passes (two motions per inner node), the walk in steps of at most
-``step_motion`` (one motion over every edge of the polyline), done.
+``step_motion`` (one motion over every edge of the polyline), the check of the
+path the walk wrote, done. The check solves anew at every step of a found path
+(one step per iteration, the same solve): the exact clearances that the result
+reports, and the swept proof of :func:`~softplan_jax.geometry.clearance.swept_clear`
+(the metrics' own test, not the walk's safe step) for every motion between steps.
 """
 
 from __future__ import annotations
@@ -30,14 +34,16 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ..geometry.clearance import swept_clear
+from ..geometry.obstacles import radius_and_mask
 from . import motions as mo
-from .reach import ReachOptions, random_configurations
+from .reach import ReachOptions, clearances, random_configurations
 
 __all__ = ["run_search"]
 
 # The handler to run when no motion is active (what the last motion was for).
 (_P_TREE, _P_EXTENDED, _P_CONNECTED, _P_TREE_DONE, _P_CUT, _P_SMOOTH_START, _P_SMOOTH_A, _P_SMOOTH_B, _P_WALK_START,
- _P_WALK, _P_DONE) = range(11)
+ _P_WALK, _P_CHECK, _P_DONE) = range(12)
 
 
 class _State(NamedTuple):
@@ -68,11 +74,17 @@ class _State(NamedTuple):
     cand: jax.Array  # (n, 3) the smoothing candidate
     first_ok: jax.Array  # () bool: the motion path[k-1] -> cand reached
     steps: jax.Array  # () int32 steps of the walk
+    # The check of the walk's path: the step to solve at next, and every motion proven so far.
+    check_k: jax.Array  # () int32
+    proven: jax.Array  # () bool
     # The walk's step of this substep, written by the loop into its steps (S + 1, n, 3), a carry
     # of its own: the handlers never touch it.
     row: jax.Array  # () int32
     q_next: jax.Array  # (n, 3)
     write: jax.Array  # () bool
+    # The check's clearances at step check_k - 1, written by the loop likewise into (S + 1, m).
+    c_now: jax.Array  # (m,)
+    c_write: jax.Array  # () bool
 
 
 def _add(trees, T: int, tree, q, par, allowed):
@@ -88,26 +100,29 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
                contact: float):
     """The search of :func:`~softplan_jax.search.tree.global_search` for a batch of B scenes
     (module docstring; every argument with a leading axis B): ``(trees, length, start, out,
-    steps, complete)``, batched.
+    steps, complete, clearance, proven)``, batched: ``clearance`` (B, S + 1, m) the check's
+    exact clearances at the path's steps (the last one repeated after the end), ``proven``
+    the check's swept proof of every motion (False where no path was found).
 
     The loop runs over the whole batch: in an iteration, a phase's handler runs (on the
     lanes whose motion ended in that phase; skipped when there is none), then one
     substep of every lane, kept where its motion is under way. So a lane costs one
     exact solve per iteration, and the handlers cost only when a motion ended: the
     batch needs no vmap of the loop, which would evaluate every handler on every
-    iteration. The walk's steps (B, S + 1, n, 3) are a carry of their own, one row per
-    lane written after the substep."""
+    iteration. The walk's steps (B, S + 1, n, 3) and the check's clearances (B, S + 1, m)
+    are carries of their own, one row per lane written after the substep."""
     B = keys.shape[0]
     state = jax.vmap(lambda sc, *a: _lane(sc, options, solver, contact, q_starts.shape[-2], q_starts.dtype)[0](*a))(
         scenarios, q_starts, n_starts, q_goals, n_goals, keys)
 
-    def run(index, s):
-        """Lane-wise: handler ``index`` (or the substep: index None) on every lane."""
-        def one(st, sc):
+    def run(index, s, out=None):
+        """Lane-wise: handler ``index`` (or the substep, which reads the walk's steps ``out``:
+        index None) on every lane."""
+        def one(st, sc, *lane_out):
             _, handlers, substep = _lane(sc, options, solver, contact, q_starts.shape[-2], q_starts.dtype)
-            return substep(st) if index is None else handlers[index](st)
+            return substep(st, *lane_out) if index is None else handlers[index](st)
 
-        return jax.vmap(one)(s, scenarios)
+        return jax.vmap(one)(s, scenarios) if out is None else jax.vmap(one)(s, scenarios, out)
 
     def select(mask, new, old):
         return jax.tree_util.tree_map(lambda a, b: jnp.where(mask.reshape((B,) + (1,) * (a.ndim - 1)), a, b), new, old)
@@ -127,25 +142,30 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
     lanes = jnp.arange(B)
 
     def body(carry):
-        s, out = carry
+        s, out, clear = carry
         s = handle(s) if B == 1 else jax.lax.cond(jnp.any(~s.active & (s.phase != _P_DONE)), handle, lambda s: s, s)
-        s = substep_all(s)  # every iteration: a lane with no motion under way keeps its state
+        s = substep_all(s, out)  # every iteration: a lane with no motion under way keeps its state
         rows = out[lanes, s.row]
-        return s, out.at[lanes, s.row].set(jnp.where(s.write[:, None, None], s.q_next, rows))
+        out = out.at[lanes, s.row].set(jnp.where(s.write[:, None, None], s.q_next, rows))
+        c_row = jnp.maximum(s.check_k - 1, 0)
+        clear = clear.at[lanes, c_row].set(jnp.where(s.c_write[:, None], s.c_now, clear[lanes, c_row]))
+        return s, out, clear
 
-    def substep_all(s):
-        new = run(None, s)
-        # ``write`` as the substep set it: false where no motion was under way.
-        return select(s.active, new, s)._replace(write=new.write)
+    def substep_all(s, out):
+        new = run(None, s, out)
+        # ``write``, ``c_write`` as the substep set them: false where no motion was under way.
+        return select(s.active, new, s)._replace(write=new.write, c_write=new.c_write)
 
     S = int(options.path_steps)
     out = jnp.zeros((B, S + 1, *q_starts.shape[-2:]), q_starts.dtype)
-    s, out = jax.lax.while_loop(lambda c: jnp.any(c[0].phase != _P_DONE), body, (state, out))
+    clear = jnp.zeros((B, S + 1, state.c_now.shape[-1]), q_starts.dtype)
+    s, out, clear = jax.lax.while_loop(lambda c: jnp.any(c[0].phase != _P_DONE), body, (state, out, clear))
     # The walk's steps: the first node (unwrapping keeps it), the steps taken, then the last one repeated.
     out = out.at[:, 0].set(s.path[:, 0])
-    last = out[lanes, s.steps]
-    out = jnp.where((jnp.arange(S + 1, dtype=jnp.int32) <= s.steps[:, None])[:, :, None, None], out, last[:, None])
-    return s.trees, s.length, s.start, out, s.steps, s.node >= s.length - 1
+    taken = (jnp.arange(S + 1, dtype=jnp.int32) <= s.steps[:, None])[:, :, None]
+    out = jnp.where(taken[..., None], out, out[lanes, s.steps][:, None])
+    clear = jnp.where(taken, clear, clear[lanes, s.steps][:, None])
+    return s.trees, s.length, s.start, out, s.steps, s.node >= s.length - 1, clear, s.proven
 
 
 def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype):
@@ -153,6 +173,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
     handlers (list index = phase), and the substep of the current motion."""
     T, S = int(options.tree_size), int(options.path_steps)
     i0, f0, q0 = jnp.zeros((), jnp.int32), jnp.zeros((), bool), jnp.zeros((n, 3), dtype)
+    _, mask = radius_and_mask(scenario)
 
     def init(q_starts, n_starts, q_goals, n_goals, key):
         k_tree, k_cut = jax.random.split(key)
@@ -163,7 +184,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
                           jnp.zeros((2,), jnp.int32), jnp.zeros((), jnp.int32), k_tree)
         return _State(jnp.asarray(_P_TREE, jnp.int32), q0, q0, q0, jnp.zeros((), dtype), i0, i0, f0, trees, i0,
                       i0, f0, i0, jnp.zeros((2 * T, n, 3), dtype), i0, i0, i0, i0, k_cut, f0,
-                      jnp.zeros((2,), jnp.int32), q0, f0, i0, i0, q0, f0)
+                      jnp.zeros((2,), jnp.int32), q0, f0, i0, i0, f0, i0, q0, f0, jnp.zeros(mask.shape, dtype), f0)
 
     def motion(s, q_a, q_b, substeps, phase):
         """Start the certified straight motion q_a -> q_a + wrap_delta(q_a, q_b) (motions.advance)."""
@@ -274,18 +295,34 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
         return when(go, s_walk, s._replace(phase=jnp.asarray(_P_WALK, jnp.int32)))
 
     def walk_end(s):
+        """The walk is over: the check of its path if the search found one (tree.global_search's ``found``)."""
+        go = s.trees.done & (s.node >= s.length - 1)
+        return s._replace(phase=jnp.where(go, _P_CHECK, _P_DONE).astype(jnp.int32), check_k=i0, proven=go, active=go)
+
+    def check_end(s):
         return s._replace(phase=jnp.asarray(_P_DONE, jnp.int32))
 
-    handlers = [tree_next, extended, connected, tree_done, cut, smooth_start, smooth_a, smooth_b, walk_start, walk_end]
+    handlers = [tree_next, extended, connected, tree_done, cut, smooth_start, smooth_a, smooth_b, walk_start, walk_end,
+                check_end]
 
-    def substep(s):
-        """One conservative-advancement substep of the current motion: the one exact solve."""
-        walk = s.phase == _P_WALK
+    def substep(s, out):
+        """One substep: conservative advancement of the current motion, or one step of the check of
+        the walk's path ``out`` (S + 1, n, 3); the one exact solve."""
+        walk, check = s.phase == _P_WALK, s.phase == _P_CHECK
+        # The check: the clearances at step j of the path (row 0 is its first node, written after
+        # the loop), the swept proof of the motion to step j + 1 (none after the last step).
+        j = s.check_k
+        q_j = jnp.where(j == 0, s.path[0], out[jnp.minimum(j, S)])
+        q = jnp.where(check, q_j, s.q_a + s.t * s.dq)
+        c, truth, ok = clearances(q, scenario, solver)
+        proof = jnp.all(swept_clear(q_j, out[jnp.minimum(j + 1, S)], truth, c, contact) | ~mask) | (j >= s.steps)
+        checking = s._replace(check_k=j + 1, proven=s.proven & proof, c_now=c, c_write=s.active,
+                              active=j + 1 <= s.steps, write=f0)
         cap = jnp.where(walk, options.step_motion, jnp.inf).astype(dtype)  # min(allowed, inf) = allowed
-        t_new, good = mo.substep(s.q_a, s.dq, s.q_e, s.t, scenario, options, solver, contact, cap=cap)
+        t_new, good = mo.advance_fraction(q, s.q_e, s.t, c, ok, options, contact, cap=cap)
         # A motion of the search (motions.advance).
         k = s.k + 1
-        moving = s._replace(t=t_new, k=k, active=(k < s.limit) & (t_new < 1.0) & good, write=f0)
+        moving = s._replace(t=t_new, k=k, active=(k < s.limit) & (t_new < 1.0) & good, write=f0, c_write=f0)
         # The walk: a good substep is a step of the path; at an edge's end the next edge starts.
         end = t_new >= 1.0
         q_next = jnp.where(end, s.q_e, s.q_a + t_new * s.dq)
@@ -295,7 +332,7 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
                              t=jnp.where(end, 0.0, t_new).astype(dtype),
                              q_a=jnp.where(end, q_a, s.q_a), q_e=jnp.where(end, q_e, s.q_e),
                              dq=jnp.where(end, q_e - q_a, s.dq),
-                             active=(e < s.length - 1) & (steps < S) & good)
-        return when(walk, walking, moving)
+                             active=(e < s.length - 1) & (steps < S) & good, c_write=f0)
+        return when(check, checking, when(walk, walking, moving))
 
     return init, handlers, substep

@@ -23,7 +23,8 @@ from ..planning.step import safe_scale
 from ..scenarios import Scenario
 from .reach import ReachOptions, clearances
 
-__all__ = ["wrap_delta", "line_bound", "substep", "advance", "Trees", "nearest", "chain", "tree_path", "unwrap"]
+__all__ = ["wrap_delta", "line_bound", "substep", "advance_fraction", "advance", "Trees", "nearest", "chain", "tree_path",
+           "unwrap"]
 
 
 def wrap_delta(q_a, q_b):
@@ -48,10 +49,16 @@ def substep(q_a, dq, q_e, t, scenario: Scenario, options: ReachOptions, solver: 
     good (a solve did not converge, or alpha is not > 0): t_new = t, the motion stops."""
     q = q_a + t * dq
     c, _, ok = clearances(q, scenario, solver)
+    return advance_fraction(q, q_e, t, c, ok, options, contact, cap)
+
+
+def advance_fraction(q, q_e, t, c, ok, options: ReachOptions, contact: float, cap=None):
+    """The rest of :func:`substep` once the exact clearances ``c`` at ``q`` (``ok``: every
+    solve converged) are known: ``(t_new, good)`` (for a caller that solves at q itself)."""
     alpha = safe_scale(q, q_e, c, 2.0 * contact, options.safe_fraction, cap=cap)[0]
     good = ok & jnp.isfinite(alpha) & (alpha > 0)
     alpha = jnp.where(good, alpha, 0.0)
-    return jnp.where(alpha >= 1.0, 1.0, t + alpha * (1.0 - t)).astype(q_a.dtype), good
+    return jnp.where(alpha >= 1.0, 1.0, t + alpha * (1.0 - t)).astype(q.dtype), good
 
 
 def advance(q_a, q_b, scenario: Scenario, substeps: int, options: ReachOptions, solver: SolverOptions,

@@ -211,9 +211,10 @@ def clearances(q, scenario: Scenario, solver: SolverOptions = DEFAULT_OPTIONS):
     return c, truth, ok
 
 
-def _tip_lm(q, scenario: Scenario, iterations: int):
+def _tip_lm(q, scenario: Scenario, iterations):
     """Levenberg-Marquardt on goal - tip(q), lengths in the box; a step that does not
-    lower the error is refused (and the damping raised), so the error never grows."""
+    lower the error is refused (and the damping raised), so the error never grows.
+    ``iterations``: an int, or a traced int (the IK's rounds choose it)."""
     n = q.shape[0]
     dtype = q.dtype
     eye = jnp.eye(3, dtype=dtype)
@@ -259,15 +260,14 @@ def _push_step(q, c, truth, scenario: Scenario, options: ReachOptions):
 
 
 def _ik_start(scenario: Scenario, key, q_extra, options: ReachOptions):
-    """The IK's starts (S, n, 3) (q0, the extra configuration if given, random ones), the
-    tip IK from them (no exact solve: taken before the loop) and the loop's first state."""
+    """The IK's starts (S, n, 3) (q0, the extra configuration if given, random ones) and the
+    loop's first state."""
     S = int(options.ik_starts)
     q0 = scenario.q0
     fixed = [q0] if q_extra is None else [q0, q_extra.astype(q0.dtype)]
     fixed = jnp.stack(fixed)[:S]
     starts = jnp.concatenate([fixed, random_configurations(key, scenario, options, S - fixed.shape[0])])
     starts = jax.vmap(lambda q: clip_lengths(q, scenario))(starts)
-    q_ik = jax.vmap(lambda q: _tip_lm(q, scenario, options.ik_iterations))(starts)
     # Rounds 0 and 1 compute a push from these placeholders and the starts' clearances; it is not taken.
     dtype = q0.dtype
     truth = jax.vmap(lambda q: placeholder_closest(q, scenario))(starts)
@@ -275,7 +275,7 @@ def _ik_start(scenario: Scenario, key, q_extra, options: ReachOptions):
     none = jnp.zeros((S,), bool)
     state = (jnp.zeros((), jnp.int32), starts, solved, jnp.zeros((S,), dtype), jnp.zeros((S,), dtype), none, none,
              jnp.asarray(jnp.inf, dtype))
-    return starts, q_ik, state
+    return starts, state
 
 
 def _ik_more(state, options: ReachOptions):
@@ -285,7 +285,7 @@ def _ik_more(state, options: ReachOptions):
     return (r < 2) | ((r - 2 < options.ik_clear_iterations) & ~jnp.any(certified))
 
 
-def _ik_round(state, scenario: Scenario, starts, q_ik, options: ReachOptions, solver, contact):
+def _ik_round(state, scenario: Scenario, starts, options: ReachOptions, solver, contact):
     """One round of the IK's loop, its one exact solve site (see goal_configurations)."""
 
     def assess(q):
@@ -299,8 +299,11 @@ def _ik_round(state, scenario: Scenario, starts, q_ik, options: ReachOptions, so
         return (c_all, truth), c, err, certified, free
 
     r, q, solved, _, _, _, _, best = state
-    pushed = jax.vmap(lambda q, s: _tip_lm(_push_step(q, *s, scenario, options), scenario, 3))(q, solved)
-    q = jnp.where(r == 0, starts, jnp.where(r == 1, q_ik, pushed))
+    # Round 0: the starts; round 1: ik_iterations tip steps from them; then a push and 3 tip steps
+    # (one copy of the tip IK in the program, its number of steps chosen by the round).
+    pushed = jax.vmap(lambda q, s: _push_step(q, *s, scenario, options))(q, solved)
+    steps = jnp.where(r == 0, 0, jnp.where(r == 1, options.ik_iterations, 3))
+    q = jax.vmap(lambda q: _tip_lm(q, scenario, steps))(jnp.where(r <= 1, starts, pushed))
     solved, c, err, certified, free = jax.vmap(assess)(q)
     best = jnp.minimum(best, jnp.min(jnp.where(free, err, jnp.inf)))
     return r + 1, q, solved, c, err, certified, free, best
@@ -327,16 +330,16 @@ def goal_configurations(scenario: Scenario, key, q_extra, options: ReachOptions,
     ``contact``: a configuration counts as collision-free for ``best_error``
     when its clearance exceeds this.
     """
-    # One exact solve site, the loop's body (one copy of the solver in the compiled
+    # One exact solve site and one tip IK, the loop's body (one copy of each in the compiled
     # program). Round 0 assesses the starts themselves: they count for the best
     # collision-free tip distance (the start pose is clear in a valid scene: a goal inside
     # an obstacle still gets a finite distance). Round 1: the tip IK from the starts
-    # (ik_iterations Levenberg-Marquardt steps, taken before the loop: no solve in them).
-    # Rounds 2, 3, ...: while no start is certified (at most ik_clear_iterations times),
-    # one null-space push from the clearances the last round found and a 3-step tip polish.
-    starts, q_ik, state = _ik_start(scenario, key, q_extra, options)
+    # (ik_iterations Levenberg-Marquardt steps). Rounds 2, 3, ...: while no start is
+    # certified (at most ik_clear_iterations times), one null-space push from the
+    # clearances the last round found and a 3-step tip polish.
+    starts, state = _ik_start(scenario, key, q_extra, options)
     state = jax.lax.while_loop(lambda st: _ik_more(st, options),
-                               lambda st: _ik_round(st, scenario, starts, q_ik, options, solver, contact), state)
+                               lambda st: _ik_round(st, scenario, starts, options, solver, contact), state)
     return _ik_result(state)
 
 
@@ -349,15 +352,14 @@ def goal_configurations_batch(scenarios: Scenario, keys, q_extra, options: Reach
     but traces and batches its body more than once: the IK's trace took 3.4 s that way, 2.5 s this
     way, for one scene alone; 3.1 and 2.8 s in benchmarks/fallback_compile.py.)"""
     if q_extra is None:
-        starts, q_ik, state = jax.vmap(lambda s, k: _ik_start(s, k, None, options))(scenarios, keys)
+        starts, state = jax.vmap(lambda s, k: _ik_start(s, k, None, options))(scenarios, keys)
     else:
-        starts, q_ik, state = jax.vmap(lambda s, k, e: _ik_start(s, k, e, options))(scenarios, keys, q_extra)
+        starts, state = jax.vmap(lambda s, k, e: _ik_start(s, k, e, options))(scenarios, keys, q_extra)
     more = jax.vmap(lambda st: _ik_more(st, options))
 
     def body(state):
         going = more(state)
-        new = jax.vmap(lambda st, s, a, b: _ik_round(st, s, a, b, options, solver, contact))(state, scenarios, starts,
-                                                                                          q_ik)
+        new = jax.vmap(lambda st, s, a: _ik_round(st, s, a, options, solver, contact))(state, scenarios, starts)
         return jax.tree_util.tree_map(
             lambda x, y: jnp.where(going.reshape((-1,) + (1,) * (x.ndim - 1)), x, y), new, state)
 

@@ -31,9 +31,13 @@ certified goal configurations of :mod:`softplan_jax.search.reach`:
   (the exact clearance at its start exceeds its motion bound plus the contact
   tolerance), so the path is collision-free by construction, and the tests
   check it against the brute-force :func:`~softplan_jax.geometry.clearance.dense_trajectory_clearance`.
+* **The check.** The exact clearances at every step of the returned path are solved
+  anew and every motion between steps must pass the metrics' swept proof
+  (:func:`~softplan_jax.geometry.clearance.swept_clear`): the result's clearances; the
+  fallback discards a path that fails (impossible by construction).
 
 The motions are :mod:`.motions`; the whole search (trees, shortcuts, smoothing,
-the walk) runs as one ``while_loop`` with one exact solve per iteration
+the walk, the check) runs as one ``while_loop`` with one exact solve per iteration
 (:mod:`.machine`), so the compiled program holds one copy of the solver.
 """
 
@@ -65,6 +69,12 @@ class SearchResult(NamedTuple):
       iterations: () int, RRT-Connect iterations run.
       nodes: (2,) int, nodes of the start and goal trees.
       path_nodes: () int, nodes of the polyline after shortcuts.
+      clearance: (path_steps + 1, m) the exact clearance of every obstacle slot at every
+        step of the path, solved anew after the walk (+inf: padding slots; the last step's
+        repeated after the end; 0 where no path was found).
+      proven: () bool, every motion between steps of the path passes the swept proof of
+        :func:`~softplan_jax.geometry.clearance.swept_clear` at that recomputation (False
+        where no path was found).
     """
 
     found: jax.Array
@@ -74,6 +84,8 @@ class SearchResult(NamedTuple):
     iterations: jax.Array
     nodes: jax.Array
     path_nodes: jax.Array
+    clearance: jax.Array
+    proven: jax.Array
 
 
 def global_search(scenario: Scenario, q_starts, n_starts, q_goals, n_goals, key, options: ReachOptions,
@@ -102,11 +114,11 @@ def global_search_batch(scenarios: Scenario, q_starts, n_starts, q_goals, n_goal
     scenes' searches in one loop (:func:`~softplan_jax.search.machine.run_search`); the
     same results as ``jax.vmap(global_search)``, without evaluating every phase of the
     search on every iteration."""
-    trees, length, start, steps_q, steps, complete = run_search(scenarios, q_starts, n_starts, q_goals, n_goals,
-                                                                keys, options, solver, contact)
+    trees, length, start, steps_q, steps, complete, clear, proven = run_search(scenarios, q_starts, n_starts, q_goals,
+                                                                            n_goals, keys, options, solver, contact)
     found = trees.done & complete
     return SearchResult(found, start, steps_q, jnp.where(found, steps, 0), trees.it, trees.count,
-                        jnp.where(found, length, 0))
+                        jnp.where(found, length, 0), clear, proven & found)
 
 
 def tip_error(scenario: Scenario, q):
