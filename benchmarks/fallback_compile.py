@@ -1,10 +1,12 @@
 """The global fallback's compile and run time, against a previous version.
 
 The fallback (:func:`softplan_jax.search.fallback.rescue_batch`, the part of
-``plan_fallback`` after the local planner) runs three programs: reachability's
-goal configurations, the certified global search, and the path check. Each
-variant is measured in a fresh subprocess with the persistent compilation cache
-off (a real compilation every time), variants alternating round by round:
+``plan_fallback`` after the local planner) runs one program: reachability's
+goal configurations, the certified global search and the check of its path in
+one loop with one exact solve site (earlier versions ran three programs; the
+per-program table shows whichever a variant compiles). Each variant is measured
+in a fresh subprocess with the persistent compilation cache off (a real
+compilation every time), variants alternating round by round:
 
 1. ``plan_batch(random_scenarios(1, --batch), max_steps=600)`` (not timed: it is
    the local planner's program, the same in both variants);

@@ -6,8 +6,8 @@ farther than S from its base), the brute-force sampled clearance of
 returns, and the local planner's arrays for scenes it reaches itself.
 
 Every test shares one ReachOptions and the padded scene shape of
-test_planner (5 curve slots, degree 2), so the reachability, search and
-path-check programs compile once, and the paper scenes' 200-step plans are
+test_planner (5 curve slots, degree 2), so reachability's program and the
+fallback's (the IK, the search and its check) compile once, and the paper scenes' 200-step plans are
 test_planner's programs (from the persistent compilation cache).
 """
 
@@ -20,7 +20,7 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.search import tree as global_planner
-from softplan_jax.search.fallback import _search_jit
+from softplan_jax.search.fallback import _fallback_jit, _start_roots
 from softplan_jax.search.reach import _goal_configurations_jit
 
 OPTS = sp.search.ReachOptions()
@@ -67,22 +67,32 @@ def test_reachable_goal_has_certified_configuration(decided):
     assert np.all(np.diff(c) <= 0)
 
 
-def test_goal_configurations_hold_one_exact_solve(monkeypatch):
-    """The IK's program holds one copy of the exact solver (issue 34: the fallback's compile
-    time): the starts, the tip IK from them and every null-space round are assessed at one
-    site, the body of one loop. Traced only (make_jaxpr): nothing compiles."""
+def test_goal_configurations_and_the_fallback_hold_one_exact_solve(monkeypatch):
+    """The IK's program holds one copy of the exact solver, and so does the fallback's (issue
+    34: the fallback's compile time): the starts, the tip IK from them and every null-space
+    round are assessed at one site, the body of one loop; the fallback's loop assesses the IK's
+    starts, walks every certified motion of the search and checks the path at one site.
+    Traced only (make_jaxpr): nothing compiles."""
+    from softplan_jax.search import machine
     from softplan_jax.search import reach as reach_module
 
     sites = []
-    real = reach_module.clearances
 
-    def counting(*args, **kwargs):
-        sites.append(1)
-        return real(*args, **kwargs)
+    def counting(real):
+        def solve(*args, **kwargs):
+            sites.append(1)
+            return real(*args, **kwargs)
+        return solve
 
-    monkeypatch.setattr(reach_module, "clearances", counting)
+    monkeypatch.setattr(reach_module, "clearances", counting(reach_module.clearances))
+    monkeypatch.setattr(machine, "clearances", counting(machine.clearances))
     s = scene()
     jax.make_jaxpr(lambda s, key, q: reach_module.goal_configurations(s, key, q, OPTS))(s, jax.random.PRNGKey(0), s.q0)
+    assert len(sites) == 1
+    sites.clear()
+    args = _fallback_args(s, np.asarray(s.q0)[None])  # a local "path" of the start alone
+    jax.make_jaxpr(lambda *a: global_planner.reach_and_search_batch(*a, OPTS, sp.geometry.SolverOptions(), 1e-6))(
+        *_stack(args))
     assert len(sites) == 1
 
 
@@ -192,7 +202,7 @@ def test_plot_shows_the_global_part(rescued):
 
 
 def test_fallback_programs_compile_with_the_package_xla_options(decided):
-    """The fallback's programs (the IK, the search) compile with the package's XLA options for
+    """The fallback's program and reachability's compile with the package's XLA options for
     exact solves (compilation_cache.rollout_compiler_options("curve")): no YNN fusions, which
     XLA's defaults put in an exact solve's program (test_compilation_cache's rollout test
     shows it on a plain jit). Checked on the IK, with the shapes the fixture compiled (its
@@ -203,9 +213,9 @@ def test_fallback_programs_compile_with_the_package_xla_options(decided):
     batch, _ = decided
     one = jax.tree_util.tree_map(lambda x: x[:1], batch)
     ik = _goal_configurations_jit(OPTS, sp.geometry.SolverOptions(), 1e-6, True)
-    search = _search_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
+    fallback = _fallback_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
     # Both are package_jit's with the curve method's options (test_compilation_cache tests package_jit).
-    assert all(isinstance(f, package_jit) and f._method == "curve" for f in (ik, search))
+    assert all(isinstance(f, package_jit) and f._method == "curve" for f in (ik, fallback))
     keys = jax.random.split(jax.random.PRNGKey(0), 1)
     assert "ynn_fusion" not in ik.lower(one, keys, one.q0).compile().as_text()
 
@@ -219,41 +229,74 @@ def test_batch_compiles_the_search_once_and_keeps_local_results(rescued):
     near = scene(goal=(0.005, 0.0, 3.0))  # within the goal tolerance of the start's tip
     local_near = sp.plan(near, max_steps=15)
     assert local_near.reached
-    fn = _search_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
-    ik = _goal_configurations_jit(OPTS, sp.geometry.SolverOptions(), 1e-6, True)
-    before = fn._cache_size(), ik._cache_size()
-    assert before[0] >= 1 and before[1] >= 1  # compiled by the single scene (the fixture)
+    fn = _fallback_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
+    before = fn._cache_size()
+    assert before >= 1  # compiled by the single scene (the fixture)
     res = rescue(sp.scenarios.stack_scenarios([s, near, s]), [local, local_near, local], sp.make_options())
     assert [r.planner for r in res] == ["global", "local", "global"]
     assert all(r.reached for r in res)
     assert res[1] is local_near or res[1] == local_near
     assert res[1].best_error is None and res[1].global_start is None
     # Reachability and the search run in chunks of one shape: the batch compiles nothing new.
-    assert (fn._cache_size(), ik._cache_size()) == before
+    assert fn._cache_size() == before
+
+
+def _fallback_args(s, q_local, proof=False, seed=0):
+    """The fallback program's arguments for one scene as plan_fallback passes them (chunk 1),
+    after the local path ``q_local``."""
+    R = OPTS.start_roots
+    roots = _start_roots(q_local, R)
+    q_starts = np.zeros((R, 3, 3))
+    q_starts[: len(roots)] = q_local[roots]
+    ik_key = jax.random.split(jax.random.PRNGKey(seed), 1)[0]
+    key = jax.random.split(jax.random.PRNGKey(seed + 1), 1)[0]
+    return (s, np.asarray(q_local[-1]), ik_key, proof, q_starts, np.int32(len(roots)), key)
+
+
+def _stack(*lanes):
+    return jax.tree_util.tree_map(lambda *ys: np.stack([np.asarray(y) for y in ys]), *lanes)
+
+
+def test_fallback_program_runs_reachabilitys_ik_bit_for_bit(decided, rescued):  # rescued: compiles the program
+    """The fallback's one program finds the goal roots by the IK of reachability (in its own
+    loop, one start's exact solve per iteration) and gives reachability's arrays, with
+    reachability's key and extra start, on the fixture's scenes that end at different rounds:
+    bit for bit where a start is certified at once (rounds 0 and 1); over the null-space
+    rounds (beyond reach: every round) the same verdicts and values to rounding (XLA fuses
+    the push step differently in the two programs: last bits). A proof of unreachability
+    stops the lane before the search. Both programs are the fixtures'."""
+    batch, r = decided
+    fn = _fallback_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
+    for b in range(4):
+        s = jax.tree_util.tree_map(lambda x, b=b: x[b], batch)
+        proof = r.reason[b] in ("beyond_reach", "goal_in_obstacle")
+        args = _fallback_args(s, np.asarray(s.q0)[None], proof=proof)  # reachability's extra start: q0
+        ik, out = jax.device_get(fn(*_stack(args)))
+        want = (r.q_goal[b], r.certified[b], r.clearance[b], r.tip_error[b], r.best_error[b])
+        if b == 0:  # certified at once
+            assert r.certified[b, 0]
+            for got, w in zip(ik, want, strict=True):
+                np.testing.assert_array_equal(got[0], w)
+        np.testing.assert_array_equal(ik[1][0], r.certified[b])
+        for got, w in zip(ik, want, strict=True):
+            np.testing.assert_allclose(got[0], w, rtol=0, atol=1e-12)
+        if not r.reachable[b]:
+            assert not out.found[0] and int(out.iterations[0]) == 0 and int(out.steps[0]) == 0
 
 
 @pytest.mark.slow
 def test_search_lanes_run_independently(rescued):
-    """The search's batched loop (search.machine): a lane searching beside a lane with no
-    goal root (done at once) finds the single-lane search's path: same trees, iterations
-    and steps, q to rounding (a wider program may round differently), every step of it
-    proven by the search's check. Slow: the two-lane program (chunk > 1, not the default)
-    compiles for about 20 s, and only this test uses it."""
-    from softplan_jax.search.fallback import _start_roots
-
+    """The fallback's batched loop (search.machine): a lane searching beside a lane whose goal
+    is proven unreachable (done after its IK) finds the single-lane search's path: same
+    trees, iterations and steps, q to rounding (a wider program may round differently),
+    every step of it proven by the search's check. Slow: the two-lane program (chunk > 1,
+    not the default) compiles for about 20 s, and only this test uses it."""
     s, local, _ = rescued
-    R, G = OPTS.start_roots, OPTS.goal_roots
-    d = sp.search.reachability(s, q_extra=local.q[-1], options=OPTS)
-    roots = _start_roots(local.q, R)
-    q_starts = np.zeros((R, 3, 3))
-    q_starts[: len(roots)] = local.q[roots]
-    key = jax.random.split(jax.random.PRNGKey(1), 1)[0]  # plan_fallback's (seed 0) for the fixture's scene
-    args = (s, q_starts, len(roots), d.q_goal[:G], int(np.sum(d.certified[:G])), key)
-    fn = _search_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
-    stack = lambda *xs: jax.tree_util.tree_map(lambda *ys: np.stack([np.asarray(y) for y in ys]), *xs)  # noqa: E731
-    one = jax.device_get(fn(*stack(args)))
-    idle = (*args[:4], 0, jax.random.PRNGKey(4))  # no goal root: this lane's search ends at once
-    two = jax.device_get(fn(*stack(idle, args)))
+    args = _fallback_args(s, local.q)
+    fn = _fallback_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
+    one = jax.device_get(fn(*_stack(args))[1])
+    idle = (*args[:3], True, *args[4:6], jax.random.PRNGKey(4))  # proven unreachable: no search
+    two = jax.device_get(fn(*_stack(idle, args))[1])
     assert bool(one.found[0]) and bool(two.found[1]) and not bool(two.found[0])
     assert int(two.iterations[0]) == 0 and int(two.steps[0]) == 0
     for f in ("start", "steps", "iterations", "nodes", "path_nodes"):

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-__all__ = ["BATCH_AXIS", "batch_mesh", "is_global", "pad_batch", "shard_batch", "gather", "round_chunk",
+__all__ = ["BATCH_AXIS", "batch_mesh", "is_global", "pad_batch", "lanes_map", "shard_batch", "gather", "round_chunk",
            "Progress"]
 
 BATCH_AXIS = "batch"
@@ -99,6 +99,18 @@ def pad_batch(tree, size: int):
         return xp.concatenate([x, xp.repeat(x[-1:], extra, axis=0)])
 
     return jax.tree_util.tree_map(pad, tree)
+
+
+def lanes_map(f, *args):
+    """``jax.vmap(f)(*args)`` (every leaf of ``args`` with a leading lane axis B); for one lane
+    (B = 1), ``f`` of the lane itself with the axis added back: the same values, traced without
+    vmap's batching rules (in the global fallback's program they cost about a third of its
+    trace, and a while_loop whose trip count is a lane's became a batched-predicate loop).
+    XLA may round the two programs differently (last bits)."""
+    if jax.tree_util.tree_leaves(args)[0].shape[0] != 1:
+        return jax.vmap(f)(*args)
+    out = f(*jax.tree_util.tree_map(lambda x: x[0], args))
+    return jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], out)
 
 
 def is_global(mesh: Mesh | None) -> bool:

@@ -45,18 +45,20 @@ from ..geometry.kinematics import tip_position
 from ..planning.batching import pad_batch
 from ..planning.planner import PlanResult, make_options, plan, plan_batch
 from ..scenarios import Scenario, stack_scenarios
-from .reach import Reachability, ReachOptions, check_reach_options, reachability, scene_of
-from .tree import global_search_batch
+from .reach import ReachOptions, check_reach_options, scene_of, unreachable_proof
+from .tree import reach_and_search_batch
 
 __all__ = ["plan_fallback", "rescue", "rescue_batch"]
 
 
 @functools.cache
-def _search_jit(options: ReachOptions, solver, contact: float):
-    def search(scenarios, q_starts, n_starts, q_goals, n_goals, keys):
-        return global_search_batch(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options, solver, contact)
+def _fallback_jit(options: ReachOptions, solver, contact: float):
+    """The fallback's one program: the IK, the search and its check (tree.reach_and_search_batch)."""
+    def fallback(scenarios, q_extra, ik_keys, proof, q_starts, n_starts, keys):
+        return reach_and_search_batch(scenarios, q_extra, ik_keys, proof, q_starts, n_starts, keys, options, solver,
+                                      contact)
 
-    return package_jit(search)
+    return package_jit(fallback)
 
 
 _tips_jit = jax.jit(jax.vmap(tip_position))
@@ -126,19 +128,7 @@ def rescue(scenarios: Scenario, results: list, options, *, reach: ReachOptions =
     todo = [b for b in range(len(results)) if results[b].status in ("stalled", "max_steps")]
     if not todo:
         return results
-    t1 = time.perf_counter()
-    decided = _reachability_chunks(batch, results, todo, reach, solver, contact, seed, chunk)
-    if progress:
-        n_un = int(np.sum(~decided.reachable))
-        _say(f"plan_fallback: reachability of {len(todo)} scenes, {n_un} unreachable, "
-             f"{time.perf_counter() - t1:.1f} s")
-    search = [i for i in range(len(todo)) if decided.reachable[i]]
-    for i, b in enumerate(todo):
-        results[b] = results[b]._replace(best_error=float(decided.best_error[i]))
-        if not decided.reachable[i]:
-            results[b] = results[b]._replace(status=status_name(Status.UNREACHABLE), reason=decided.reason[i])
-    _search_all(batch, results, [todo[i] for i in search], decided, search, reach, solver, contact,
-                options.goal_tolerance, seed, chunk, progress)
+    _reach_and_search(batch, results, todo, reach, solver, contact, options.goal_tolerance, seed, chunk, progress)
     return results
 
 
@@ -174,24 +164,6 @@ def _int_seed(seed) -> int:
     return int(words.ravel()[-1])
 
 
-def _reachability_chunks(batch, results, todo, reach, solver, contact, seed, chunk):
-    """reachability of the scenes ``todo`` (extra start: where the local planner stopped), in
-    chunks of ``chunk`` scenes padded to one shape (one program whatever the number of scenes)."""
-    host = jax.device_get(batch)
-    size = min(int(chunk), len(todo))
-    parts = []
-    for a in range(0, len(todo), size):
-        part = todo[a : a + size]
-        sub = jax.tree_util.tree_map(lambda x, part=part: np.asarray(x)[part], host)
-        q_end = np.stack([results[b].q[-1] for b in part])
-        sub, q_end = pad_batch((sub, q_end), size)
-        r = reachability(sub, q_end, seed=seed, options=reach, solver=solver, contact_tolerance=contact)
-        parts.append(jax.tree_util.tree_map(lambda x, n=len(part): x[:n], r._replace(reason=None)))
-        parts[-1] = parts[-1]._replace(reason=r.reason[: len(part)])
-    return Reachability(*(np.concatenate([getattr(p, f) for p in parts]) if f != "reason" else
-                          sum((p.reason for p in parts), ()) for f in Reachability._fields))
-
-
 def _say(msg: str):
     import sys
 
@@ -205,21 +177,24 @@ def _local_result(r, b: int, batch: Scenario) -> PlanResult:
     return result_from_rollout(one, scene_of(batch, b))
 
 
-def _search_all(batch, results, scenes, decided, rows, reach: ReachOptions, solver, contact, tolerance, seed, chunk,
-                progress):
-    """Run the global search for the scenes ``scenes`` (rows ``rows`` of ``decided``) in chunks."""
-    if not scenes:
-        return
-    G, R = int(reach.goal_roots), int(reach.start_roots)
+def _reach_and_search(batch, results, todo, reach: ReachOptions, solver, contact, tolerance, seed, chunk, progress):
+    """Reachability and the global search of the scenes ``todo`` (their results replaced in
+    place), in chunks of ``chunk`` scenes padded to one shape: one program whatever the number
+    of scenes. The IK of a chunk's scene k has the key ``split(PRNGKey(seed), chunk)[k]`` and
+    the extra start where the local planner stopped (as :func:`~softplan_jax.search.reach.reachability`
+    of the chunk); the search of scene b the key ``split(PRNGKey(seed + 1), B)[b]``."""
     host = jax.device_get(batch)
-    fn = _search_jit(reach, solver, float(contact))
-    keys = np.asarray(jax.random.split(jax.random.PRNGKey(int(seed) + 1), len(results)))
+    fn = _fallback_jit(reach, solver, float(contact))
+    R = int(reach.start_roots)
     n = host.q0.shape[-2]
-    t0 = time.perf_counter()
-    size = min(int(chunk), len(scenes))
-    for a in range(0, len(scenes), size):
-        part = scenes[a : a + size]
-        prow = rows[a : a + size]
+    size = min(int(chunk), len(todo))
+    ik_keys = np.asarray(jax.random.split(jax.random.PRNGKey(seed), size))
+    keys = np.asarray(jax.random.split(jax.random.PRNGKey(seed + 1), len(results)))
+    t0, unreachable = time.perf_counter(), 0
+    for a in range(0, len(todo), size):
+        part = todo[a : a + size]
+        sub = jax.tree_util.tree_map(lambda x, part=part: np.asarray(x)[part], host)
+        proofs = [unreachable_proof(scene_of(sub, k)) for k in range(len(part))]  # exact, host side
         q_starts = np.zeros((len(part), R, n, 3), host.q0.dtype)
         n_starts = np.zeros(len(part), np.int32)
         roots = []
@@ -228,25 +203,28 @@ def _search_all(batch, results, scenes, decided, rows, reach: ReachOptions, solv
             roots.append(idx)
             q_starts[k, : len(idx)] = results[b].q[idx]
             n_starts[k] = len(idx)
-        q_goals = decided.q_goal[prow][:, :G]
-        n_goals = np.sum(decided.certified[prow][:, :G], axis=1).astype(np.int32)
-        scenes_part = jax.tree_util.tree_map(lambda x, part=part: x[part], host)
-        args = (scenes_part, q_starts, n_starts, q_goals, n_goals, keys[part])
-        args = pad_batch(args, size)
-        out = jax.device_get(fn(*args))
+        q_end = np.stack([results[b].q[-1] for b in part])
+        args = (sub, q_end, np.array([bool(p) for p in proofs]), q_starts, n_starts, keys[part])
+        sub, q_end, proof, q_starts, n_starts, part_keys = pad_batch(args, size)
+        ik, out = jax.device_get(fn(sub, q_end, ik_keys, proof, q_starts, n_starts, part_keys))
+        certified, best = ik[1], ik[4]
         for k, b in enumerate(part):
-            if not out.found[k]:
+            results[b] = results[b]._replace(best_error=float(best[k]))
+            if proofs[k] or not certified[k, 0]:  # reachability's verdict
+                unreachable += 1
+                results[b] = results[b]._replace(status=status_name(Status.UNREACHABLE),
+                                                 reason=proofs[k] or "no_ik_solution")
+            elif not out.found[k]:
                 results[b] = results[b]._replace(reason="search_exhausted")
-                continue
-            k_root = int(roots[k][int(out.start[k])])
-            steps = int(out.steps[k])
-            q_global = out.q[k][: steps + 1]
-            q = np.concatenate([results[b].q[: k_root + 1], q_global[1:]])
-            check = out.clearance[k][: steps + 1], bool(out.proven[k])
-            results[b] = _with_path(results[b], q, k_root, scene_of(host, b), check, tolerance, out.q.shape[1])
+            else:
+                k_root = int(roots[k][int(out.start[k])])
+                steps = int(out.steps[k])
+                q = np.concatenate([results[b].q[: k_root + 1], out.q[k][1 : steps + 1]])
+                check = out.clearance[k][: steps + 1], bool(out.proven[k])
+                results[b] = _with_path(results[b], q, k_root, scene_of(host, b), check, tolerance, out.q.shape[1])
         if progress:
-            done = min(a + size, len(scenes))
-            _say(f"plan_fallback: global search {done}/{len(scenes)} scenes, {time.perf_counter() - t0:.1f} s")
+            _say(f"plan_fallback: reachability and global search {min(a + size, len(todo))}/{len(todo)} scenes, "
+                 f"{unreachable} unreachable, {time.perf_counter() - t0:.1f} s")
 
 
 def _with_path(local: PlanResult, q: np.ndarray, k_root: int, scenario: Scenario, check, tolerance,

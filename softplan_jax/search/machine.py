@@ -25,6 +25,12 @@ path the walk wrote, done. The check solves anew at every step of a found path
 (one step per iteration, the same solve): the exact clearances that the result
 reports, and the swept proof of :func:`~softplan_jax.geometry.clearance.swept_clear`
 (the metrics' own test, not the walk's safe step) for every motion between steps.
+
+For the fallback the loop first finds the goal roots: the IK of
+:func:`~softplan_jax.search.reach.goal_configurations`, each round's starts
+assessed one per iteration at the same solve (``_P_IK_ROUND`` sets a round up,
+``_P_IK_SOLVE`` ends it), then the search where a start is certified. So the
+fallback's one program holds one copy of the solver.
 """
 
 from __future__ import annotations
@@ -36,14 +42,26 @@ import jax.numpy as jnp
 
 from ..geometry.clearance import swept_clear
 from ..geometry.obstacles import radius_and_mask
+from ..planning.batching import lanes_map
 from . import motions as mo
-from .reach import ReachOptions, clearances, random_configurations
+from .reach import (
+    ReachOptions,
+    clearances,
+    ik_assess,
+    ik_more,
+    ik_result,
+    ik_round_configurations,
+    ik_round_end,
+    ik_start,
+    random_configurations,
+)
 
 __all__ = ["run_search"]
 
 # The handler to run when no motion is active (what the last motion was for).
 (_P_TREE, _P_EXTENDED, _P_CONNECTED, _P_TREE_DONE, _P_CUT, _P_SMOOTH_START, _P_SMOOTH_A, _P_SMOOTH_B, _P_WALK_START,
- _P_WALK, _P_CHECK, _P_DONE) = range(12)
+ _P_WALK, _P_CHECK, _P_IK_ROUND, _P_IK_SOLVE, _P_DONE) = range(14)
+_IK_PHASES = (_P_IK_ROUND, _P_IK_SOLVE)
 
 
 class _State(NamedTuple):
@@ -85,6 +103,12 @@ class _State(NamedTuple):
     # The check's clearances at step check_k - 1, written by the loop likewise into (S + 1, m).
     c_now: jax.Array  # (m,)
     c_write: jax.Array  # () bool
+    # The IK (None in a search given its goal roots): its loop's state, its starts, the start
+    # to assess next, and whether the goal is proven unreachable (no search then).
+    ik: object = None  # reach.IKState
+    ik_starts: object = None  # (S, n, 3)
+    ik_i: object = None  # () int32
+    proof: object = None  # () bool
 
 
 def _add(trees, T: int, tree, q, par, allowed):
@@ -97,12 +121,19 @@ def _add(trees, T: int, tree, q, par, allowed):
 
 
 def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: ReachOptions, solver,
-               contact: float):
+               contact: float, ik=None):
     """The search of :func:`~softplan_jax.search.tree.global_search` for a batch of B scenes
     (module docstring; every argument with a leading axis B): ``(trees, length, start, out,
     steps, complete, clearance, proven)``, batched: ``clearance`` (B, S + 1, m) the check's
     exact clearances at the path's steps (the last one repeated after the end), ``proven``
     the check's swept proof of every motion (False where no path was found).
+
+    ``ik``: ``(ik_keys, q_extra, proof)`` (leading axis B) in place of ``q_goals, n_goals``
+    (then None): the goal roots are the IK's (reach.goal_configurations with these keys and
+    extra starts, in this loop: one start's exact solve per iteration), the first
+    ``goal_roots`` of its sorted results; a lane searches where its first is certified and
+    ``proof`` (the goal proven unreachable) is False. The tuple then ends with the IK's
+    final :class:`~softplan_jax.search.reach.IKState` (batched).
 
     The loop runs over the whole batch: in an iteration, a phase's handler runs (on the
     lanes whose motion ended in that phase; skipped when there is none), then one
@@ -112,17 +143,26 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
     iteration. The walk's steps (B, S + 1, n, 3) and the check's clearances (B, S + 1, m)
     are carries of their own, one row per lane written after the substep."""
     B = keys.shape[0]
-    state = jax.vmap(lambda sc, *a: _lane(sc, options, solver, contact, q_starts.shape[-2], q_starts.dtype)[0](*a))(
-        scenarios, q_starts, n_starts, q_goals, n_goals, keys)
+    with_ik = ik is not None
+    n, dtype = q_starts.shape[-2], q_starts.dtype
+
+    def lane(sc):
+        return _lane(sc, options, solver, contact, n, dtype, with_ik)
+
+    if with_ik:
+        state = lanes_map(lambda sc, *a: lane(sc)[0](*a), scenarios, q_starts, n_starts, keys, *ik)
+    else:
+        state = lanes_map(lambda sc, *a: lane(sc)[0](*a), scenarios, q_starts, n_starts, q_goals, n_goals, keys)
+    live = [p for p in range(_P_DONE) if with_ik or p not in _IK_PHASES]  # the phases with a handler
 
     def run(index, s, out=None):
         """Lane-wise: handler ``index`` (or the substep, which reads the walk's steps ``out``:
         index None) on every lane."""
         def one(st, sc, *lane_out):
-            _, handlers, substep = _lane(sc, options, solver, contact, q_starts.shape[-2], q_starts.dtype)
+            _, handlers, substep = lane(sc)
             return substep(st, *lane_out) if index is None else handlers[index](st)
 
-        return jax.vmap(one)(s, scenarios) if out is None else jax.vmap(one)(s, scenarios, out)
+        return lanes_map(one, s, scenarios) if out is None else lanes_map(one, s, scenarios, out)
 
     def select(mask, new, old):
         return jax.tree_util.tree_map(lambda a, b: jnp.where(mask.reshape((B,) + (1,) * (a.ndim - 1)), a, b), new, old)
@@ -131,10 +171,11 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
         """The handler of each lane whose motion ended (phase p: handlers[p])."""
         idle = ~s.active & (s.phase != _P_DONE)
         if B == 1:  # one branch, chosen by the lane's phase (the last: no handler)
-            branches = [lambda s, p=p: run(p, s) for p in range(_P_DONE)] + [lambda s: s]
+            branches = [(lambda s, p=p: run(p, s)) if p in live else (lambda s: s) for p in range(_P_DONE)]
+            branches.append(lambda s: s)
             return jax.lax.switch(jnp.where(idle[0], s.phase[0], _P_DONE), branches, s)
         phase = s.phase
-        for p in range(_P_DONE):  # each handler only where some lane needs it
+        for p in live:  # each handler only where some lane needs it
             mask = idle & (phase == p)
             s = jax.lax.cond(jnp.any(mask), lambda s, p=p, mask=mask: select(mask, run(p, s), s), lambda s: s, s)
         return s
@@ -165,17 +206,30 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
     taken = (jnp.arange(S + 1, dtype=jnp.int32) <= s.steps[:, None])[:, :, None]
     out = jnp.where(taken[..., None], out, out[lanes, s.steps][:, None])
     clear = jnp.where(taken, clear, clear[lanes, s.steps][:, None])
-    return s.trees, s.length, s.start, out, s.steps, s.node >= s.length - 1, clear, s.proven
+    found = (s.trees, s.length, s.start, out, s.steps, s.node >= s.length - 1, clear, s.proven)
+    return found + (s.ik,) if with_ik else found
 
 
-def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype):
-    """One lane's ``(init, handlers, substep)``: the state of a new search, the phases'
-    handlers (list index = phase), and the substep of the current motion."""
+def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype, with_ik: bool = False):
+    """One lane's ``(init, handlers, substep)``: the state of a new search (``with_ik``: of the
+    IK, then the search), the phases' handlers (list index = phase), and the substep of the
+    current motion."""
     T, S = int(options.tree_size), int(options.path_steps)
     i0, f0, q0 = jnp.zeros((), jnp.int32), jnp.zeros((), bool), jnp.zeros((n, 3), dtype)
     _, mask = radius_and_mask(scenario)
 
-    def init(q_starts, n_starts, q_goals, n_goals, key):
+    G, S_ik = int(options.goal_roots), int(options.ik_starts)
+
+    def init(q_starts, n_starts, *args):
+        if not with_ik:
+            return search_init(q_starts, n_starts, *args)
+        key, ik_key, q_extra, proof = args
+        s = search_init(q_starts, n_starts, jnp.zeros((G, n, 3), dtype), i0, key)  # goal roots: the IK's
+        starts, ik = ik_start(scenario, ik_key, q_extra, options)
+        return s._replace(phase=jnp.asarray(_P_IK_ROUND, jnp.int32), ik=ik, ik_starts=starts, ik_i=i0,
+                          proof=jnp.asarray(proof, bool))
+
+    def search_init(q_starts, n_starts, q_goals, n_goals, key):
         k_tree, k_cut = jax.random.split(key)
         nodes = jnp.zeros((2, T, n, 3), dtype)
         nodes = nodes.at[0, : q_starts.shape[0]].set(q_starts[:T]).at[1, : q_goals.shape[0]].set(q_goals[:T])
@@ -302,8 +356,28 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
     def check_end(s):
         return s._replace(phase=jnp.asarray(_P_DONE, jnp.int32))
 
+    # --- The IK (with_ik): a round's configurations, their S exact solves (substeps), its end.
+    def ik_round(s):
+        q = ik_round_configurations(s.ik, scenario, s.ik_starts, options)
+        return s._replace(phase=jnp.asarray(_P_IK_SOLVE, jnp.int32), ik=s.ik._replace(q=q), ik_i=i0,
+                          active=jnp.ones((), bool))
+
+    def ik_solved(s):
+        """The round's starts are assessed: another round, or the search from the IK's first
+        ``goal_roots`` results (where one is certified and no proof says unreachable), or done."""
+        ik = ik_round_end(s.ik)
+        more = ik_more(ik, options)
+        q_goal, certified = ik_result(ik)[:2]
+        go = certified[0] & ~s.proof
+        roots = q_goal[:G][:T]
+        t = s.trees
+        n_goals = jnp.where(go, jnp.minimum(jnp.sum(certified[:G]), T), 0).astype(jnp.int32)
+        t = t._replace(nodes=t.nodes.at[1, : roots.shape[0]].set(roots), count=t.count.at[1].set(n_goals))
+        phase = jnp.where(more, _P_IK_ROUND, jnp.where(go, _P_TREE, _P_DONE)).astype(jnp.int32)
+        return s._replace(ik=ik, trees=t, phase=phase)  # the next phase's handler runs next iteration
+
     handlers = [tree_next, extended, connected, tree_done, cut, smooth_start, smooth_a, smooth_b, walk_start, walk_end,
-                check_end]
+                check_end, ik_round, ik_solved]
 
     def substep(s, out):
         """One substep: conservative advancement of the current motion, or one step of the check of
@@ -314,6 +388,9 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
         j = s.check_k
         q_j = jnp.where(j == 0, s.path[0], out[jnp.minimum(j, S)])
         q = jnp.where(check, q_j, s.q_a + s.t * s.dq)
+        if with_ik:  # the IK: the round's start ik_i
+            assess, i = s.phase == _P_IK_SOLVE, jnp.minimum(s.ik_i, S_ik - 1)
+            q = jnp.where(assess, s.ik.q[i], q)
         c, truth, ok = clearances(q, scenario, solver)
         proof = jnp.all(swept_clear(q_j, out[jnp.minimum(j + 1, S)], truth, c, contact) | ~mask) | (j >= s.steps)
         checking = s._replace(check_k=j + 1, proven=s.proven & proof, c_now=c, c_write=s.active,
@@ -333,6 +410,15 @@ def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype
                              q_a=jnp.where(end, q_a, s.q_a), q_e=jnp.where(end, q_e, s.q_e),
                              dq=jnp.where(end, q_e - q_a, s.dq),
                              active=(e < s.length - 1) & (steps < S) & good, c_write=f0)
-        return when(check, checking, when(walk, walking, moving))
+        new = when(check, checking, when(walk, walking, moving))
+        if not with_ik:
+            return new
+        solved, c_min, err, certified, free = ik_assess(q, c, truth, ok, scenario, options, contact)
+        ik = s.ik
+        ik = ik._replace(solved=jax.tree_util.tree_map(lambda a, x: a.at[i].set(x), ik.solved, solved),
+                         c=ik.c.at[i].set(c_min), err=ik.err.at[i].set(err), certified=ik.certified.at[i].set(certified),
+                         free=ik.free.at[i].set(free))
+        assessing = s._replace(ik=ik, ik_i=s.ik_i + 1, active=s.ik_i + 1 < S_ik, write=f0, c_write=f0)
+        return when(assess, assessing, new)
 
     return init, handlers, substep

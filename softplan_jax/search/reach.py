@@ -47,6 +47,7 @@ from ..base.numerics import damped_pinv, safe_norm, solve_small
 from ..geometry.closest import DEFAULT_OPTIONS, SolverOptions
 from ..geometry.kinematics import points_jacobian, tip_position
 from ..geometry.obstacles import placeholder_closest, radius_and_mask, true_closest
+from ..planning.batching import lanes_map
 from ..scenarios import Scenario
 from ..scenarios.scenario import unreachable_reason
 
@@ -259,9 +260,31 @@ def _push_step(q, c, truth, scenario: Scenario, options: ReachOptions):
     return jnp.where(jnp.all(jnp.isfinite(q_new)), q_new, q)
 
 
-def _ik_start(scenario: Scenario, key, q_extra, options: ReachOptions):
+class IKState(NamedTuple):
+    """The state of the IK's loop for one scene (S starts; the search's loop carries it too).
+
+    Attributes:
+      r: () int32, rounds done.
+      q: (S, n, 3) the round's configurations.
+      solved: ``(c_all (S, m), truth)``: the exact clearances and closest pairs at q.
+      c: (S,) smallest clearance; err: (S,) |goal - tip|.
+      certified, free: (S,) bool (see :func:`ik_assess`).
+      best: () the smallest tip distance of a collision-free configuration so far.
+    """
+
+    r: jax.Array
+    q: jax.Array
+    solved: tuple
+    c: jax.Array
+    err: jax.Array
+    certified: jax.Array
+    free: jax.Array
+    best: jax.Array
+
+
+def ik_start(scenario: Scenario, key, q_extra, options: ReachOptions):
     """The IK's starts (S, n, 3) (q0, the extra configuration if given, random ones) and the
-    loop's first state."""
+    loop's first :class:`IKState`."""
     S = int(options.ik_starts)
     q0 = scenario.q0
     fixed = [q0] if q_extra is None else [q0, q_extra.astype(q0.dtype)]
@@ -273,46 +296,58 @@ def _ik_start(scenario: Scenario, key, q_extra, options: ReachOptions):
     truth = jax.vmap(lambda q: placeholder_closest(q, scenario))(starts)
     solved = (jnp.zeros(truth.distance.shape, dtype), truth)
     none = jnp.zeros((S,), bool)
-    state = (jnp.zeros((), jnp.int32), starts, solved, jnp.zeros((S,), dtype), jnp.zeros((S,), dtype), none, none,
-             jnp.asarray(jnp.inf, dtype))
+    state = IKState(jnp.zeros((), jnp.int32), starts, solved, jnp.zeros((S,), dtype), jnp.zeros((S,), dtype), none,
+                    none, jnp.asarray(jnp.inf, dtype))
     return starts, state
 
 
-def _ik_more(state, options: ReachOptions):
-    """Whether the loop runs another round: rounds 0 and 1, then while no start is certified
+def ik_more(state: IKState, options: ReachOptions):
+    """Whether the IK's loop runs another round: rounds 0 and 1, then while no start is certified
     (at most ik_clear_iterations times)."""
-    r, _, _, _, _, certified, _, _ = state
-    return (r < 2) | ((r - 2 < options.ik_clear_iterations) & ~jnp.any(certified))
+    return (state.r < 2) | ((state.r - 2 < options.ik_clear_iterations) & ~jnp.any(state.certified))
 
 
-def _ik_round(state, scenario: Scenario, starts, options: ReachOptions, solver, contact):
-    """One round of the IK's loop, its one exact solve site (see goal_configurations)."""
-
-    def assess(q):
-        """The exact clearances at q (kept: the next push step starts from them) and their verdict."""
-        c_all, truth, ok = clearances(q, scenario, solver)
-        err = safe_norm(scenario.goal - tip_position(q))
-        c = jnp.min(c_all, initial=jnp.inf)
-        finite = jnp.all(jnp.isfinite(q)) & jnp.isfinite(err)
-        certified = finite & ok & (c >= options.ik_clearance) & (err <= options.ik_tolerance)
-        free = finite & ok & (c > contact)
-        return (c_all, truth), c, err, certified, free
-
-    r, q, solved, _, _, _, _, best = state
-    # Round 0: the starts; round 1: ik_iterations tip steps from them; then a push and 3 tip steps
-    # (one copy of the tip IK in the program, its number of steps chosen by the round).
-    pushed = jax.vmap(lambda q, s: _push_step(q, *s, scenario, options))(q, solved)
+def ik_round_configurations(state: IKState, scenario: Scenario, starts, options: ReachOptions):
+    """The configurations (S, n, 3) that the IK's round ``state.r`` assesses (no exact solve):
+    round 0 the starts; round 1 ik_iterations tip steps from them; later rounds a null-space push
+    from the last round's clearances and 3 tip steps (one copy of the tip IK in the program, its
+    number of steps chosen by the round)."""
+    r = state.r
+    pushed = jax.vmap(lambda q, s: _push_step(q, *s, scenario, options))(state.q, state.solved)
     steps = jnp.where(r == 0, 0, jnp.where(r == 1, options.ik_iterations, 3))
-    q = jax.vmap(lambda q: _tip_lm(q, scenario, steps))(jnp.where(r <= 1, starts, pushed))
-    solved, c, err, certified, free = jax.vmap(assess)(q)
-    best = jnp.minimum(best, jnp.min(jnp.where(free, err, jnp.inf)))
-    return r + 1, q, solved, c, err, certified, free, best
+    return jax.vmap(lambda q: _tip_lm(q, scenario, steps))(jnp.where(r <= 1, starts, pushed))
 
 
-def _ik_result(state):
-    _, q, _, c, err, certified, _, best = state
-    order = jnp.argsort(jnp.where(certified, -c, jnp.inf))  # certified, widest clearance first
-    return q[order], certified[order], c[order], err[order], best
+def ik_assess(q, c_all, truth, ok, scenario: Scenario, options: ReachOptions, contact):
+    """The IK's verdict on q from the exact solve at q (:func:`clearances`: ``c_all, truth, ok``):
+    ``(solved, c, err, certified, free)`` (kept: the next push starts from ``solved``)."""
+    err = safe_norm(scenario.goal - tip_position(q))
+    c = jnp.min(c_all, initial=jnp.inf)
+    finite = jnp.all(jnp.isfinite(q)) & jnp.isfinite(err)
+    certified = finite & ok & (c >= options.ik_clearance) & (err <= options.ik_tolerance)
+    free = finite & ok & (c > contact)
+    return (c_all, truth), c, err, certified, free
+
+
+def ik_round_end(state: IKState) -> IKState:
+    """After the round's assessments: one round more, and the best collision-free tip distance."""
+    return state._replace(r=state.r + 1,
+                          best=jnp.minimum(state.best, jnp.min(jnp.where(state.free, state.err, jnp.inf))))
+
+
+def _ik_round(state: IKState, scenario: Scenario, starts, options: ReachOptions, solver, contact):
+    """One round of the IK's loop, its one exact solve site (see goal_configurations)."""
+    q = ik_round_configurations(state, scenario, starts, options)
+    solved, c, err, certified, free = jax.vmap(
+        lambda q: ik_assess(q, *clearances(q, scenario, solver), scenario, options, contact))(q)
+    return ik_round_end(IKState(state.r, q, solved, c, err, certified, free, state.best))
+
+
+def ik_result(state: IKState):
+    """``(q, certified, clearance, tip_error, best_error)`` of the IK, sorted: certified first,
+    widest clearance first."""
+    order = jnp.argsort(jnp.where(state.certified, -state.c, jnp.inf))
+    return state.q[order], state.certified[order], state.c[order], state.err[order], state.best
 
 
 def goal_configurations(scenario: Scenario, key, q_extra, options: ReachOptions,
@@ -337,10 +372,10 @@ def goal_configurations(scenario: Scenario, key, q_extra, options: ReachOptions,
     # (ik_iterations Levenberg-Marquardt steps). Rounds 2, 3, ...: while no start is
     # certified (at most ik_clear_iterations times), one null-space push from the
     # clearances the last round found and a 3-step tip polish.
-    starts, state = _ik_start(scenario, key, q_extra, options)
-    state = jax.lax.while_loop(lambda st: _ik_more(st, options),
+    starts, state = ik_start(scenario, key, q_extra, options)
+    state = jax.lax.while_loop(lambda st: ik_more(st, options),
                                lambda st: _ik_round(st, scenario, starts, options, solver, contact), state)
-    return _ik_result(state)
+    return ik_result(state)
 
 
 def goal_configurations_batch(scenarios: Scenario, keys, q_extra, options: ReachOptions,
@@ -350,21 +385,25 @@ def goal_configurations_batch(scenarios: Scenario, keys, q_extra, options: Reach
     batch: each round runs every scene's round (vmapped) and keeps it where that scene's loop
     goes on, until none does. (Under vmap, jax turns the per-scene loop into this same loop,
     but traces and batches its body more than once: the IK's trace took 3.4 s that way, 2.5 s this
-    way, for one scene alone; 3.1 and 2.8 s in benchmarks/fallback_compile.py.)"""
+    way, for one scene alone; 3.1 and 2.8 s in benchmarks/fallback_compile.py.) A batch of one
+    scene is traced without vmap (:func:`~softplan_jax.planning.batching.lanes_map`), as the
+    global fallback's program traces its IK: the two give the same arrays."""
     if q_extra is None:
-        starts, state = jax.vmap(lambda s, k: _ik_start(s, k, None, options))(scenarios, keys)
+        starts, state = lanes_map(lambda s, k: ik_start(s, k, None, options), scenarios, keys)
     else:
-        starts, state = jax.vmap(lambda s, k, e: _ik_start(s, k, e, options))(scenarios, keys, q_extra)
-    more = jax.vmap(lambda st: _ik_more(st, options))
+        starts, state = lanes_map(lambda s, k, e: ik_start(s, k, e, options), scenarios, keys, q_extra)
+
+    def more(state):
+        return lanes_map(lambda st: ik_more(st, options), state)
 
     def body(state):
         going = more(state)
-        new = jax.vmap(lambda st, s, a: _ik_round(st, s, a, options, solver, contact))(state, scenarios, starts)
+        new = lanes_map(lambda st, s, a: _ik_round(st, s, a, options, solver, contact), state, scenarios, starts)
         return jax.tree_util.tree_map(
             lambda x, y: jnp.where(going.reshape((-1,) + (1,) * (x.ndim - 1)), x, y), new, state)
 
     state = jax.lax.while_loop(lambda st: jnp.any(more(st)), body, state)
-    return jax.vmap(_ik_result)(state)
+    return lanes_map(ik_result, state)
 
 
 @functools.cache

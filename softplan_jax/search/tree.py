@@ -50,12 +50,14 @@ import jax.numpy as jnp
 
 from ..geometry.closest import SolverOptions
 from ..geometry.kinematics import tip_position
+from ..planning.batching import lanes_map
 from ..scenarios import Scenario
 from .machine import run_search
 from .motions import advance, substep, wrap_delta
-from .reach import ReachOptions
+from .reach import ReachOptions, ik_result
 
-__all__ = ["wrap_delta", "substep", "advance", "global_search", "global_search_batch", "SearchResult"]
+__all__ = ["wrap_delta", "substep", "advance", "global_search", "global_search_batch", "reach_and_search_batch",
+           "SearchResult"]
 
 
 class SearchResult(NamedTuple):
@@ -114,8 +116,26 @@ def global_search_batch(scenarios: Scenario, q_starts, n_starts, q_goals, n_goal
     scenes' searches in one loop (:func:`~softplan_jax.search.machine.run_search`); the
     same results as ``jax.vmap(global_search)``, without evaluating every phase of the
     search on every iteration."""
-    trees, length, start, steps_q, steps, complete, clear, proven = run_search(scenarios, q_starts, n_starts, q_goals,
-                                                                            n_goals, keys, options, solver, contact)
+    return _result(*run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options, solver, contact))
+
+
+def reach_and_search_batch(scenarios: Scenario, q_extra, ik_keys, proof, q_starts, n_starts, keys,
+                           options: ReachOptions, solver: SolverOptions, contact: float):
+    """The global fallback's program for B scenes (every argument with a leading axis B): the IK
+    of :func:`~softplan_jax.search.reach.goal_configurations` (``ik_keys``, extra starts
+    ``q_extra``), then :func:`global_search_batch` from its first ``goal_roots`` results where
+    the first is certified and ``proof`` (the goal proven unreachable) is False, in one loop
+    with one exact solve site (:func:`~softplan_jax.search.machine.run_search`).
+
+    Returns ``(ik, search)``: ``ik`` as :func:`~softplan_jax.search.reach.goal_configurations`
+    returns it (batched), ``search`` a :class:`SearchResult` (not found where the IK certified
+    nothing or a proof holds)."""
+    *found, ik = run_search(scenarios, q_starts, n_starts, None, None, keys, options, solver, contact,
+                            ik=(ik_keys, q_extra, proof))
+    return lanes_map(ik_result, ik), _result(*found)
+
+
+def _result(trees, length, start, steps_q, steps, complete, clear, proven) -> SearchResult:
     found = trees.done & complete
     return SearchResult(found, start, steps_q, jnp.where(found, steps, 0), trees.it, trees.count,
                         jnp.where(found, length, 0), clear, proven & found)
