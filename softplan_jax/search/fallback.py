@@ -19,8 +19,11 @@
    finds nothing the local result stands, with the reason ``search_exhausted``.
 
 Scenes the local planner reached, or that collided (an N-point model can),
-keep their local result. The searches of a batch run in chunks of one shape
-(``chunk`` scenes vmapped, the last chunk padded), so a batch compiles once.
+keep their local result. Steps 1 and 2 (the IK, the search, and the check of
+the path it finds) are one compiled program
+(:func:`~softplan_jax.search.tree.reach_and_search_batch`: one loop with one
+exact solve site), run on a batch in chunks of one shape (``chunk`` scenes
+vmapped, the last chunk padded), so a batch compiles once.
 The default chunk is 1, one scene at a time: a vmapped search runs its
 loops in lockstep until the slowest scene of the chunk is done, and on the
 CPU the first chunk of 8 of random_scenarios(1, 1024)'s rescued scenes took
