@@ -7,8 +7,9 @@ returns, and the local planner's arrays for scenes it reaches itself.
 
 Every test shares one ReachOptions and the padded scene shape of
 test_planner (5 curve slots, degree 2), so reachability's program and the
-fallback's (the IK, the search and its check) compile once, and the paper scenes' 200-step plans are
-test_planner's programs (from the persistent compilation cache).
+fallback's (the IK, the search and its check) compile once, and the paper
+scenes' 200-step plans are test_planner's programs (from the persistent
+compilation cache).
 """
 
 import math
@@ -257,7 +258,7 @@ def _stack(*lanes):
     return jax.tree_util.tree_map(lambda *ys: np.stack([np.asarray(y) for y in ys]), *lanes)
 
 
-def test_fallback_program_runs_reachabilitys_ik_bit_for_bit(decided, rescued):  # rescued: compiles the program
+def test_fallback_program_runs_reachabilitys_ik(decided, rescued):  # rescued: compiles the program
     """The fallback's one program finds the goal roots by the IK of reachability (in its own
     loop, one start's exact solve per iteration) and gives reachability's arrays, with
     reachability's key and extra start, on the fixture's scenes that end at different rounds:
