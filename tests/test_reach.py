@@ -21,7 +21,7 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.search import tree as global_planner
-from softplan_jax.search.fallback import _fallback_jit, _start_roots
+from softplan_jax.search.fallback import _fallback_jit, _search_starts
 from softplan_jax.search.reach import _goal_configurations_jit
 
 OPTS = sp.search.ReachOptions()
@@ -245,13 +245,10 @@ def test_batch_compiles_the_search_once_and_keeps_local_results(rescued):
 def _fallback_args(s, q_local, proof=False, seed=0):
     """The fallback program's arguments for one scene as plan_fallback passes them (chunk 1),
     after the local path ``q_local``."""
-    R = OPTS.start_roots
-    roots = _start_roots(q_local, R)
-    q_starts = np.zeros((R, 3, 3))
-    q_starts[: len(roots)] = q_local[roots]
+    q_starts, n_starts, _ = _search_starts(np.asarray(q_local), OPTS.start_roots)
     ik_key = jax.random.split(jax.random.PRNGKey(seed), 1)[0]
     key = jax.random.split(jax.random.PRNGKey(seed + 1), 1)[0]
-    return (s, np.asarray(q_local[-1]), ik_key, proof, q_starts, np.int32(len(roots)), key)
+    return (s, np.asarray(q_local[-1]), ik_key, proof, q_starts, n_starts, key)
 
 
 def _stack(*lanes):

@@ -73,6 +73,15 @@ def _start_roots(q_local: np.ndarray, count: int):
     return np.unique(np.round(np.linspace(0.0, 1.0, count) * last).astype(int))
 
 
+def _search_starts(q_local: np.ndarray, count: int):
+    """The search's start roots after the local path: ``(q_starts (count, n, 3)`` padded with
+    zeros, ``n_starts`` (int32), their indices in the path)."""
+    idx = _start_roots(q_local, count)
+    q_starts = np.zeros((count, *q_local.shape[1:]), q_local.dtype)
+    q_starts[: len(idx)] = q_local[idx]
+    return q_starts, np.int32(len(idx)), idx
+
+
 def plan_fallback(scenarios: Scenario, method: str = "curve", n_points: int = 10, gains=None, max_steps: int = 600,
                   seed=0, *, reach: ReachOptions = ReachOptions(), chunk: int = 1, progress: bool = False,
                   **options):
@@ -189,7 +198,6 @@ def _reach_and_search(batch, results, todo, reach: ReachOptions, solver, contact
     host = jax.device_get(batch)
     fn = _fallback_jit(reach, solver, float(contact))
     R = int(reach.start_roots)
-    n = host.q0.shape[-2]
     size = min(int(chunk), len(todo))
     ik_keys = np.asarray(jax.random.split(jax.random.PRNGKey(seed), size))
     keys = np.asarray(jax.random.split(jax.random.PRNGKey(seed + 1), len(results)))
@@ -198,14 +206,8 @@ def _reach_and_search(batch, results, todo, reach: ReachOptions, solver, contact
         part = todo[a : a + size]
         sub = jax.tree_util.tree_map(lambda x, part=part: np.asarray(x)[part], host)
         proofs = [unreachable_proof(scene_of(sub, k)) for k in range(len(part))]  # exact, host side
-        q_starts = np.zeros((len(part), R, n, 3), host.q0.dtype)
-        n_starts = np.zeros(len(part), np.int32)
-        roots = []
-        for k, b in enumerate(part):
-            idx = _start_roots(results[b].q, R)
-            roots.append(idx)
-            q_starts[k, : len(idx)] = results[b].q[idx]
-            n_starts[k] = len(idx)
+        q_starts, n_starts, roots = zip(*(_search_starts(results[b].q, R) for b in part), strict=True)
+        q_starts, n_starts = np.stack(q_starts).astype(host.q0.dtype), np.array(n_starts, np.int32)
         q_end = np.stack([results[b].q[-1] for b in part])
         args = (sub, q_end, np.array([bool(p) for p in proofs]), q_starts, n_starts, keys[part])
         sub, q_end, proof, q_starts, n_starts, part_keys = pad_batch(args, size)

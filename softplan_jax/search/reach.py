@@ -387,7 +387,9 @@ def goal_configurations_batch(scenarios: Scenario, keys, q_extra, options: Reach
     but traces and batches its body more than once: the IK's trace took 3.4 s that way, 2.5 s this
     way, for one scene alone; 3.1 and 2.8 s in benchmarks/fallback_compile.py.) A batch of one
     scene is traced without vmap (:func:`~softplan_jax.planning.batching.lanes_map`), as the
-    global fallback's program traces its IK: the two give the same arrays."""
+    global fallback's program traces its IK: the two give the same arrays bit for bit where a
+    start is certified at once (rounds 0 and 1), and to rounding over the null-space rounds
+    (XLA fuses the push step differently in the two programs)."""
     if q_extra is None:
         starts, state = lanes_map(lambda s, k: ik_start(s, k, None, options), scenarios, keys)
     else:
