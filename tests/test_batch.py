@@ -366,7 +366,8 @@ def test_global_mesh_in_one_process():
     assert not is_global(mesh)
     with pytest.raises(ValueError, match='"global"'):
         batch_mesh("everywhere")
-    batch = sp.scenarios.stack_scenarios([sp.paper_scenario("sim1", **PAD)] * 2)
-    a = sp.plan_batch(batch, max_steps=5, devices="global")
-    b = sp.plan_batch(batch, max_steps=5)
+    # test_plan_batch_matches_single's batch: its program (found in the compilation cache).
+    batch = sp.scenarios.stack_scenarios([sp.paper_scenario(name, **PAD) for name in ("sim1", "sim2", "tree")])
+    a = sp.plan_batch(batch, max_steps=200, devices="global")
+    b = sp.plan_batch(batch, max_steps=200)
     np.testing.assert_array_equal(np.asarray(a.q), np.asarray(b.q))

@@ -78,7 +78,11 @@ def test_paper_preset_sim2_ten_points_collide_at_step_21():
     assert r.status == "collided" and r.iterations == 21
 
 
-def test_cli_gains_paper_shows_the_collision(capsys):
+def test_cli_gains_paper_shows_the_collision(capsys, monkeypatch):
+    # The run of the test above: without the CLI's traced-program artifact (the artifact is
+    # test_compilation_cache's), the command compiles the same program as sp.plan did, found
+    # in the compilation cache instead of compiled a second time.
+    monkeypatch.setattr(sp.base.compilation_cache, "_exported_dir", lambda: None)
     code = main(["run", "sim2", "--gains", "paper", "--method", "points", "--n-points", "10",
                  "--max-steps", "40", "--json"])
     out, err = capsys.readouterr()
