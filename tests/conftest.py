@@ -20,9 +20,11 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 # XLA's Eigen kernels single-threaded in each process: the suite runs 2 xdist workers on
 # 2 cores, busy throughout (user + sys = 1.95 x wall), where each worker's Eigen thread pool
 # only made them contend (cold suite, 4 runs each: 339-352 s without, 328-334 s with). The user's
-# own XLA_FLAGS are kept, and their setting of this flag wins.
-if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
+# own XLA_FLAGS are kept, and their setting of this flag wins (XLA_FLAGS naming a file of
+# flags, i.e. not starting with "--", is left alone).
+_XLA_FLAGS = os.environ.get("XLA_FLAGS", "").strip()
+if "xla_cpu_multi_thread_eigen" not in _XLA_FLAGS and (not _XLA_FLAGS or _XLA_FLAGS.startswith("--")):
+    os.environ["XLA_FLAGS"] = (_XLA_FLAGS + " --xla_cpu_multi_thread_eigen=false").strip()
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
