@@ -212,7 +212,7 @@ def _reach_and_search(batch, results, todo, reach: ReachOptions, solver, contact
         args = (sub, q_end, np.array([bool(p) for p in proofs]), q_starts, n_starts, keys[part])
         sub, q_end, proof, q_starts, n_starts, part_keys = pad_batch(args, size)
         ik, out = jax.device_get(fn(sub, q_end, ik_keys, proof, q_starts, n_starts, part_keys))
-        certified, best = ik[1], ik[4]
+        _, certified, _, _, best = ik  # goal_configurations: (q, certified, clearance, tip_error, best_error)
         for k, b in enumerate(part):
             results[b] = results[b]._replace(best_error=float(best[k]))
             if proofs[k] or not certified[k, 0]:  # reachability's verdict
