@@ -17,14 +17,27 @@ import sys
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
-# XLA's Eigen kernels single-threaded in each process: the suite runs 2 xdist workers on
-# 2 cores, busy throughout (user + sys = 1.95 x wall), where each worker's Eigen thread pool
-# only made them contend (cold suite, 4 runs each: 339-352 s without, 328-334 s with). The user's
-# own XLA_FLAGS are kept, and their setting of this flag wins (XLA_FLAGS naming a file of
-# flags, i.e. not starting with "--", is left alone).
+# Two XLA flags for the test processes (compilation is 80 % of the suite's time):
+# - XLA's Eigen kernels single-threaded in each process: the suite runs 2 xdist workers on
+#   2 cores, busy throughout (user + sys = 1.95 x wall), where each worker's Eigen thread pool
+#   only made them contend (cold suite, 4 runs each: 339-352 s without, 328-334 s with).
+# - for the ~2,000 small programs the suite compiles (eager ops, test helpers), XLA's elemental
+#   emitter instead of its MLIR fusion emitters and LLVM's optimisation level 0 instead of 3:
+#   a tiny program compiles in a third of the time (19 -> 6 ms). Every program the package
+#   jits names both options per program (compilation_cache: rollout_compiler_options and
+#   package_jit), so the programs tested here compile as in a user's process; the baselines
+#   (benchmarks/baselines.py: paper scenes, random batches, moving scenes, the fallback) are
+#   bit-identical with and without these flags
+#   (test_compilation_cache::test_package_programs_do_not_depend_on_the_suites_xla_flags).
+# The user's own XLA_FLAGS are kept, and their setting of any of these flags wins (XLA_FLAGS
+# naming a file of flags, i.e. not starting with "--", is left alone).
 _XLA_FLAGS = os.environ.get("XLA_FLAGS", "").strip()
-if "xla_cpu_multi_thread_eigen" not in _XLA_FLAGS and (not _XLA_FLAGS or _XLA_FLAGS.startswith("--")):
-    os.environ["XLA_FLAGS"] = (_XLA_FLAGS + " --xla_cpu_multi_thread_eigen=false").strip()
+if not _XLA_FLAGS or _XLA_FLAGS.startswith("--"):
+    for _flag, _value in (("xla_cpu_multi_thread_eigen", "false"), ("xla_cpu_use_fusion_emitters", "false"),
+                          ("xla_backend_optimization_level", "0")):
+        if _flag not in _XLA_FLAGS:
+            _XLA_FLAGS = f"{_XLA_FLAGS} --{_flag}={_value}".strip()
+    os.environ["XLA_FLAGS"] = _XLA_FLAGS
 
 import jax  # noqa: E402
 import pytest  # noqa: E402

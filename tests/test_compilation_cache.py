@@ -100,6 +100,7 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     from softplan_jax.base.compilation_cache import (
         CPU_COMPILER_OPTIONS,
         CURVE_CPU_COMPILER_OPTIONS,
+        POINTS_CPU_COMPILER_OPTIONS,
         rollout_compiler_options,
     )
     from softplan_jax.planning.planner import make_options
@@ -108,7 +109,7 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     sc, g, key = sp.paper_scenario("sim1"), sp.default_gains(), jax.random.PRNGKey(0)
     opts = make_options("points", 10, check_collisions=False)
     # the suite runs on the CPU, with a jaxlib that knows every option
-    assert rollout_compiler_options("points") == CPU_COMPILER_OPTIONS
+    assert rollout_compiler_options("points") == {**CPU_COMPILER_OPTIONS, **POINTS_CPU_COMPILER_OPTIONS}
     assert rollout_compiler_options("curve") == {**CPU_COMPILER_OPTIONS, **CURVE_CPU_COMPILER_OPTIONS}
     assert rollout_compiler_options() == rollout_compiler_options("curve")
     with pytest.raises(ValueError, match="method"):
@@ -127,7 +128,7 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     finally:
         monkeypatch.undo()
         rollout_compiler_options.cache_clear()
-    assert rollout_compiler_options("points") == CPU_COMPILER_OPTIONS
+    assert rollout_compiler_options("points") == {**CPU_COMPILER_OPTIONS, **POINTS_CPU_COMPILER_OPTIONS}
 
 
 def test_xla_options_this_jaxlib_does_not_know_are_left_out(monkeypatch):
@@ -138,11 +139,12 @@ def test_xla_options_this_jaxlib_does_not_know_are_left_out(monkeypatch):
     monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True, **known})
     try:
         cc.rollout_compiler_options.cache_clear()
-        assert cc.rollout_compiler_options("points") == known
+        assert cc.rollout_compiler_options("points") == {**known, **cc.POINTS_CPU_COMPILER_OPTIONS}
         monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True})
         monkeypatch.setattr(cc, "CURVE_CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option_either": False})
+        monkeypatch.setattr(cc, "POINTS_CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option_either": True})
         cc.rollout_compiler_options.cache_clear()
-        assert cc.rollout_compiler_options("curve") is None
+        assert cc.rollout_compiler_options("curve") is None and cc.rollout_compiler_options("points") is None
     finally:
         monkeypatch.undo()
         cc.rollout_compiler_options.cache_clear()
@@ -187,3 +189,46 @@ def test_planner_step_rejects_options_that_are_not_plan_options():
     sc = sp.paper_scenario("sim1")
     with pytest.raises(ValueError, match="PlanOptions"):
         sp.planning.planner_step(sc.q0, sc, sp.default_gains(), {"method": "curve"})
+
+
+
+# The probe of the test below, run in this process and in one without the suite's XLA flags (OUT: an .npz path).
+_FLAG_PROBE = """
+import jax
+import numpy as np
+jax.config.update("jax_enable_x64", True)
+import softplan_jax as sp
+sc, gains, opts = sp.apply_preset("paper", sp.paper_scenario("sim2"))
+runs = {m: sp.plan(sc, m, 10, gains=gains, max_steps=40, **opts) for m in ("points", "curve")}
+np.savez(OUT, **{f"{m}/{a}": np.asarray(getattr(r, a)) for m, r in runs.items() for a in ("q", "clearance")})
+"""
+
+
+@pytest.mark.slow
+def test_package_programs_do_not_depend_on_the_suites_xla_flags(tmp_path):
+    """tests/conftest.py compiles the suite with --xla_cpu_use_fusion_emitters=false and
+    --xla_backend_optimization_level=0 (quicker compiles of its many small programs); the
+    package's programs name both options per program (rollout_compiler_options, package_jit),
+    so the rollouts tested here are the ones a user's process compiles (without the names,
+    each flag changes the last bits below). The probe: sim2 with the
+    paper's step and gains, where the plain step (dt = 1) turns a 1e-16 difference into
+    1e-1 within 40 steps (test_presets), planned with each method here and in a fresh process
+    without any XLA_FLAGS or compilation cache: the trajectories and clearances are equal bit
+    for bit."""
+    import numpy as np
+
+    flags = os.environ.get("XLA_FLAGS", "")
+    assert "--xla_backend_optimization_level=0" in flags and "--xla_cpu_use_fusion_emitters=false" in flags
+    here, there = str(tmp_path / "here.npz"), str(tmp_path / "there.npz")
+    exec(_FLAG_PROBE, {"OUT": here})
+    env = subprocess_env()
+    for k in ("XLA_FLAGS", "JAX_COMPILATION_CACHE_DIR"):
+        env.pop(k, None)
+    env["SOFTPLAN_COMPILATION_CACHE"] = "0"
+    out = subprocess.run([sys.executable, "-c", f"OUT = {there!r}\n{_FLAG_PROBE}"], capture_output=True,
+                         text=True, env=env, cwd=REPO, timeout=300)
+    assert out.returncode == 0, out.stderr
+    a, b = np.load(here), np.load(there)
+    assert sorted(a.files) == sorted(b.files) == ["curve/clearance", "curve/q", "points/clearance", "points/q"]
+    for k in a.files:
+        assert a[k].shape == b[k].shape and np.array_equal(a[k], b[k]), k

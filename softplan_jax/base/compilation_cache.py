@@ -39,7 +39,11 @@ compilation.
 compiled with, per obstacle model: every rollout
 without XLA's YNN fusions, and the curve method's also without its MLIR fusion
 emitters (a quarter less compile time; the N-point model's batched step runs
-slower with it, so it keeps them). The package's other programs take the curve
+slower with it, so it keeps them, named explicitly). XLA's optimisation level
+is named too, at its default: an ``XLA_FLAGS`` setting of the level or of the
+emitter does not change the package's programs. The package's small helper
+programs (the kinematics on concrete arrays, the random scenes' goals) are
+compiled with XLA's defaults, named the same way (``package_jit(fn, None)``). The package's other programs take the curve
 method's (:class:`package_jit`): the global fallback's three (the IK, the search, the path
 check), :func:`~softplan_jax.closest_point`, :func:`~softplan_jax.planning.planner_step`
 (its method's) and the brute-force :func:`~softplan_jax.dense_trajectory_clearance`. They
@@ -70,10 +74,19 @@ __all__ = ["compilation_cache_dir", "enable_compilation_cache", "enable_default_
 #   4.7 s single, 7.0 -> 5.1 s batched; run time within 3 %. Not for the N-point method: its
 #   program compiles in ~1 s anyway, and its batched step ran 35-45 % slower with it
 #   (float64 7.5 -> 10.3 us, float32 6.2 -> 9.1 us per scenario-step, tree, batch of 64).
+# - XLA's own defaults of two options, named per program so that XLA_FLAGS settings of them
+#   do not change the package's programs: xla_backend_optimization_level=3 (every program) and
+#   xla_cpu_use_fusion_emitters=True (N-point programs and the plain ones, XLA_DEFAULT_OPTIONS).
+#   The test suite compiles its ~2,000 small programs (eager ops, test helpers) with both
+#   lowered (tests/conftest.py), and the programs it tests must stay the ones users run.
 # Tried and not taken: xla_llvm_disable_expensive_passes (no further gain),
 # xla_backend_optimization_level=1 (compile no faster, run +4-17 % against no YNN).
-CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
+CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "", "xla_backend_optimization_level": 3}
 CURVE_CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+POINTS_CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": True}
+# The package's plain programs (package_jit(fn, None): kinematics, random scenes, point sets):
+# XLA's defaults, named.
+XLA_DEFAULT_OPTIONS = {"xla_backend_optimization_level": 3, "xla_cpu_use_fusion_emitters": True}
 
 
 _OFF = ("0", "false", "no", "off")
@@ -190,17 +203,23 @@ def rollout_compiler_options(method: str = "curve") -> dict | None:
     :data:`~softplan_jax.planning.planner.rollout_batch` and ``rollout_jit.cached`` compile a
     rollout of the planner's ``method`` ("curve" or "points") with (and, through
     :class:`package_jit`, the package's other programs), on the CPU backend:
-    :data:`CPU_COMPILER_OPTIONS`, and for "curve" also :data:`CURVE_CPU_COMPILER_OPTIONS`,
-    each kept only if this jaxlib knows it. None (XLA's defaults) on other backends, when
+    :data:`CPU_COMPILER_OPTIONS`, and for "curve" also :data:`CURVE_CPU_COMPILER_OPTIONS`
+    (for "points" :data:`POINTS_CPU_COMPILER_OPTIONS`, XLA's default made explicit); None:
+    :data:`XLA_DEFAULT_OPTIONS` (the package's plain programs); each kept only if this jaxlib
+    knows it. None (XLA's defaults) on other backends, when
     it knows none of them, or with ``SOFTPLAN_XLA_OPTIONS=0`` in the environment. Decided
     on the first rollout, not at import (the backend is not initialised by importing)."""
     import jax
 
-    if method not in ("curve", "points"):
+    if method not in ("curve", "points", None):
         raise ValueError(f"method must be 'curve' or 'points'; got {method!r}")
     if os.environ.get("SOFTPLAN_XLA_OPTIONS", "1") == "0" or jax.default_backend() != "cpu":
         return None
-    wanted = {**CPU_COMPILER_OPTIONS, **(CURVE_CPU_COMPILER_OPTIONS if method == "curve" else {})}
+    if method is None:
+        wanted = XLA_DEFAULT_OPTIONS
+    else:
+        wanted = {**CPU_COMPILER_OPTIONS,
+                  **(CURVE_CPU_COMPILER_OPTIONS if method == "curve" else POINTS_CPU_COMPILER_OPTIONS)}
     known = {name: value for name, value in wanted.items() if _known_option(name, value)}
     return known or None
 
@@ -208,12 +227,13 @@ def rollout_compiler_options(method: str = "curve") -> dict | None:
 class package_jit:
     """``jax.jit(fn, **jit_kwargs)`` with :func:`rollout_compiler_options` ``(method)``: how this
     package jits its programs (the rollouts, the fallback's, the exact closest point, the planner
-    step, the brute-force clearance). Built on the first call (the options depend on the
-    backend, which importing must not start). Inside the user's own jit, where jax takes
-    compiler options on top-level jits only, a plain jit of ``fn`` (compiled with the enclosing
-    program's options). ``lower`` and ``_cache_size`` are the top-level jit's (``jitted()``: the jit itself)."""
+    step, the brute-force clearance; with ``method=None`` its plain helpers, at XLA's defaults).
+    Built on the first call (the options depend on the backend, which importing must not start).
+    Inside the user's own jit, where jax takes compiler options on top-level jits only, a plain
+    jit of ``fn`` (compiled with the enclosing program's options). ``lower`` and ``_cache_size``
+    are the top-level jit's (``jitted()``: the jit itself)."""
 
-    def __init__(self, fn, method: str = "curve", **jit_kwargs):
+    def __init__(self, fn, method: str | None = "curve", **jit_kwargs):
         functools.update_wrapper(self, fn)
         self._fn, self._method, self._jit_kwargs = fn, method, jit_kwargs
         self._top = self._nested = None

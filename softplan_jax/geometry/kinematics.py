@@ -22,6 +22,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from ..base.compilation_cache import package_jit
 from ..base.numerics import one_minus_cos_over_x, sin_over_x
 from ..base.validation import check_configuration, check_fraction, check_segment_index, is_concrete
 
@@ -156,9 +157,9 @@ def _tip_jacobian(q):
 # program each (found in the persistent compilation cache on later runs) instead of dozens of
 # op-by-op dispatches (about 2 s for a point Jacobian on a warm start); inside a trace (jit,
 # grad, vmap) they are traced as they are, so the planner's programs do not change.
-_tip_jit = jax.jit(_tip)
-_point_jacobian_jit = jax.jit(_point_jacobian)
-_tip_jacobian_jit = jax.jit(_tip_jacobian)
+_tip_jit = package_jit(_tip, None)
+_point_jacobian_jit = package_jit(_point_jacobian, None)
+_tip_jacobian_jit = package_jit(_tip_jacobian, None)
 
 
 def tip_position(q):

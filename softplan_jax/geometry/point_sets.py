@@ -19,6 +19,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ..base.compilation_cache import package_jit
 from ..base.numerics import safe_norm
 from ..base.validation import check_configuration, check_points
 from .closest import ClosestPoint
@@ -68,7 +69,7 @@ def points_closest(q, points, mask=None, points_per_segment: int = 10) -> Closes
     )
 
 
-_closest_point_to_points_jit = jax.jit(points_closest, static_argnums=3)
+_closest_point_to_points_jit = package_jit(points_closest, None, static_argnums=3)
 
 
 def closest_point_to_points(q, points, points_per_segment: int = 10) -> ClosestPoint:
@@ -172,6 +173,8 @@ def point_distance(q, points):
     return _point_distances(q, points)
 
 
-@jax.jit
-def _point_distances(q, points):
+def _point_distances_fn(q, points):
     return jax.vmap(lambda p: _point_closest(q, p).distance)(points)
+
+
+_point_distances = package_jit(_point_distances_fn, None)

@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.compilation_cache import package_jit
 from ..base.memory import check_memory
 from ..base.validation import check_configuration
 from ..geometry.curves import PolynomialCurve
@@ -46,13 +47,13 @@ def seed_sequence(key_or_seed) -> np.random.SeedSequence:
 @functools.cache
 def _batched_tips():
     """jit(vmap(tip position)), built once (a new jit per call would recompile)."""
-    return jax.jit(jax.vmap(tip_position))
+    return package_jit(jax.vmap(tip_position), None)
 
 
 @functools.cache
 def _backbone():
     """jit(backbone points), built once."""
-    return jax.jit(backbone_points, static_argnums=1)
+    return package_jit(backbone_points, None, static_argnums=1)
 
 
 def _unit(v):

@@ -64,7 +64,7 @@ def _fallback_jit(options: ReachOptions, solver, contact: float):
     return package_jit(fallback)
 
 
-_tips_jit = jax.jit(jax.vmap(tip_position))
+_tips_jit = package_jit(jax.vmap(tip_position), None)
 
 
 def _start_roots(q_local: np.ndarray, count: int):

@@ -52,6 +52,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..base.compilation_cache import package_jit
 from ..base.status import STATUS_NAMES
 from ..planning.batching import batch_mesh, pad_batch, round_chunk
 from ..planning.planner import check_gains, make_options, plan_batch
@@ -79,7 +80,7 @@ def _block_seed(seed: int, block: int) -> int:
 
 @functools.cache
 def _fold_keys():
-    return jax.jit(jax.vmap(jax.random.fold_in, in_axes=(None, 0)))
+    return package_jit(jax.vmap(jax.random.fold_in, in_axes=(None, 0)), None)
 
 
 def sweep_keys(seed: int, start: int, stop: int) -> np.ndarray:

@@ -64,7 +64,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.compilation_cache import rollout_compiler_options
+from ..base.compilation_cache import package_jit, rollout_compiler_options
 from ..planning.planner import make_options
 from ..planning.programs import rollout
 from ..planning.step import PlanOptions
@@ -350,7 +350,7 @@ class ObjectiveEstimate(NamedTuple):
     rollouts: int
 
 
-_value_and_grad = jax.jit(jax.value_and_grad(smoothed_objective))
+_value_and_grad = package_jit(jax.value_and_grad(smoothed_objective), None)
 
 
 def estimate_objective(sample: SmoothingSample) -> ObjectiveEstimate:
