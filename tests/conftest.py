@@ -17,13 +17,13 @@ import sys
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
-# Two XLA flags for the test processes (compilation is 80 % of the suite's time):
+# XLA flags for the test processes (compilation is 80 % of the suite's time):
 # - XLA's Eigen kernels single-threaded in each process: the suite runs 2 xdist workers on
 #   2 cores, busy throughout (user + sys = 1.95 x wall), where each worker's Eigen thread pool
 #   only made them contend (cold suite, 4 runs each: 339-352 s without, 328-334 s with).
 # - for the ~2,000 small programs the suite compiles (eager ops, test helpers), XLA's elemental
 #   emitter instead of its MLIR fusion emitters and LLVM's optimisation level 0 instead of 3:
-#   a tiny program compiles in a third of the time (19 -> 6 ms). Every program the package
+#   a tiny program compiles in about a third of the time (19 -> 7 ms). Every program the package
 #   jits names both options per program (compilation_cache: rollout_compiler_options and
 #   package_jit), so the programs tested here compile as in a user's process; the baselines
 #   (benchmarks/baselines.py: paper scenes, random batches, moving scenes, the fallback) are

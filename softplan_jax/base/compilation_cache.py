@@ -43,10 +43,11 @@ slower with it, so it keeps them, named explicitly). XLA's optimisation level
 is named too, at its default: an ``XLA_FLAGS`` setting of the level or of the
 emitter does not change the package's programs. The package's small helper
 programs (the kinematics on concrete arrays, the random scenes' goals) are
-compiled with XLA's defaults, named the same way (``package_jit(fn, None)``). The package's other programs take the curve
-method's (:class:`package_jit`): the global fallback's three (the IK, the search, the path
-check), :func:`~softplan_jax.closest_point`, :func:`~softplan_jax.planning.planner_step`
-(its method's) and the brute-force :func:`~softplan_jax.dense_trajectory_clearance`. They
+compiled with XLA's defaults, named the same way (``package_jit(fn, None)``).
+The package's other programs take the curve method's (:class:`package_jit`): the
+global fallback's three (the IK, the search, the path check),
+:func:`~softplan_jax.closest_point`, :func:`~softplan_jax.planning.planner_step` (its
+method's) and the brute-force :func:`~softplan_jax.dense_trajectory_clearance`. They
 are passed per program (``jax.jit(..., compiler_options=...)``), so they apply to this
 package's programs only and never to the user's other jax code: no ``XLA_FLAGS``, no
 global jax configuration. ``SOFTPLAN_XLA_OPTIONS=0`` compiles with XLA's
@@ -198,7 +199,7 @@ def _known_option(name: str, value) -> bool:
 
 
 @functools.cache
-def rollout_compiler_options(method: str = "curve") -> dict | None:
+def rollout_compiler_options(method: str | None = "curve") -> dict | None:
     """The XLA options that :data:`~softplan_jax.planning.planner.rollout_jit`,
     :data:`~softplan_jax.planning.planner.rollout_batch` and ``rollout_jit.cached`` compile a
     rollout of the planner's ``method`` ("curve" or "points") with (and, through
@@ -212,7 +213,7 @@ def rollout_compiler_options(method: str = "curve") -> dict | None:
     import jax
 
     if method not in ("curve", "points", None):
-        raise ValueError(f"method must be 'curve' or 'points'; got {method!r}")
+        raise ValueError(f"method must be 'curve', 'points' or None; got {method!r}")
     if os.environ.get("SOFTPLAN_XLA_OPTIONS", "1") == "0" or jax.default_backend() != "cpu":
         return None
     if method is None:
