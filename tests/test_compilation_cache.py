@@ -191,7 +191,6 @@ def test_planner_step_rejects_options_that_are_not_plan_options():
         sp.planning.planner_step(sc.q0, sc, sp.default_gains(), {"method": "curve"})
 
 
-
 # The probe of the test below, run in this process and in one without the suite's XLA flags (OUT: an .npz path).
 _FLAG_PROBE = """
 import jax
@@ -218,7 +217,8 @@ def test_package_programs_do_not_depend_on_the_suites_xla_flags(tmp_path):
     import numpy as np
 
     flags = os.environ.get("XLA_FLAGS", "")
-    assert "--xla_backend_optimization_level=0" in flags and "--xla_cpu_use_fusion_emitters=false" in flags
+    if "--xla_backend_optimization_level=0" not in flags or "--xla_cpu_use_fusion_emitters=false" not in flags:
+        pytest.skip("XLA_FLAGS of the user's own set these options: the suite runs without its flags")
     here, there = str(tmp_path / "here.npz"), str(tmp_path / "there.npz")
     exec(_FLAG_PROBE, {"OUT": here})
     env = subprocess_env()
