@@ -100,7 +100,7 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     from softplan_jax.base.compilation_cache import (
         CPU_COMPILER_OPTIONS,
         CURVE_CPU_COMPILER_OPTIONS,
-        POINTS_CPU_COMPILER_OPTIONS,
+        XLA_DEFAULT_OPTIONS,
         rollout_compiler_options,
     )
     from softplan_jax.planning.planner import make_options
@@ -109,8 +109,10 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     sc, g, key = sp.paper_scenario("sim1"), sp.default_gains(), jax.random.PRNGKey(0)
     opts = make_options("points", 10, check_collisions=False)
     # the suite runs on the CPU, with a jaxlib that knows every option
-    assert rollout_compiler_options("points") == {**CPU_COMPILER_OPTIONS, **POINTS_CPU_COMPILER_OPTIONS}
-    assert rollout_compiler_options("curve") == {**CPU_COMPILER_OPTIONS, **CURVE_CPU_COMPILER_OPTIONS}
+    assert rollout_compiler_options("points") == {**XLA_DEFAULT_OPTIONS, **CPU_COMPILER_OPTIONS}
+    assert rollout_compiler_options("curve") == {**XLA_DEFAULT_OPTIONS, **CPU_COMPILER_OPTIONS,
+                                                 **CURVE_CPU_COMPILER_OPTIONS}
+    assert rollout_compiler_options(None) == XLA_DEFAULT_OPTIONS
     assert rollout_compiler_options() == rollout_compiler_options("curve")
     with pytest.raises(ValueError, match="method"):
         rollout_compiler_options("Curve")
@@ -128,7 +130,7 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     finally:
         monkeypatch.undo()
         rollout_compiler_options.cache_clear()
-    assert rollout_compiler_options("points") == {**CPU_COMPILER_OPTIONS, **POINTS_CPU_COMPILER_OPTIONS}
+    assert rollout_compiler_options("points") == {**XLA_DEFAULT_OPTIONS, **CPU_COMPILER_OPTIONS}
 
 
 def test_xla_options_this_jaxlib_does_not_know_are_left_out(monkeypatch):
@@ -139,10 +141,10 @@ def test_xla_options_this_jaxlib_does_not_know_are_left_out(monkeypatch):
     monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True, **known})
     try:
         cc.rollout_compiler_options.cache_clear()
-        assert cc.rollout_compiler_options("points") == {**known, **cc.POINTS_CPU_COMPILER_OPTIONS}
+        assert cc.rollout_compiler_options("points") == {**cc.XLA_DEFAULT_OPTIONS, **known}
         monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True})
         monkeypatch.setattr(cc, "CURVE_CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option_either": False})
-        monkeypatch.setattr(cc, "POINTS_CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option_either": True})
+        monkeypatch.setattr(cc, "XLA_DEFAULT_OPTIONS", {"xla_cpu_no_such_option_either": True})
         cc.rollout_compiler_options.cache_clear()
         assert cc.rollout_compiler_options("curve") is None and cc.rollout_compiler_options("points") is None
     finally:

@@ -75,18 +75,15 @@ __all__ = ["compilation_cache_dir", "enable_compilation_cache", "enable_default_
 #   4.7 s single, 7.0 -> 5.1 s batched; run time within 3 %. Not for the N-point method: its
 #   program compiles in ~1 s anyway, and its batched step ran 35-45 % slower with it
 #   (float64 7.5 -> 10.3 us, float32 6.2 -> 9.1 us per scenario-step, tree, batch of 64).
-# - XLA's own defaults of two options, named per program so that XLA_FLAGS settings of them
-#   do not change the package's programs: xla_backend_optimization_level=3 (every program) and
-#   xla_cpu_use_fusion_emitters=True (N-point programs and the plain ones, XLA_DEFAULT_OPTIONS).
-#   The test suite compiles its ~2,000 small programs (eager ops, test helpers) with both
-#   lowered (tests/conftest.py), and the programs it tests must stay the ones users run.
 # Tried and not taken: xla_llvm_disable_expensive_passes (no further gain),
 # xla_backend_optimization_level=1 (compile no faster, run +4-17 % against no YNN).
-CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": "", "xla_backend_optimization_level": 3}
+CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 CURVE_CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
-POINTS_CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": True}
-# The package's plain programs (package_jit(fn, None): kinematics, random scenes, point sets):
-# XLA's defaults, named.
+# Under every program's options, the package's plain ones included (package_jit(fn, None)): XLA's
+# own defaults of two options, named per program so that XLA_FLAGS settings of them do not change
+# the package's programs. The test suite compiles its ~2,000 small programs (eager ops, test
+# helpers) with both lowered (tests/conftest.py), and the programs it tests must stay the ones
+# users run.
 XLA_DEFAULT_OPTIONS = {"xla_backend_optimization_level": 3, "xla_cpu_use_fusion_emitters": True}
 
 
@@ -204,23 +201,20 @@ def rollout_compiler_options(method: str | None = "curve") -> dict | None:
     :data:`~softplan_jax.planning.planner.rollout_batch` and ``rollout_jit.cached`` compile a
     rollout of the planner's ``method`` ("curve" or "points") with (and, through
     :class:`package_jit`, the package's other programs), on the CPU backend:
-    :data:`CPU_COMPILER_OPTIONS`, and for "curve" also :data:`CURVE_CPU_COMPILER_OPTIONS`
-    (for "points" :data:`POINTS_CPU_COMPILER_OPTIONS`, XLA's default made explicit); None:
-    :data:`XLA_DEFAULT_OPTIONS` (the package's plain programs); each kept only if this jaxlib
-    knows it. None (XLA's defaults) on other backends, when
-    it knows none of them, or with ``SOFTPLAN_XLA_OPTIONS=0`` in the environment. Decided
-    on the first rollout, not at import (the backend is not initialised by importing)."""
+    :data:`XLA_DEFAULT_OPTIONS` (XLA's defaults, named), then :data:`CPU_COMPILER_OPTIONS`, and
+    for "curve" also :data:`CURVE_CPU_COMPILER_OPTIONS`; None: :data:`XLA_DEFAULT_OPTIONS`
+    alone (the package's plain programs); each kept only if this jaxlib knows it. None (XLA's
+    defaults) on other backends, when it knows none of them, or with ``SOFTPLAN_XLA_OPTIONS=0``
+    in the environment. Decided on the first rollout, not at import (the backend is not
+    initialised by importing)."""
     import jax
 
     if method not in ("curve", "points", None):
         raise ValueError(f"method must be 'curve', 'points' or None; got {method!r}")
     if os.environ.get("SOFTPLAN_XLA_OPTIONS", "1") == "0" or jax.default_backend() != "cpu":
         return None
-    if method is None:
-        wanted = XLA_DEFAULT_OPTIONS
-    else:
-        wanted = {**CPU_COMPILER_OPTIONS,
-                  **(CURVE_CPU_COMPILER_OPTIONS if method == "curve" else POINTS_CPU_COMPILER_OPTIONS)}
+    wanted = {**XLA_DEFAULT_OPTIONS, **(CPU_COMPILER_OPTIONS if method else {}),
+              **(CURVE_CPU_COMPILER_OPTIONS if method == "curve" else {})}
     known = {name: value for name, value in wanted.items() if _known_option(name, value)}
     return known or None
 
