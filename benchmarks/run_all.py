@@ -50,6 +50,7 @@ SCRIPTS = {
     "evasion": [[]],
     "engine": [[]],
     "step_profile": [[]],
+    "fallback_chunk": [[]],
     "throughput": [[]],
     "devices": [[]],
     "baselines": [["save", "--fallback"]],

@@ -203,3 +203,26 @@ def test_batched_fallback_under_nested_vmap():
         *jax.tree_util.tree_map(lambda x: x.reshape(2, 2, *x.shape[1:]), args))
     for x, y in zip(nested, batched, strict=True):
         np.testing.assert_allclose(np.asarray(x).reshape(np.shape(y)), np.asarray(y), rtol=1e-12, atol=1e-13)
+
+
+def test_fallback_trip_bound_by_platform():
+    """The fallback loop's trip bound: CPU_FALLBACK_TRIPS in a program traced for a CPU,
+    FALLBACK_TRIPS on an accelerator (warm_start's docstring, "Fallback cost")."""
+    assert ws.fallback_trips("cpu") == ws.CPU_FALLBACK_TRIPS
+    assert ws.fallback_trips("gpu") == ws.fallback_trips("tpu") == ws.FALLBACK_TRIPS
+    assert ws.fallback_trips() == ws.fallback_trips(jax.default_backend())
+
+
+@pytest.mark.slow
+def test_fallback_chunk_changes_no_answer(monkeypatch):
+    """The trip bound sets how many failed pairs are solved side by side (the chunk), not
+    which or how: all 24 pairs of the batch in one chunk give the default chunk's (8)
+    answers bit for bit."""
+    args = _fallback_batch()
+    default = jax.jit(jax.vmap(_warm_member))(*args)
+    monkeypatch.setattr(ws, "CPU_FALLBACK_TRIPS", 1)
+    monkeypatch.setattr(ws, "FALLBACK_TRIPS", 1)
+    wide = jax.jit(jax.vmap(lambda *a: _warm_member(*a)))(*args)
+    assert int(np.sum(np.asarray(wide[2]))) > ws.FALLBACK_CHUNK  # more failed pairs than one default chunk
+    for x, y in zip(wide, default, strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))

@@ -75,13 +75,17 @@ per iteration, so a batch pays for its failures only, where plain ``vmap``
 would run the loop as long as the member with the most failures and solve a
 pair for every member in each iteration. At the first step of a rollout (no
 warm state) every pair fails and takes the full solve. The chunk is
-``max(FALLBACK_CHUNK, ceil(pairs / FALLBACK_TRIPS))`` (pairs: the batch's
-curve-segment pairs), so the loop's trips per step stay bounded (at most
-``FALLBACK_TRIPS``) however wide the batch: with a fixed chunk of 8 they grew
-with the width (measured on random_scenarios(0, 1024), 200 steps: 0.28 failed
-pairs per scene-step, so a mean of 21 trips per step at 1,024 scenes side by
-side and 84 at 4,096; every trip is a serial round of small kernels on a GPU).
-At 64 lanes and 8 slots (1,536 pairs) the chunk is 24.
+``max(FALLBACK_CHUNK, ceil(pairs / trips))`` (pairs: the batch's curve-segment
+pairs), so the loop's trips per step stay bounded (at most ``trips``) however
+wide the batch: with a fixed chunk of 8 they grew with the width (measured on
+random_scenarios(0, 1024), 200 steps: 0.28 failed pairs per scene-step, so a
+mean of 21 trips per step at 1,024 scenes side by side and 84 at 4,096; every
+trip is a serial round of small kernels on a GPU). ``trips`` is
+``FALLBACK_TRIPS`` (64) on an accelerator and ``CPU_FALLBACK_TRIPS`` (192) in a
+program traced for a CPU (:func:`fallback_trips`), where a trip costs little
+beyond its pairs' solves, so a smaller chunk solves fewer pairs that did not
+fail (``benchmarks/fallback_chunk.py``). At 64 lanes and 8 slots (1,536 pairs)
+the chunk is 8 on a CPU (24 on an accelerator); at 256 lanes, 32 (96).
 
 Derivatives. Everything here runs without derivatives (stop_gradient); the
 winning pair goes through :func:`~softplan_jax.geometry.closest.closest_from_pairs`,
@@ -133,10 +137,12 @@ TOLERANCE = 64.0
 PARAMETRIC_SAFETY = 2.0
 PARAMETRIC_SAMPLES = 257
 # Failed pairs solved side by side per iteration of the fallback loop under vmap: at least
-# FALLBACK_CHUNK, and at least 1 / FALLBACK_TRIPS of the batch's pairs, so that a step's trips
-# through the loop stay bounded as the batch widens (module docstring, "Fallback cost").
+# FALLBACK_CHUNK, and at least 1 / trips of the batch's pairs, so that a step's trips through
+# the loop stay bounded as the batch widens (module docstring, "Fallback cost"): FALLBACK_TRIPS
+# on an accelerator, CPU_FALLBACK_TRIPS on a CPU (benchmarks/fallback_chunk.py).
 FALLBACK_CHUNK = 8
 FALLBACK_TRIPS = 64
+CPU_FALLBACK_TRIPS = 192
 
 
 class CurveData(NamedTuple):
@@ -312,17 +318,27 @@ def _fallback_fn(solver: SolverOptions):
     return fallback
 
 
+def fallback_trips(platform: str | None = None) -> int:
+    """The bound on the fallback loop's trips per step (module docstring, "Fallback
+    cost"): :data:`CPU_FALLBACK_TRIPS` for ``platform`` "cpu", else :data:`FALLBACK_TRIPS`
+    (None: ``jax.default_backend()``, the platform a program traced now runs on unless
+    placed elsewhere). Either bound solves the same pairs; only the cost differs."""
+    platform = jax.default_backend() if platform is None else platform
+    return CPU_FALLBACK_TRIPS if platform == "cpu" else FALLBACK_TRIPS
+
+
 def _solve_failed(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, solver: SolverOptions) -> _Pairs:
     """The loop of :func:`_fallback` over any leading axes ``lead`` (``fail``:
     lead + (m, n); segs: lead + (n,); curves, data: lead + (m,)): the failed
     pairs go through :func:`~softplan_jax.base.numerics.evaluate_where`, ``chunk``
     at a time (1 without leading axes, else ``max(FALLBACK_CHUNK, ceil(pairs /
-    FALLBACK_TRIPS))``), and each keeps the better of its full and polished answers."""
+    trips))``, trips: :func:`fallback_trips`), and each keeps the better of its full and
+    polished answers."""
     m, n = fail.shape[-2:]
     lead = fail.shape[:-2]
     batch = math.prod(lead)
     total = batch * m * n
-    chunk = min(1 if not lead else max(FALLBACK_CHUNK, -(-total // FALLBACK_TRIPS)), total)
+    chunk = min(1 if not lead else max(FALLBACK_CHUNK, -(-total // fallback_trips())), total)
 
     def flat(tree):  # lead axes -> one axis of size batch
         return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) :])), tree)
