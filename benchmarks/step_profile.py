@@ -2,22 +2,27 @@
 
 The engine's batch (:func:`softplan_jax.planning.engine.run_lanes`) steps ``lanes``
 scenes side by side; what a batch costs is the steps it takes times the cost of one
-lane's step at that width. This script measures both halves of that product on
-``random_scenarios(1, L)`` (float64, the curve method, the planner's default options):
+lane's step at that width. This script measures both halves of that product for
+``plan_batch(random_scenarios(1, --batch), max_steps=600)`` (float64, the curve method,
+the planner's default options):
 
 * **cost per lane-step**: the vmapped engine step of L scenes, every one still running,
-  10 steps after the first (the first step's full closest-point solve apart), for each
-  width of ``--lanes``; min over ``--rounds`` interleaved rounds;
+  for each width of ``--lanes``: the batch's 64 longest-running scenes (tiled to L),
+  stepped ``--after`` steps first (so that the warm start's fallback rate is a running
+  batch's, not that of the first steps, which solve every pair in full), then
+  10 steps timed; min over ``--rounds`` interleaved rounds;
 * **a profile** at ``--profile-lanes``: a ``jax.profiler`` trace of those steps, each
   XLA operation's time attributed to the package function that emitted it (from the
   compiled program's stack frames), summed at ``--depth`` calls below the step;
-* **the floor** it sets: ``plan_batch(random_scenarios(1, --batch), max_steps=600)``
-  takes S steps, so at L lanes it takes about S times the cost per lane-step at L
-  even with every lane busy at every step (the cost measured over the scenes' first
-  steps; a scene's later steps may cost somewhat more or less).
+* **what lanes can buy**: the batch takes S steps (iterations + 1 summed), so at L
+  lanes it takes at least S times the cost per lane-step at L (every lane busy at
+  every step); and a replay of ``run_lanes``' schedule in Python (refills in lane
+  order, round robin after ``DEFAULT_QUANTUM`` steps, the loop ending at a chunk's
+  end) on the scenes' step counts gives the loop steps the engine runs at L lanes,
+  idle lanes included, and so the time the step's cost predicts.
 
-    python benchmarks/step_profile.py            # ~5 min on 2 CPUs
-    python benchmarks/step_profile.py --quick    # small widths, no bound, into results/quick/
+    python benchmarks/step_profile.py            # ~6 min on 2 CPUs
+    python benchmarks/step_profile.py --quick    # small widths on random_scenarios(1, L), no batch, into results/quick/
 
 Writes ``benchmarks/results/step_profile.{md,json}`` and ``results/figures/step_profile.png``.
 The attribution reads the trace jax writes (``perfetto_trace.json.gz``) and the compiled
@@ -47,8 +52,10 @@ from _common import finish_machine, log, machine_info, machine_lines, output_pat
 STEPS = 10  # steps timed and profiled, after the first
 
 
-def _stepper(L: int):
-    """(compiled program of STEPS steps, its arguments) for the vmapped step of L running scenes."""
+def _stepper(L: int, after: int, longest=None, batch: int = 0):
+    """(compiled program of STEPS steps, its arguments) for the vmapped step of L running
+    scenes, after ``after`` steps: the scenes ``longest`` of ``random_scenarios(1, batch)``
+    tiled to L (None: ``random_scenarios(1, L)``)."""
     import jax.numpy as jnp
 
     import softplan_jax as sp
@@ -57,11 +64,16 @@ def _stepper(L: int):
     from softplan_jax.planning.planner import make_options
     from softplan_jax.planning.programs import batch_keys, strong_gains
 
-    scenes = sp.random_scenarios(1, L)
+    if longest is None:
+        scenes, keys = sp.random_scenarios(1, L), batch_keys(0, L)
+    else:
+        sel = np.resize(np.asarray(longest), L)
+        scenes = jax.tree_util.tree_map(lambda x: x[sel], sp.random_scenarios(1, batch))
+        keys = batch_keys(0, batch)[sel]
     options = make_options("curve", 10)
     gains = strong_gains(sp.default_gains(), scenes.q0.dtype)
     prepared = jax.vmap(lambda w: prepare(w, options))(scenes)
-    carry0 = jax.vmap(lambda w, key: init_carry(w, options, key))(scenes, batch_keys(0, L))
+    carry0 = jax.vmap(lambda w, key: init_carry(w, options, key))(scenes, keys)
 
     def steps(worlds, prep, carry, k, n):
         def one(w, p, c, k):
@@ -75,9 +87,44 @@ def _stepper(L: int):
 
     f = jax.jit(steps, static_argnums=4, compiler_options=rollout_compiler_options("curve"))
     k = jnp.zeros((L,), jnp.int32)
-    carry1 = f(scenes, prepared, carry0, k, 1)  # the first step: the full solves, the warm start's state
-    args = (scenes, prepared, carry1, k + 1)
+    carry = f(scenes, prepared, carry0, k, after)  # the first steps: the full solves, then a running batch's
+    args = (scenes, prepared, carry, k + after)
     return f.lower(*args, STEPS).compile(), args
+
+
+def replay(steps, lanes: int, quantum: int, chunk: int) -> int:
+    """Loop steps :func:`~softplan_jax.planning.engine.run_lanes` runs for scenes taking
+    ``steps`` (per scene, iterations + 1) at ``lanes`` lanes: its schedule in Python. A
+    lane whose scene ends takes the next of the queue (the scenes not started, then the
+    suspended), in lane order; a scene held ``quantum`` steps while others wait is
+    suspended to the queue's tail; the loop stops at the end of the ``chunk`` of steps
+    in which the last scene ended."""
+    left = [int(x) for x in steps]
+    L = min(lanes, len(left))
+    queue = collections.deque(range(L, len(left)))
+    lane, held = list(range(L)), [0] * L
+    n = 0
+    while any(s is not None for s in lane):
+        n += 1
+        for i, s in enumerate(lane):
+            if s is not None:
+                left[s] -= 1
+                held[i] += 1
+        spare = len(queue) - sum(1 for s in lane if s is not None and left[s] == 0)
+        vacated = []
+        for i, s in enumerate(lane):
+            if s is None:
+                continue
+            if left[s] == 0:
+                vacated.append(i)
+            elif held[i] >= quantum and spare > 0:
+                queue.append(s)
+                spare -= 1
+                vacated.append(i)
+        for i in vacated:
+            lane[i] = queue.popleft() if queue else None
+            held[i] = 0
+    return -(-n // chunk) * chunk
 
 
 def _frames(hlo: str) -> tuple[dict, callable]:
@@ -114,11 +161,11 @@ def _frames(hlo: str) -> tuple[dict, callable]:
     return op_frame, chain
 
 
-def profile(L: int, depth: int, stepper=None) -> dict:
-    """Trace STEPS steps of L lanes (``stepper``: :func:`_stepper` of L, None: built here);
+def profile(L: int, depth: int, stepper) -> dict:
+    """Trace STEPS steps of L lanes (``stepper``: :func:`_stepper` of L);
     each op's time summed by the functions ``depth`` calls below the engine's step
     (``other``: ops outside it or without a frame)."""
-    f, args = _stepper(L) if stepper is None else stepper
+    f, args = stepper
     jax.block_until_ready(f(*args))
     with tempfile.TemporaryDirectory() as tmp:
         jax.profiler.start_trace(tmp, create_perfetto_trace=True)
@@ -149,12 +196,16 @@ def profile(L: int, depth: int, stepper=None) -> dict:
             "share": {k: v / total for k, v in by.most_common()} if total else {}}
 
 
-def bound(batch: int) -> int:
-    """Steps taken by plan_batch(random_scenarios(1, batch), max_steps=600): iterations + 1 summed."""
+def batch_steps(batch: int) -> tuple[np.ndarray, float]:
+    """Per-scene steps (iterations + 1) of plan_batch(random_scenarios(1, batch), max_steps=600)
+    at the default lanes, and the seconds its second (warm) call took."""
     import softplan_jax as sp
 
-    r = sp.plan_batch(sp.random_scenarios(1, batch), max_steps=600)
-    return int(np.sum(np.asarray(r.iterations) + 1))
+    scenes = sp.random_scenarios(1, batch)
+    jax.block_until_ready(sp.plan_batch(scenes, max_steps=600))  # compiles; its run ends before the timed one
+    t0 = time.perf_counter()
+    r = jax.block_until_ready(sp.plan_batch(scenes, max_steps=600))
+    return np.asarray(r.iterations) + 1, time.perf_counter() - t0
 
 
 def plot(rows, prof, path):
@@ -187,8 +238,9 @@ def main(argv=None) -> int:
     ap.add_argument("--profile-lanes", type=int, default=None, help="width profiled (default 256; quick 8; 0: none)")
     ap.add_argument("--depth", type=int, default=3, help="calls below the step the profile sums at")
     ap.add_argument("--rounds", type=int, default=None, help="interleaved timing rounds (default 5; quick 2)")
-    ap.add_argument("--batch", type=int, default=None, help="plan_batch scenes of the bound (default 1024; quick 0)")
-    ap.add_argument("--quick", action="store_true", help="small widths, no bound, into results/quick/")
+    ap.add_argument("--batch", type=int, default=None, help="plan_batch scenes (default 1024; quick 0: none)")
+    ap.add_argument("--after", type=int, default=None, help="steps before the timed ones (default 100; quick 1)")
+    ap.add_argument("--quick", action="store_true", help="small widths, no batch, into results/quick/")
     ap.add_argument("--out", default=None, help="output prefix (default results/step_profile; quick: results/quick/)")
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
@@ -198,14 +250,21 @@ def main(argv=None) -> int:
     rounds = args.rounds or (2 if args.quick else 5)
     prof_lanes = (8 if args.quick else 256) if args.profile_lanes is None else args.profile_lanes
     batch = (0 if args.quick else 1024) if args.batch is None else args.batch
+    after = (1 if args.quick else 100) if args.after is None else args.after
+    if after < 1 or batch < 0:
+        raise ValueError(f"--after must be >= 1 and --batch >= 0, got {after} and {batch}")
     prefix, fig_dir = output_paths("step_profile", args.quick, args.out)
     machine = machine_info("float64")
     t_start = time.perf_counter()
 
+    from softplan_jax.planning.engine import DEFAULT_LANES, DEFAULT_QUANTUM, DEFAULT_STEP_CHUNK
+
+    need, batch_s = batch_steps(batch) if batch else (None, None)
+    longest = None if need is None else np.argsort(-need, kind="stable")[:64]
     runs = {}
     for L in lanes:
         log(f"compiling the step of {L} lanes")
-        runs[L] = _stepper(L)
+        runs[L] = _stepper(L, after, longest, batch)
         jax.block_until_ready(runs[L][0](*runs[L][1]))
     times = {L: [] for L in lanes}
     for r in range(rounds):
@@ -217,24 +276,38 @@ def main(argv=None) -> int:
         log(f"round {r + 1}/{rounds}")
     rows = [{"lanes": L, "per_step_ms": 1e3 * min(times[L]) / STEPS, "per_lane_step_us": 1e6 * min(times[L]) / STEPS / L,
              "median_per_lane_step_us": 1e6 * float(np.median(times[L])) / STEPS / L} for L in lanes]
-    prof = profile(prof_lanes, args.depth, runs.get(prof_lanes)) if prof_lanes else {}
+    prof = profile(prof_lanes, args.depth, runs.get(prof_lanes) or _stepper(prof_lanes, after, longest, batch)) \
+        if prof_lanes else {}
     del runs
-    steps_taken = bound(batch) if batch else None
+    steps_taken = None if need is None else int(need.sum())
+    for r in rows if need is not None else ():
+        r["floor_s"] = steps_taken * r["per_lane_step_us"] * 1e-6
+        r["loop_steps"] = replay(need, r["lanes"], DEFAULT_QUANTUM, DEFAULT_STEP_CHUNK)
+        r["busy"] = steps_taken / (r["loop_steps"] * min(r["lanes"], batch))
+        r["predicted_s"] = r["loop_steps"] * min(r["lanes"], batch) * r["per_lane_step_us"] * 1e-6
 
+    command = "".join(" " + a for a in (sys.argv[1:] if argv is None else argv))
+    source = (f"the {min(64, batch)} longest-running scenes of `random_scenarios(1, {batch})` tiled to L"
+              if batch else "`random_scenarios(1, L)`")
     md = ["# Where a planner step's time goes", "", *machine_lines(finish_machine(machine)),
-          f"- command: `python benchmarks/step_profile.py{' --quick' if args.quick else ''}`; "
+          f"- command: `python benchmarks/step_profile.py{command}`; "
           f"{time.perf_counter() - t_start:.0f} s",
-          f"- the vmapped engine step of L scenes of `random_scenarios(1, L)`, all running, {STEPS} steps after "
-          f"the first; min over {rounds} interleaved rounds", "",
+          f"- the vmapped engine step of L scenes ({source}), all running, {STEPS} steps after the first "
+          f"{after}; min over {rounds} interleaved rounds", "",
           "| lanes | ms per step | µs per lane-step (min) | median |", "|---|---|---|---|"]
     md += [f"| {r['lanes']} | {r['per_step_ms']:.3f} | {r['per_lane_step_us']:.1f} | "
            f"{r['median_per_lane_step_us']:.1f} |" for r in rows]
-    if steps_taken:
+    if need is not None:
         md += ["", f"`plan_batch(random_scenarios(1, {batch}), max_steps=600)` takes {steps_taken:,} steps "
-               "(iterations + 1 summed). At L lanes, with every lane busy at every step, it would take "
-               "about that times the cost per lane-step at L (measured over the scenes' first steps):", "",
-               "| lanes | floor |", "|---|---|"]
-        md += [f"| {r['lanes']} | {steps_taken * r['per_lane_step_us'] * 1e-6:.2f} s |" for r in rows]
+               "(iterations + 1 summed; the longest scene "
+               f"{int(need.max())}). At L lanes it takes at least that times the cost per lane-step at L "
+               "(the floor: every lane busy at every step). The replay of `run_lanes`' schedule "
+               f"(quantum {DEFAULT_QUANTUM}, chunks of {DEFAULT_STEP_CHUNK}) gives the loop steps it runs, "
+               "idle lanes included, and the time the step's cost predicts (no bookkeeping counted):", "",
+               "| lanes | floor | loop steps | lanes busy | predicted |", "|---|---|---|---|---|"]
+        md += [f"| {r['lanes']} | {r['floor_s']:.2f} s | {r['loop_steps']:,} | {100 * r['busy']:.1f} % | "
+               f"{r['predicted_s']:.2f} s |" for r in rows]
+        md += ["", f"Measured: the batch at the default {DEFAULT_LANES} lanes took {batch_s:.2f} s (one warm call)."]
     if prof.get("share"):
         md += ["", f"Profile at {prof['lanes']} lanes ({STEPS} steps; `jax.profiler` trace, each XLA op's time "
                f"attributed to the functions {prof['depth']} calls below the engine's step; "
@@ -242,8 +315,8 @@ def main(argv=None) -> int:
         md += [f"| {100 * v:.1f} % | {k} |" for k, v in list(prof["share"].items())[:20]]
     elif prof_lanes:
         md += ["", "No profile: this jax wrote no perfetto trace."]
-    report = {"machine": machine, "steps": STEPS, "rounds": rounds, "rows": rows, "profile": prof,
-              "batch": batch, "steps_taken": steps_taken}
+    report = {"machine": machine, "steps": STEPS, "after": after, "rounds": rounds, "rows": rows, "profile": prof,
+              "batch": batch, "steps_taken": steps_taken, "batch_default_lanes_s": batch_s}
     write_results(prefix, report, "\n".join(md) + "\n")
     os.makedirs(fig_dir, exist_ok=True)
     plot(rows, prof, os.path.join(fig_dir, "step_profile.png"))

@@ -169,6 +169,20 @@ def test_run_all_runs_every_script_and_each_has_a_quick_mode():
         ("batch_sweep", ["--n", "256", "--chunk", "64"])]
 
 
+def test_step_profile_replays_the_lanes_schedule():
+    """step_profile.replay, the Python replay of run_lanes' schedule, on cases worked by hand."""
+    import step_profile
+
+    # 2 lanes, scenes of 3, 1 and 2 steps: scene 1 ends at loop step 1, its lane takes scene 2;
+    # scenes 0 and 2 end at loop step 3.
+    assert step_profile.replay([3, 1, 2], lanes=2, quantum=100, chunk=1) == 3
+    assert step_profile.replay([3, 1, 2], lanes=2, quantum=100, chunk=8) == 8  # the loop ends at a chunk's end
+    # One lane, quantum 1: the scenes take turns, one step each; 2 + 2 steps in all.
+    assert step_profile.replay([2, 2], lanes=1, quantum=1, chunk=1) == 4
+    # More lanes than scenes: the slowest scene sets the loop.
+    assert step_profile.replay([5, 1], lanes=8, quantum=2, chunk=1) == 5
+
+
 def test_run_all_rejects_unknown_scripts(capsys):
     import run_all
 
