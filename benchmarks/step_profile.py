@@ -48,6 +48,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _common import finish_machine, log, machine_info, machine_lines, output_paths, write_results  # noqa: E402
+from lane_schedule import replay  # noqa: E402
 
 STEPS = 10  # steps timed and profiled, after the first
 
@@ -90,41 +91,6 @@ def _stepper(L: int, after: int, longest=None, batch: int = 0):
     carry = f(scenes, prepared, carry0, k, after)  # the first steps: the full solves, then a running batch's
     args = (scenes, prepared, carry, k + after)
     return f.lower(*args, STEPS).compile(), args
-
-
-def replay(steps, lanes: int, quantum: int, chunk: int) -> int:
-    """Loop steps :func:`~softplan_jax.planning.engine.run_lanes` runs for scenes taking
-    ``steps`` (per scene, iterations + 1) at ``lanes`` lanes: its schedule in Python. A
-    lane whose scene ends takes the next of the queue (the scenes not started, then the
-    suspended), in lane order; a scene held ``quantum`` steps while others wait is
-    suspended to the queue's tail; the loop stops at the end of the ``chunk`` of steps
-    in which the last scene ended."""
-    left = [int(x) for x in steps]
-    L = min(lanes, len(left))
-    queue = collections.deque(range(L, len(left)))
-    lane, held = list(range(L)), [0] * L
-    n = 0
-    while any(s is not None for s in lane):
-        n += 1
-        for i, s in enumerate(lane):
-            if s is not None:
-                left[s] -= 1
-                held[i] += 1
-        spare = len(queue) - sum(1 for s in lane if s is not None and left[s] == 0)
-        vacated = []
-        for i, s in enumerate(lane):
-            if s is None:
-                continue
-            if left[s] == 0:
-                vacated.append(i)
-            elif held[i] >= quantum and spare > 0:
-                queue.append(s)
-                spare -= 1
-                vacated.append(i)
-        for i in vacated:
-            lane[i] = queue.popleft() if queue else None
-            held[i] = 0
-    return -(-n // chunk) * chunk
 
 
 def _frames(hlo: str) -> tuple[dict, callable]:

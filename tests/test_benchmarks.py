@@ -143,7 +143,7 @@ def test_batch_sweep_quick(tmp_path):
 # ----------------------------------------------------------------------------
 # run_all.py and every script's quick run
 
-HELPERS = {"_common", "stats", "run_all"}  # modules of benchmarks/ that are not benchmark scripts
+HELPERS = {"_common", "lane_schedule", "stats", "run_all"}  # modules of benchmarks/ that are not benchmark scripts
 
 
 def _scripts():
@@ -169,18 +169,28 @@ def test_run_all_runs_every_script_and_each_has_a_quick_mode():
         ("batch_sweep", ["--n", "256", "--chunk", "64"])]
 
 
-def test_step_profile_replays_the_lanes_schedule():
-    """step_profile.replay, the Python replay of run_lanes' schedule, on cases worked by hand."""
-    import step_profile
+def test_lane_schedule_replays_run_lanes():
+    """lane_schedule.replay, the Python replay of run_lanes' schedule (step_profile.py's
+    prediction), on cases worked by hand. (Imported here: it imports nothing of the
+    package; a benchmark script imports _common, which turns the compilation cache off.)"""
+    import importlib
+
+    import lane_schedule
+
+    from softplan_jax.base.compilation_cache import compilation_cache_dir
+
+    before = compilation_cache_dir()
+    importlib.reload(lane_schedule)
+    assert compilation_cache_dir() == before  # importing it leaves this process's cache alone
 
     # 2 lanes, scenes of 3, 1 and 2 steps: scene 1 ends at loop step 1, its lane takes scene 2;
     # scenes 0 and 2 end at loop step 3.
-    assert step_profile.replay([3, 1, 2], lanes=2, quantum=100, chunk=1) == 3
-    assert step_profile.replay([3, 1, 2], lanes=2, quantum=100, chunk=8) == 8  # the loop ends at a chunk's end
+    assert lane_schedule.replay([3, 1, 2], lanes=2, quantum=100, chunk=1) == 3
+    assert lane_schedule.replay([3, 1, 2], lanes=2, quantum=100, chunk=8) == 8  # the loop ends at a chunk's end
     # One lane, quantum 1: the scenes take turns, one step each; 2 + 2 steps in all.
-    assert step_profile.replay([2, 2], lanes=1, quantum=1, chunk=1) == 4
+    assert lane_schedule.replay([2, 2], lanes=1, quantum=1, chunk=1) == 4
     # More lanes than scenes: the slowest scene sets the loop.
-    assert step_profile.replay([5, 1], lanes=8, quantum=2, chunk=1) == 5
+    assert lane_schedule.replay([5, 1], lanes=8, quantum=2, chunk=1) == 5
 
 
 def test_run_all_rejects_unknown_scripts(capsys):
