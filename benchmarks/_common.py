@@ -163,6 +163,34 @@ def rollout_wrappers(rollout):
     return single, batched
 
 
+def lanes_program(opts, max_steps: int, lanes: int, trips: int):
+    """``compile_(*args, **kw) -> (compiled, seconds)``: :func:`softplan_jax.planning.engine.run_lanes`
+    jitted (the curve rollout's XLA options) and compiled with the warm start's fallback trip
+    bound set to ``trips`` on every platform (``FALLBACK_TRIPS`` and ``CPU_FALLBACK_TRIPS``; a
+    huge value: a chunk of 8 at every width). The bound is read at trace time, so it is set
+    around ``lower`` and restored after."""
+    import functools
+
+    from softplan_jax.base.compilation_cache import rollout_compiler_options
+    from softplan_jax.geometry import warm_start as ws
+    from softplan_jax.planning.engine import run_lanes
+
+    fn = jax.jit(functools.partial(run_lanes, options=opts, max_steps=max_steps, lanes=lanes),
+                 compiler_options=rollout_compiler_options("curve"))
+
+    def compile_(*a, **kw):
+        saved = ws.FALLBACK_TRIPS, ws.CPU_FALLBACK_TRIPS
+        ws.FALLBACK_TRIPS = ws.CPU_FALLBACK_TRIPS = trips
+        try:
+            t0 = time.perf_counter()
+            c = fn.lower(*a, **kw).compile()
+            return c, time.perf_counter() - t0
+        finally:
+            ws.FALLBACK_TRIPS, ws.CPU_FALLBACK_TRIPS = saved
+
+    return compile_
+
+
 def compile_timed(jitted, *args):
     """(compiled executable, lower + compile seconds) of a jitted function."""
     t0 = time.perf_counter()

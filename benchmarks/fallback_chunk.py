@@ -28,7 +28,6 @@ Writes ``benchmarks/results/fallback_chunk.{md,json}``.
 from __future__ import annotations
 
 import argparse
-import functools
 import os
 import statistics
 import sys
@@ -38,33 +37,29 @@ import jax
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _common import finish_machine, log, machine_info, machine_lines, output_paths, write_results  # noqa: E402
+from _common import (  # noqa: E402
+    finish_machine,
+    lanes_program,
+    log,
+    machine_info,
+    machine_lines,
+    output_paths,
+    write_results,
+)
 
 UNBOUNDED = 10**9  # trips: no bound, a chunk of FALLBACK_CHUNK (8) at every width
 
 
 def _compiled(world, opts, lanes, trips):
-    """run_lanes of ``world`` compiled with the CPU trip bound ``trips`` (read at trace
-    time, so set around ``lower``): (call, compile seconds)."""
+    """run_lanes of ``world`` with the trip bound ``trips`` (:func:`_common.lanes_program`):
+    (call, compile seconds)."""
     import softplan_jax as sp
-    from softplan_jax.base.compilation_cache import rollout_compiler_options
-    from softplan_jax.geometry import warm_start as ws
-    from softplan_jax.planning.engine import run_lanes
     from softplan_jax.planning.programs import batch_keys, strong_gains
 
     dtype = jax.tree_util.tree_leaves(world)[0].dtype
     gains = strong_gains(sp.default_gains(), dtype)
     keys = batch_keys(0, jax.tree_util.tree_leaves(world)[0].shape[0])
-    fn = jax.jit(functools.partial(run_lanes, options=opts, max_steps=600, lanes=lanes),
-                 compiler_options=rollout_compiler_options("curve"))
-    saved = ws.CPU_FALLBACK_TRIPS
-    ws.CPU_FALLBACK_TRIPS = trips
-    try:
-        t0 = time.perf_counter()
-        c = fn.lower(world, gains, keys=keys).compile()
-        seconds = time.perf_counter() - t0
-    finally:
-        ws.CPU_FALLBACK_TRIPS = saved
+    c, seconds = lanes_program(opts, 600, lanes, trips)(world, gains, keys=keys)
     return (lambda: jax.block_until_ready(c(world, gains, keys=keys))), seconds
 
 
@@ -119,8 +114,7 @@ def main(argv=None):
         for t in trips:
             calls[(case, t)], compile_s = _compiled(world, opts, lanes, t)
             outs[(case, t)] = calls[(case, t)]()  # the first run, untimed
-            pairs = min(lanes, batch) * scene.curve_mask.shape[-1] * scene.q0.shape[-2]  # the lanes' pairs
-            chunk = min(max(ws.FALLBACK_CHUNK, -(-pairs // t)), pairs)
+            chunk = ws.fallback_chunk(min(lanes, batch) * scene.curve_mask.shape[-1] * scene.q0.shape[-2], t)
             rows.append(dict(case=case, trips=t, variant=label[t], chunk=chunk, compile_s=compile_s, runs=[],
                              identical=_same(outs[(case, t)], outs[(case, trips[0])])))
             log(f"{case} [{label[t]}]: chunk {chunk}, compile {compile_s:.1f} s, "

@@ -275,42 +275,18 @@ def part_tracking(args, rep):
     return out
 
 
-def _lanes_program(opts, steps, lanes, trips):
-    """A jitted run_lanes with the fallback loop's trip bound ``trips`` (a huge value: the
-    former fixed chunk of 8). Read at trace time, so set around ``lower``."""
-    import jax
-
-    from softplan_jax.base.compilation_cache import rollout_compiler_options
-    from softplan_jax.geometry import warm_start as ws
-    from softplan_jax.planning.engine import run_lanes
-
-    fn = jax.jit(functools.partial(run_lanes, options=opts, max_steps=steps, lanes=lanes),
-                 compiler_options=rollout_compiler_options("curve"))
-
-    def compile_(*a, **kw):
-        saved = ws.FALLBACK_TRIPS
-        ws.FALLBACK_TRIPS = trips
-        try:
-            t0 = time.perf_counter()
-            c = fn.lower(*a, **kw).compile()
-            return c, time.perf_counter() - t0
-        finally:
-            ws.FALLBACK_TRIPS = saved
-
-    return compile_
-
-
 def batch_variants(args):
     """[(name, dtype, B, lanes, trips)]: the batched programs of part 2."""
     from softplan_jax.geometry import warm_start as ws
 
     s = args.size_list
-    v = [(f"f64 B={b} lanes=B", "float64", b, b, ws.FALLBACK_TRIPS) for b in (s[0], *s[:0:-1])]
+    trips = ws.fallback_trips()  # the platform's default bound
+    v = [(f"f64 B={b} lanes=B", "float64", b, b, trips) for b in (s[0], *s[:0:-1])]
     if not (args.quick or args.no_extras):
-        v += [(f"f64 B={s[0]} lanes=64", "float64", s[0], min(64, s[0]), ws.FALLBACK_TRIPS),
+        v += [(f"f64 B={s[0]} lanes=64", "float64", s[0], min(64, s[0]), trips),
               (f"f64 B={s[0]} lanes=B chunk8 (before)", "float64", s[0], s[0], 10 ** 9)]
     if "float32" in args.part_list:
-        v += [(f"f32 B={s[-1]} lanes=B", "float32", s[-1], s[-1], ws.FALLBACK_TRIPS)]
+        v += [(f"f32 B={s[-1]} lanes=B", "float32", s[-1], s[-1], trips)]
     return v
 
 
@@ -340,6 +316,7 @@ def load_suite(suites, b, dtype):
 def part_batch(args, rep, programs):
     import jax
     import numpy as np
+    from _common import lanes_program  # imported here: it imports jax and the package
 
     import softplan_jax as sp
     from softplan_jax.planning.programs import batch_keys, strong_gains
@@ -350,7 +327,7 @@ def part_batch(args, rep, programs):
         suite = load_suite(args.suites, b, dtype)
         g = strong_gains(sp.default_gains(np.dtype(dtype)), suite.q0.dtype)
         keys = batch_keys(0, b)
-        compiled, compile_s = _lanes_program(opts, args.steps, lanes, trips)(suite, g, keys=keys)
+        compiled, compile_s = lanes_program(opts, args.steps, lanes, trips)(suite, g, keys=keys)
         t0 = time.perf_counter()
         r = jax.block_until_ready(compiled(suite, g, keys=keys))
         first = time.perf_counter() - t0

@@ -327,18 +327,25 @@ def fallback_trips(platform: str | None = None) -> int:
     return CPU_FALLBACK_TRIPS if platform == "cpu" else FALLBACK_TRIPS
 
 
+def fallback_chunk(pairs: int, trips: int | None = None) -> int:
+    """Failed pairs the batched fallback loop solves side by side, for a batch of ``pairs``
+    (curve, segment) pairs: ``min(max(FALLBACK_CHUNK, ceil(pairs / trips)), pairs)``
+    (``trips``: None, :func:`fallback_trips` of this platform)."""
+    trips = fallback_trips() if trips is None else trips
+    return min(max(FALLBACK_CHUNK, -(-pairs // trips)), pairs)
+
+
 def _solve_failed(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, solver: SolverOptions) -> _Pairs:
     """The loop of :func:`_fallback` over any leading axes ``lead`` (``fail``:
     lead + (m, n); segs: lead + (n,); curves, data: lead + (m,)): the failed
     pairs go through :func:`~softplan_jax.base.numerics.evaluate_where`, ``chunk``
-    at a time (1 without leading axes, else ``max(FALLBACK_CHUNK, ceil(pairs /
-    trips))``, trips: :func:`fallback_trips`), and each keeps the better of its full and
-    polished answers."""
+    at a time (1 without leading axes, else :func:`fallback_chunk`), and each keeps the
+    better of its full and polished answers."""
     m, n = fail.shape[-2:]
     lead = fail.shape[:-2]
     batch = math.prod(lead)
     total = batch * m * n
-    chunk = min(1 if not lead else max(FALLBACK_CHUNK, -(-total // fallback_trips())), total)
+    chunk = fallback_chunk(total) if lead else min(1, total)
 
     def flat(tree):  # lead axes -> one axis of size batch
         return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) :])), tree)
