@@ -47,9 +47,10 @@ from .geometry.closest import closest_point
 from .geometry.curves import ParametricCurve, PolynomialCurve, line_segment
 from .geometry.kinematics import point_jacobian, segment_point, tip_position
 from .geometry.point_sets import closest_point_to_points
-from .planning.planner import PlanResult, make_options, plan, plan_batch
+from .planning.gains import GainFunction, Gains, default_gains
+from .planning.options import PAPER_STEP, PlanOptions, make_options
+from .planning.planner import PlanResult, plan, plan_batch
 from .planning.presets import apply_preset
-from .planning.step import PAPER_STEP, GainFunction, Gains, PlanOptions, default_gains
 from .planning.tracking import track, track_batch
 from .scenarios import Scenario, load_scenario, make_scenario, paper_scenario, random_scenarios, save_scenario
 from .scenarios.motion import make_moving_scenario

@@ -56,6 +56,7 @@ __all__ = [
     "between_steps",
     "swept_clear",
     "contact_tolerance",
+    "safety_floor",
     "apply_collision_checks",
     "dense_trajectory_clearance",
 ]
@@ -245,6 +246,11 @@ def contact_tolerance(options, dtype) -> float:
     """Clearance at or below which a rollout counts as collided: the planner options'
     ``contact_tolerance``, but never below ten times sqrt(eps) of ``dtype``."""
     return max(float(options.contact_tolerance), contact_floor(dtype))
+
+
+def safety_floor(options, dtype) -> float:
+    """The clearance a certified motion never reaches: twice :func:`contact_tolerance`."""
+    return 2.0 * contact_tolerance(options, dtype)
 
 
 def apply_collision_checks(r, scenario, options):

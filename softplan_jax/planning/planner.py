@@ -33,9 +33,10 @@ from ..scenarios import Scenario
 from ..scenarios.scenario import check_scenario, unreachable_reason
 from .batching import Progress, batch_mesh, gather, is_global, pad_batch, round_chunk, shard_batch
 from .engine import check_engine_sizes, default_lanes
+from .options import PlanOptions, make_options, tracks
 from .programs import batch_keys, prng_key, rollout_batch, rollout_jit, start_configuration, strong_gains
-from .records import Rollout, check_rollout_memory, tracks
-from .step import GOAL_GAINS, GainFunction, Gains, PlanOptions, check_options, default_gains
+from .records import Rollout, check_rollout_memory
+from .step import GOAL_GAINS, GainFunction, Gains, default_gains
 
 __all__ = ["PlanResult", "make_options", "check_gains", "plan", "plan_device", "unreachable_result",
            "result_from_rollout", "plan_batch", "run_batch"]
@@ -82,14 +83,6 @@ class PlanResult(NamedTuple):
     reason: str = ""
     best_error: float | None = None
     global_start: int | None = None
-
-
-def make_options(method="curve", n_points=10, **kwargs) -> PlanOptions:
-    """PlanOptions from keyword arguments, validated."""
-    unknown = set(kwargs) - set(PlanOptions._fields)
-    if unknown:
-        raise ValueError(f"unknown planner option(s) {sorted(unknown)}; known: {list(PlanOptions._fields)}")
-    return check_options(PlanOptions(method=method, n_points=n_points, **kwargs))
 
 
 # Largest k_att * dt of a sound explicit Euler step of the attraction (see check_gains).

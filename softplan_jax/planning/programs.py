@@ -20,8 +20,9 @@ from ..base.compilation_cache import load_or_export, package_jit, rollout_compil
 from ..scenarios import Scenario
 from .batching import BATCH_AXIS, batch_mesh, pad_batch, round_chunk, shard_batch
 from .engine import check_engine_sizes, default_lanes, run, run_lanes
-from .records import Rollout, check_rollout_memory, tracks
-from .step import Gains, PlanOptions
+from .options import PlanOptions, tracks
+from .records import Rollout, check_rollout_memory
+from .step import Gains
 
 __all__ = ["rollout", "strong_gains", "prng_key", "start_configuration", "batch_keys", "CompiledRollout",
            "rollout_jit", "BatchedRollout", "rollout_batch"]

@@ -46,7 +46,8 @@ from ..geometry.clearance import contact_tolerance
 from ..geometry.closest import DEFAULT_OPTIONS
 from ..geometry.kinematics import tip_position
 from ..planning.batching import pad_batch
-from ..planning.planner import PlanResult, make_options, plan, plan_batch
+from ..planning.options import make_options
+from ..planning.planner import PlanResult, plan, plan_batch
 from ..scenarios import Scenario, stack_scenarios
 from .reach import ReachOptions, check_reach_options, scene_of, unreachable_proof
 from .tree import reach_and_search_batch

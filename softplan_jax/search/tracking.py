@@ -38,9 +38,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..base.status import STATUS_NAMES, Status, status_name
+from ..planning.gains import default_gains
+from ..planning.options import PlanOptions, make_track_options
 from ..planning.records import hold_statistics
-from ..planning.step import PlanOptions, default_gains
-from ..planning.tracking import TrackResult, goal_trajectory, make_track_options, result_from_track, track, track_batch
+from ..planning.tracking import TrackResult, goal_trajectory, result_from_track, track, track_batch
 from ..scenarios import stack_scenarios
 from ..scenarios.motion import GoalPath, MovingScenario, stack_moving_scenarios
 from .fallback import plan_fallback

@@ -24,7 +24,8 @@ import numpy as np
 import optax
 
 from ..planning.gains import GOAL_GAINS, Gains, default_gains
-from ..planning.planner import check_gains, make_options
+from ..planning.options import make_options
+from ..planning.planner import check_gains
 from ..scenarios import Scenario
 from .objective import ScoreWeights, check_sigma, check_weights, estimate_objective, scores_jit, smoothing_sample
 from .space import GainSpace
