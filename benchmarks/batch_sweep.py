@@ -180,7 +180,7 @@ def main(argv=None) -> dict:
 
     import softplan_jax as sp
     from softplan_jax.base.status import Status
-    from softplan_jax.geometry.clearance import apply_collision_checks
+    from softplan_jax.planning import apply_collision_checks
     from softplan_jax.planning.batching import pad_batch, round_chunk
     from softplan_jax.planning.planner import make_options
     from softplan_jax.planning.programs import rollout

@@ -107,7 +107,7 @@ def main(argv=None) -> dict:
 
     import softplan_jax as sp
     from softplan_jax.base.status import status_name
-    from softplan_jax.geometry.clearance import apply_collision_checks
+    from softplan_jax.planning import apply_collision_checks
     from softplan_jax.planning.planner import make_options
     from softplan_jax.planning.programs import rollout_batch
 

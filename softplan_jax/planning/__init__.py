@@ -15,6 +15,7 @@
 """
 
 from ..base.status import STATUS_NAMES, Status, status_name
+from .checks import apply_collision_checks
 from .gains import GainFunction, Gains, default_gains
 from .options import PAPER_STEP, PlanOptions, TrackOptions, make_options, make_track_options
 from .planner import PlanResult, plan, plan_batch, result_from_rollout
@@ -51,6 +52,7 @@ __all__ = [
     "TrackResult",
     "track",
     "track_batch",
+    "apply_collision_checks",
     "Preset",
     "PRESETS",
     "preset",

@@ -28,7 +28,7 @@ from ..base.status import Status, status_name
 from ..geometry.clearance import contact_tolerance
 from ..geometry.closest import DEFAULT_OPTIONS
 from ..geometry.kinematics import tip_jacobian, tip_position
-from ..geometry.obstacles import radius_and_mask, true_closest
+from ..geometry.obstacles import clearance_of, radius_and_mask, true_closest
 from ..scenarios import Scenario
 from ..scenarios.scenario import check_scenario, unreachable_reason
 from .batching import Progress, batch_mesh, gather, is_global, pad_batch, round_chunk, shard_batch
@@ -256,9 +256,7 @@ def plan_device(device=None):
 @functools.cache
 def _start_clearance_program(solver):
     def clearance(q, scenario):
-        cp = true_closest(q, scenario, solver)
-        radius, mask = radius_and_mask(scenario)
-        return jnp.where(mask, cp.distance - scenario.arm_radius - radius, jnp.inf)
+        return clearance_of(true_closest(q, scenario, solver), scenario)
 
     return package_jit(clearance)
 

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 from ..base.compilation_cache import package_jit
 from ..base.numerics import damped_pinv, safe_norm
 from ..geometry.arm import PCC
-from ..geometry.clearance import safety_floor
+from ..geometry.clearance import contact_tolerance, safety_floor
 from ..geometry.closest import ClosestPoint
 from ..geometry.obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
 from ..scenarios import Scenario
@@ -214,7 +214,7 @@ def scaled_step(q, q_full, clearance, options: PlanOptions, travel=None, arm=PCC
     for a static scene); ``"plain"`` is the paper's step (alpha = 1)."""
     if options.step == "plain":
         return q_full, jnp.ones((), q.dtype), jnp.zeros((), bool)
-    floor = safety_floor(options, q.dtype)
+    floor = safety_floor(contact_tolerance(options, q.dtype))
     alpha, too_fast = safe_scale(q, q_full, clearance, floor, options.safe_fraction, travel, arm=arm)
     # q and q_full lie in the length box, so every point of the segment between them does too.
     return q + alpha * (q_full - q), alpha, too_fast
