@@ -89,9 +89,9 @@ def main(argv=None):
     from stats import paired_table, pct_interval, wilson
 
     import softplan_jax as sp
+    from softplan_jax.planning import make_track_options
     from softplan_jax.planning.planner import make_options
     from softplan_jax.planning.programs import rollout_batch, rollout_jit
-    from softplan_jax.planning.tracking import make_track_options, track_program
     from softplan_jax.testing import oracle
 
     quick = args.quick
@@ -211,8 +211,9 @@ def main(argv=None):
     tree = sp.paper_scenario("tree")
     sway = sp.moving_scenario("tree_sway")
     plan_opts = make_options("curve")
-    track_single = track_program(make_track_options("curve"), T, False)
-    track_batched = track_program(make_track_options("curve"), T, True)
+    track_opts = make_track_options("curve")
+    track_single = lambda m, g, k: rollout_jit(m, g, track_opts, T, k)  # noqa: E731
+    track_batched = lambda m, g, k: rollout_batch(m, g, track_opts, T, k, devices=1)  # noqa: E731
     key = jax.random.PRNGKey(0)
     movers = jax.tree_util.tree_map(lambda x: jnp.asarray(x[:B]), suite)
     rest = movers.scene

@@ -60,8 +60,8 @@ def _stepper(L: int, after: int, longest=None, batch: int = 0):
     import jax.numpy as jnp
 
     import softplan_jax as sp
-    from softplan_jax.base.compilation_cache import rollout_compiler_options
     from softplan_jax.planning.engine import init_carry, make_step, prepare
+    from softplan_jax.planning.options import rollout_compiler_options
     from softplan_jax.planning.planner import make_options
     from softplan_jax.planning.programs import batch_keys, strong_gains
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.base.compilation_cache import rollout_compiler_options
+from softplan_jax.planning.options import rollout_compiler_options
 from softplan_jax.planning.engine import (
     ACCELERATOR_LANES,
     DEFAULT_LANES,

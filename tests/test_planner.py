@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.base.compilation_cache import rollout_compiler_options
+from softplan_jax.planning.options import rollout_compiler_options
 from softplan_jax.planning.planner import make_options, result_from_rollout
 from softplan_jax.planning.programs import rollout_jit
 from softplan_jax.testing import oracle

@@ -182,9 +182,9 @@ def _fallback(args, suite, r, options, out) -> float:
 
     t0 = time.perf_counter()
     idx, results = rescue_batch(suite, r, options, seed=args.seed, progress=not args.no_progress)
-    codes = {s.label: int(s) for s in Status}
     for k, res in zip(idx, results, strict=True):
-        out["status"][k], out["reached"][k], out["iterations"][k] = codes[res.status], res.reached, res.iterations
+        out["status"][k], out["reached"][k] = int(Status.from_label(res.status)), res.reached
+        out["iterations"][k] = res.iterations
         out["min_clearance"][k], out["final_error"][k] = res.min_clearance, res.final_error
         out["planner"][k] = ("global" if res.planner == "global" else "local") if res.reached else "none"
     return time.perf_counter() - t0

@@ -6,12 +6,13 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+from ..base.compilation_cache import compiler_options
 from ..base.validation import check_bool, check_int, check_number
 from ..geometry.closest import DEFAULT_OPTIONS, SolverOptions
 from ..geometry.closest_grid import GridSolverOptions
 
 __all__ = ["PlanOptions", "PAPER_STEP", "check_options", "make_options", "TrackOptions", "check_track_options",
-           "make_track_options", "tracks", "plan_options"]
+           "make_track_options", "tracks", "plan_options", "PROGRAM_KIND", "rollout_compiler_options"]
 
 
 class PlanOptions(NamedTuple):
@@ -198,3 +199,16 @@ def tracks(options) -> bool:
 def plan_options(options) -> PlanOptions:
     """The PlanOptions of a rollout's options (PlanOptions, or TrackOptions' ``plan``)."""
     return options.plan if tracks(options) else options
+
+
+# The kind of XLA program of each obstacle model (base.compilation_cache.compiler_options).
+PROGRAM_KIND = {"curve": "exact", "points": "samples"}
+
+
+def rollout_compiler_options(method: str = "curve") -> dict | None:
+    """The XLA options the rollouts of the planner's ``method`` ("curve" or "points") compile
+    with (:func:`~softplan_jax.base.compilation_cache.compiler_options` of its
+    :data:`PROGRAM_KIND`). ValueError for another method."""
+    if method not in PROGRAM_KIND:
+        raise ValueError(f"method must be 'curve' or 'points'; got {method!r}")
+    return compiler_options(PROGRAM_KIND[method])

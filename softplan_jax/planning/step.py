@@ -40,7 +40,7 @@ from ..geometry.closest import ClosestPoint
 from ..geometry.obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
 from ..scenarios import Scenario
 from .gains import GOAL_GAINS, GainFunction, Gains, default_gains, goal_scaled, repulsion_scale
-from .options import PlanOptions
+from .options import PROGRAM_KIND, PlanOptions
 
 __all__ = [
     "Gains",
@@ -261,5 +261,6 @@ def planner_step(q, scenario: Scenario, gains: Gains, options: PlanOptions = Pla
     if not isinstance(options, PlanOptions):
         raise ValueError(f"options must be a PlanOptions (see make_options), got {type(options).__name__}")
     if options.method not in _PLANNER_STEP:
-        _PLANNER_STEP[options.method] = package_jit(_planner_step, options.method, static_argnames=("options",))
+        kind = PROGRAM_KIND[options.method]
+        _PLANNER_STEP[options.method] = package_jit(_planner_step, kind, static_argnames=("options",))
     return _PLANNER_STEP[options.method](q, scenario, gains, options)

@@ -52,7 +52,6 @@ plans it with the same step (:func:`~softplan_jax.plan`).
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import jax
@@ -62,42 +61,18 @@ import numpy as np
 from ..base.status import status_name
 from ..geometry.obstacles import radius_and_mask
 from ..scenarios.motion import MovingScenario, goal_at
-from .engine import check_engine_sizes, run
-from .options import TrackOptions, make_track_options
-from .planner import check_gains, run_batch
-from .programs import prng_key, rollout_batch, rollout_jit, strong_gains
-from .records import Rollout, check_rollout_memory
+from .options import make_track_options
+from .planner import check_gains
+from .programs import rollout_batch, rollout_jit, strong_gains
+from .records import Rollout
 from .step import Gains
 
-__all__ = ["TrackOptions", "make_track_options", "Track", "TrackResult", "track_rollout", "track", "track_batch"]
+__all__ = ["Track", "TrackResult", "track", "track_batch", "result_from_track", "goal_trajectory"]
 
 
 # One result type: a tracking rollout is an engine Rollout with its tracking fields
 # (goal, time, error, reached_step, held_steps, held_to_end) filled in.
 Track = Rollout
-
-
-def track_rollout(moving: MovingScenario, gains: Gains, options: TrackOptions, max_steps: int, key=None, *,
-                  driver: str = "scan") -> Rollout:
-    """Roll the tracking planner out for ``max_steps`` steps (pure; :func:`track` is the
-    jitted entry point): :func:`softplan_jax.planning.engine.run` on a moving scene. See the
-    module docstring; ``driver`` as :func:`~softplan_jax.planning.planner.rollout`."""
-    key = jax.random.PRNGKey(0) if key is None else key
-    return run(moving, gains, options, max_steps, key, driver=driver, step_chunk=options.plan.step_chunk)
-
-
-# ----------------------------------------------------------------------------
-# Entry points.
-
-
-@functools.cache
-def track_program(options: TrackOptions, max_steps: int, batched: bool):
-    """The jitted tracking rollout ``(moving, gains, key) -> Rollout`` for these static settings
-    (over a stack of moving scenarios and keys when ``batched``): the programs of
-    :data:`~softplan_jax.planning.planner.rollout_jit` / :data:`~softplan_jax.planning.planner.rollout_batch`."""
-    if batched:
-        return lambda moving, gains, keys: rollout_batch._call(moving, gains, options, max_steps, keys, None, None)
-    return lambda moving, gains, key: rollout_jit._call(moving, gains, options, max_steps, key)
 
 
 class TrackResult(NamedTuple):
@@ -183,9 +158,7 @@ def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gai
     opts = make_track_options(method, n_points, **options)
     dtype = moving.scene.q0.dtype
     g = strong_gains(check_gains(gains, dtype, moving.n_segments), dtype)
-    T = check_engine_sizes(max_steps)[0]
-    check_rollout_memory(moving, opts, T)
-    r = track_program(opts, T, False)(moving, g, prng_key(seed))
+    r = rollout_jit(moving, g, opts, max_steps, seed)
     return result_from_track(r, moving, float(g.dt))
 
 
@@ -235,8 +208,8 @@ def track_batch(movings: MovingScenario, method: str = "curve", n_points: int = 
     opts = make_track_options(method, n_points, **options)
     dtype = movings.scene.q0.dtype
     g = strong_gains(check_gains(gains, dtype, movings.n_segments), dtype)
-    r = run_batch(movings, g, opts, max_steps, seed, chunk=chunk, progress=progress, lanes=lanes, devices=1,
-                  label="track_batch")
+    r = rollout_batch.in_chunks(movings, g, opts, max_steps, seed, chunk=chunk, progress=progress, lanes=lanes,
+                                devices=1, label="track_batch")
     return jax.device_get(r)
 
 

@@ -64,8 +64,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.compilation_cache import package_jit, rollout_compiler_options
-from ..planning.options import PlanOptions, make_options
+from ..base.compilation_cache import package_jit
+from ..planning.options import PlanOptions, make_options, rollout_compiler_options
 from ..planning.programs import rollout
 from ..scenarios import Scenario
 from .space import GainSpace

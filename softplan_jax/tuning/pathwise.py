@@ -26,8 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ..base.compilation_cache import rollout_compiler_options
-from ..planning.options import PlanOptions, make_options
+from ..planning.options import PlanOptions, make_options, rollout_compiler_options
 from ..planning.planner import check_gains
 from ..planning.programs import rollout
 from ..planning.step import Gains
