@@ -215,8 +215,8 @@ def test_fallback_programs_compile_with_the_package_xla_options(decided):
     one = jax.tree_util.tree_map(lambda x: x[:1], batch)
     ik = _goal_configurations_jit(OPTS, sp.geometry.SolverOptions(), 1e-6, True)
     fallback = _fallback_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
-    # Both are package_jit's with the curve method's options (test_compilation_cache tests package_jit).
-    assert all(isinstance(f, package_jit) and f._method == "curve" for f in (ik, fallback))
+    # Both are package_jit's with the exact solves' options (test_compilation_cache tests package_jit).
+    assert all(isinstance(f, package_jit) and f._kind == "exact" for f in (ik, fallback))
     keys = jax.random.split(jax.random.PRNGKey(0), 1)
     assert "ynn_fusion" not in ik.lower(one, keys, one.q0).compile().as_text()
 

@@ -139,9 +139,9 @@ def _compiled_run(world, gains, options, max_steps: int, seed) -> tuple:
     return rollout, compile_time, time.perf_counter() - t0, loaded
 
 
-def _compiling_message(what: str) -> None:
-    print(f"softplan: {what}: compiling the planner, or loading it from the cache (once per scene shape and "
-          "option set) ...", file=sys.stderr, flush=True)
+def _compiling_message(what: str = "") -> None:
+    print(f"softplan: compiling the planner{what}, or loading it from the cache (once per scene shape and option "
+          "set) ...", file=sys.stderr, flush=True)
 
 
 def _static_inputs(args, dtype) -> tuple:
@@ -175,7 +175,7 @@ def _cmd_plan(args, dtype) -> int:
               file=sys.stderr, flush=True)
         result = unreachable_result(scenario, options, reason)
     else:
-        _compiling_message("planning")
+        _compiling_message()
         rollout, times["compile_time_s"], times["run_time_s"], times["program_from_cache"] = _compiled_run(
             scenario, gains, options, int(args.max_steps), args.seed)
         result = result_from_rollout(rollout, scenario)
@@ -286,8 +286,8 @@ def _cmd_track(args, dtype) -> int:
 
     moving, gains, options, preset, extra, gain_values = _moving_inputs(args, dtype)
     max_steps = int(args.max_steps)
-    _compiling_message(f"a moving scene, tracked for {max_steps} steps ({max_steps * float(gains.dt):g} s of "
-                       "simulated time)")
+    _compiling_message(f" for a moving scene, tracked for {max_steps} steps ({max_steps * float(gains.dt):g} s "
+                       "of simulated time)")
     track, compile_time, run_time, loaded = _compiled_run(moving, gains, options, max_steps, args.seed)
     result = result_from_track(track, moving, float(gains.dt))
     if result.status == "max_steps" and not args.no_fallback:
