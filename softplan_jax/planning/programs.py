@@ -87,18 +87,18 @@ def batch_keys(seed, batch: int):
     return jax.random.split(key, batch)
 
 
-def _one(world, gains, options, max_steps: int, key, arm) -> Rollout:
+def _one(world, gains, options, max_steps: int, key, arm=None) -> Rollout:
     return run(world, gains, options, max_steps, key, driver="chunks", step_chunk=plan_options(options).step_chunk,
-               arm=arm)
+               arm=PCC if arm is None else arm)
 
 
-def _batch(worlds, gains, options, max_steps: int, keys, arm, mesh=None, lanes=None) -> Rollout:
+def _batch(worlds, gains, options, max_steps: int, keys, mesh=None, lanes=None, arm=None) -> Rollout:
     platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
     width = default_lanes(platform, tracking=tracks(options)) if lanes is None else lanes
 
     def laned(worlds, gains, keys):
         return run_lanes(worlds, gains, options, max_steps, keys, lanes=width,
-                         step_chunk=plan_options(options).step_chunk, arm=arm)
+                         step_chunk=plan_options(options).step_chunk, arm=PCC if arm is None else arm)
 
     if mesh is None:
         return laned(worlds, gains, keys)
@@ -143,17 +143,17 @@ class RolloutProgram:
             self._programs[method] = package_jit(self._fn, PROGRAM_KIND[method], static_argnames=self._static_argnames)
         return self._programs[method]
 
-    def args(self, world, gains, options, max_steps, seed=0, arm=PCC) -> tuple:
-        """The normalised arguments of :meth:`run`: ``(world, gains, options, max_steps, key,
-        arm)`` (one key per scene of a batch). ValueError for a bad max_steps or seed, or
-        records that would not fit in memory."""
+    def args(self, world, gains, options, max_steps, seed=0) -> tuple:
+        """The normalised arguments of :meth:`run`: ``(world, gains, options, max_steps, key)``
+        (one key per scene of a batch). ValueError for a bad max_steps or seed, or records that
+        would not fit in memory."""
         q0 = start_configuration(world)
         max_steps = check_engine_sizes(max_steps)[0]
         scenes = q0.shape[0] if self._batched else 1
         # Before anything is allocated: the records of max_steps steps must fit in memory.
         check_rollout_memory(world, options, max_steps, scenes, min(scenes, default_lanes(tracking=tracks(options))))
         key = batch_keys(seed, scenes) if self._batched else prng_key(seed)
-        return world, strong_gains(gains, q0.dtype), options, max_steps, key, arm
+        return world, strong_gains(gains, q0.dtype), options, max_steps, key
 
     def run(self, *args, mesh=None, lanes=None) -> Rollout:
         """The compiled rollout on normalised arguments (:meth:`args`); a batch program also
@@ -174,15 +174,15 @@ class RolloutProgram:
     def _sharded(self, worlds, gains, options, max_steps, seed, devices, lanes):
         """``(args, mesh, pad)``: a batch's arguments, padded to a multiple of the device count
         (``pad`` copies of its last scene) and sharded over the mesh."""
-        w, g, o, T, keys, arm = self.args(worlds, gains, options, max_steps, seed)
+        w, g, o, T, keys = self.args(worlds, gains, options, max_steps, seed)
         check_engine_sizes(T, 1, lanes)
         mesh = batch_mesh(devices)
         if mesh is None:
-            return (w, g, o, T, keys, arm), None, 0
+            return (w, g, o, T, keys), None, 0
         batch = start_configuration(w).shape[0]
         size = round_chunk(None, batch, mesh.size)
         (w, keys), g = shard_batch(mesh, pad_batch((w, keys), size), g)
-        return (w, g, o, T, keys, arm), mesh, size - batch
+        return (w, g, o, T, keys), mesh, size - batch
 
     def lower(self, world, gains, options, max_steps: int, seed=0, devices=None, lanes=None):
         """``jax.jit(...).lower`` of the rollout for these arguments (a batch padded to a
@@ -210,13 +210,13 @@ class RolloutProgram:
         """
         if self._batched:
             raise ValueError("cached compiles one scene's rollout: use rollout_jit.cached")
-        w, g, _, T, key, arm = self.args(world, gains, options, max_steps, 0)
+        w, g, _, T, key = self.args(world, gains, options, max_steps, 0)
         leaves, treedef = jax.tree_util.tree_flatten((w, g, key))
         scene = w.scene if hasattr(w, "motion") else w
 
         def flat(*xs):  # arrays in, arrays out: the artifact needs no pytree registrations
             s, g, k = jax.tree_util.tree_unflatten(treedef, xs)
-            return tuple(jax.tree_util.tree_leaves(self._fn(s, g, options, T, k, arm)))
+            return tuple(jax.tree_util.tree_leaves(self._fn(s, g, options, T, k)))
 
         compiled, loaded = (None, False)
         if not scene.parametric:
@@ -226,14 +226,14 @@ class RolloutProgram:
             plain = self.lower(world, gains, options, T).compile()
 
             def run_plain(world, gains, seed=0):
-                s, g, _, _, k, _ = self.args(world, gains, options, T, seed)
-                return plain(s, g, k, arm)
+                s, g, _, _, k = self.args(world, gains, options, T, seed)
+                return plain(s, g, k)
 
             return run_plain, False
         out_def = _rollout_structure(options)
 
         def run_loaded(world, gains, seed=0):
-            s, g, _, _, k, _ = self.args(world, gains, options, T, seed)
+            s, g, _, _, k = self.args(world, gains, options, T, seed)
             return jax.tree_util.tree_unflatten(out_def, compiled(*jax.tree_util.tree_leaves((s, g, k))))
 
         return run_loaded, loaded
@@ -275,7 +275,7 @@ def _chunked(program, worlds, gains, options, T, keys, mesh, size, lanes, bar) -
             (s, k), g_dev = jax.device_put(part), gains  # jax arrays, as rollout_batch's: one jit signature
         else:
             (s, k), g_dev = shard_batch(mesh, part, gains)
-        return program.run(s, g_dev, options, T, k, PCC, mesh=mesh, lanes=lanes)
+        return program.run(s, g_dev, options, T, k, mesh=mesh, lanes=lanes)
 
     def collect(a, r):
         nonlocal out, done
