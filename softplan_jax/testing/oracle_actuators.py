@@ -1,0 +1,88 @@
+"""Independent NumPy reference for actuator lengths: each tendon's (or chamber's) path
+sampled densely along the backbone, offset from it in a frame carried by parallel
+transport, and measured as a polyline.
+
+The backbone and its tangent come from :mod:`.oracle_geometry` (the paper's formulas,
+section 2.1); the frame is propagated by a plain loop: at every sample it is turned by
+the smallest rotation that takes the previous tangent to the next one (Rodrigues'
+formula), which is exactly the twist-free (Bishop) frame along an arc. Nothing of the
+closed form of ``softplan_jax.actuators`` (the bending directions, eq. A1) is used.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .oracle_geometry import segment_point_derivs
+
+__all__ = ["transported_offsets", "tendon_lengths_sampled", "chamber_lengths_sampled"]
+
+
+def _rotation_between(a, b):
+    """The smallest rotation taking unit vector a to unit vector b (Rodrigues)."""
+    v = np.cross(a, b)
+    c = float(np.dot(a, b))
+    s = float(np.linalg.norm(v))
+    if s < 1e-300:
+        return np.eye(3)
+    k = v / s
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def transported_offsets(q, samples: int = 4000):
+    """Backbone points and the twist-free frame's x and y axes, segment by segment.
+
+    Args:
+      q: (n, 3) configuration.
+      samples: points per segment (both ends included).
+
+    Returns:
+      list over segments of (points (samples, 3), ex (samples, 3), ey (samples, 3)).
+    """
+    q = np.asarray(q, np.float64)
+    s = np.linspace(0.0, 1.0, samples)
+    ex, ey, t_prev = np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, 0, 1.0])
+    out = []
+    for i in range(q.shape[0]):
+        F, dF, _ = segment_point_derivs(q, i, s)
+        P, X, Y = np.empty_like(F), np.empty_like(F), np.empty_like(F)
+        for j in range(samples):
+            t = dF[j] / np.linalg.norm(dF[j])
+            R = _rotation_between(t_prev, t)
+            ex, ey, t_prev = R @ ex, R @ ey, t
+            P[j], X[j], Y[j] = F[j], ex, ey
+        out.append((P, X, Y))
+    return out
+
+
+def _polyline(points):
+    return float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+
+
+def _offset_path(frames, i, r, alpha):
+    P, X, Y = frames[i]
+    return P + r * (np.cos(alpha) * X + np.sin(alpha) * Y)
+
+
+def tendon_lengths_sampled(q, radius, angles, samples: int = 4000):
+    """(n, k) polyline lengths of the tendons: tendon m of segment t at (radius[t], angles[t, m])
+    from the base to segment t's tip."""
+    frames = transported_offsets(q, samples)
+    radius, angles = np.asarray(radius, float), np.asarray(angles, float)
+    n, k = angles.shape
+    out = np.zeros((n, k))
+    for t in range(n):
+        for m in range(k):
+            out[t, m] = sum(_polyline(_offset_path(frames, j, radius[t], angles[t, m])) for j in range(t + 1))
+    return out
+
+
+def chamber_lengths_sampled(q, radius, angles, samples: int = 4000):
+    """(n, k) polyline lengths of the chambers: chamber m of segment i at (radius[i], angles[i, m])
+    along segment i only."""
+    frames = transported_offsets(q, samples)
+    radius, angles = np.asarray(radius, float), np.asarray(angles, float)
+    n, k = angles.shape
+    return np.array([[_polyline(_offset_path(frames, i, radius[i], angles[i, m])) for m in range(k)]
+                     for i in range(n)])
