@@ -250,7 +250,7 @@ def check_realisable(lengths, q, radius, angles, kind: str, tolerance: float = R
         check_bending_radius(q_np, np.asarray(radius), kind)
     except ValueError as err:
         raise ValueError(f"lengths: no configuration realises them: {err}") from None
-    fn = length_function(kind)
+    fn = _tendons_jit if kind == "tendon" else _chambers_jit
     back = np.asarray(fn(jnp.asarray(q), radius, angles))
     scale = float(np.max(np.abs(np.asarray(lengths))))
     residual = float(np.max(np.abs(back - np.asarray(lengths))))

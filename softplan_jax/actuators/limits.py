@@ -187,23 +187,25 @@ def check_limits(limits: ActuatorLimits, layout: ActuatorLayout, lengths, t=None
     n, k = layout.n_segments, layout.count
     if lengths.ndim != 3 or lengths.shape[1:] != (n, k):
         raise ValueError(f"lengths must have shape (T, {n}, {k}); got {lengths.shape}")
-    series = {"min_length": (lengths, lim.min_length, True), "max_length": (lengths, lim.max_length, False)}
+    # name -> (values, limit, a lower limit?, index of the sample a value is reported at: an acceleration
+    # is centred on the middle of its three samples)
+    series = {"min_length": (lengths, lim.min_length, True, 0), "max_length": (lengths, lim.max_length, False, 0)}
     stamps = np.arange(lengths.shape[0]) if t is None else np.asarray(t, np.float64)
     if t is not None:
         if stamps.shape != (lengths.shape[0],) or np.any(np.diff(stamps) <= 0):
             raise ValueError("t must be (T,) strictly increasing times, one per sample")
         speed, accel = finite_differences(stamps, lengths)
-        series["max_speed"] = (speed, lim.max_speed, False)
-        series["max_acceleration"] = (accel, lim.max_acceleration, False)
+        series["max_speed"] = (speed, lim.max_speed, False, 0)
+        series["max_acceleration"] = (accel, lim.max_acceleration, False, 1)
     usage, where, violations, first = {}, {}, {}, None
-    for name, (values, limit, lower) in series.items():
+    for name, (values, limit, lower, offset) in series.items():
         if not np.any(limit > 0) if lower else not np.any(np.isfinite(limit)):
             continue
         u = _usage(values, limit, lower)
         flat = int(np.argmax(u))
         j, i, m = np.unravel_index(flat, u.shape)
         usage[name] = float(u[j, i, m])
-        when = f"sample {j}" if t is None else f"t = {stamps[j]:.3f} s"
+        when = f"sample {j + offset}" if t is None else f"t = {stamps[j + offset]:.3f} s"
         where[name] = (when, actuator_name(layout.kind, int(i), int(m)))
         over = u > 1.0 + 1e-9
         violations[name] = int(np.sum(np.any(over, axis=(1, 2))))
@@ -211,10 +213,11 @@ def check_limits(limits: ActuatorLimits, layout: ActuatorLayout, lengths, t=None
             j0 = int(np.argmax(np.any(over, axis=(1, 2))))
             i0, m0 = np.unravel_index(int(np.argmax(u[j0])), u.shape[1:])
             value = float(values[j0, i0, m0])
+            j0 += offset
             when0 = f"sample {j0}" if t is None else f"t = {stamps[j0]:.3f} s"
             text = (f"{name}: {actuator_name(layout.kind, int(i0), int(m0))} at {when0}: "
                     f"{abs(value):.6g} {'<' if lower else '>'} {float(limit[i0, m0]):.6g} {_UNITS[name]}")
-            if first is None or (t is not None and stamps[j0] < first[0]) or (t is None and j0 < first[0]):
+            if first is None or stamps[j0] < first[0]:
                 first = (stamps[j0], text)
     tightest = max(usage, key=usage.get) if usage else None
     return LimitReport(ok=first is None, first=None if first is None else first[1], usage=usage, tightest=tightest,

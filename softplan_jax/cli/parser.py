@@ -11,6 +11,7 @@ import argparse
 import math
 import os
 
+from .actuation import add_actuator_options, check_actuator_args
 from .common import InputError, package_version, warn
 from .trajectory import TRAJECTORY_FORMATS
 
@@ -99,6 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="exit with code 3 unless the run succeeded: status 'reached' (a moving goal: "
                      "also 'held', the tip back on the goal at the end); every other status fails, "
                      "'lost', 'max_steps', 'stalled', 'collided', 'unreachable' included")
+    add_actuator_options(run)
 
     scen = sub.add_parser("scenarios", help="list the paper scenarios",
                           description="List the paper's scenarios (names for 'softplan run').")
@@ -360,8 +362,9 @@ def check_run_args(args, paper_names) -> None:
             )
         if os.path.exists(args.out) and not args.force:
             raise InputError(f"--out: {args.out} exists; pass --force to overwrite it")
-    elif args.force:
-        raise InputError("--force only applies to --out")
+    elif args.force and args.export is None and args.plot_actuators is None:
+        raise InputError("--force only applies to --out, --export and --plot-actuators")
+    check_actuator_args(args, inputs, [args.plot, args.gif, args.out])
     # Last, so that a bad argument is one error line, not a warning and an error.
     if n_points_given and args.method == "curve":
         warn("--n-points applies to --method points only; the curve method ignores it")

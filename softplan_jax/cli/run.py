@@ -21,6 +21,7 @@ import os
 import sys
 import time
 
+from .actuation import constrain, summary_rows, time_run, write_outputs
 from .common import (
     InputError,
     fmt_gain_values,
@@ -124,9 +125,11 @@ def cmd_run(args) -> int:
                         ("--barrier-gain", args.barrier_gain)):
         if value is not None:
             warn(f"{flag} applies to moving scenes only; {args.scenario} does not move, it is ignored")
+    actuator_summary = {}
     try:
         scenario, label = _load(args, dtype)
         scenario, gains, extra, gain_values = resolve_gains(args, scenario, args.method, args.n_points)
+        scenario = constrain(args, scenario, actuator_summary)  # the actuators' segment length limits
         options = make_options(args.method, args.n_points, **_plan_extra(args, extra))
         max_steps = int(args.max_steps)
         check_rollout_memory(scenario, options, max_steps)  # before anything is allocated
@@ -194,7 +197,9 @@ def cmd_run(args) -> int:
         "plot": None,
         "gif": None,
         "out": None,
+        **actuator_summary,
     }
+    traj = time_run(args, scenario, result, options, summary)  # before any output: nothing written if it fails
 
     title = (
         f"{label} — {args.method} method"
@@ -210,6 +215,7 @@ def cmd_run(args) -> int:
 
     if args.out is not None:
         _write_out(args, summary, trajectory_record(result, scenario, summary))
+    write_outputs(args, traj, scenario, summary)
     return report(args, summary, lambda: _text_summary(summary), result.reached)
 
 
@@ -232,6 +238,8 @@ def _cmd_track(args, dtype) -> int:
             moving = load_moving_scenario(args.scenario, dtype=dtype)
             preset = {}
         scenario, gains, extra, gain_values = resolve_gains(args, moving.scene, args.method, args.n_points)
+        actuator_summary = {}
+        scenario = constrain(args, scenario, actuator_summary)  # the actuators' segment length limits
         moving = moving._replace(scene=scenario)
         extra = _plan_extra(args, extra)
         if args.anticipation is not None:
@@ -305,7 +313,9 @@ def _cmd_track(args, dtype) -> int:
         "plot": None,
         "gif": None,
         "out": None,
+        **actuator_summary,
     }
+    traj = time_run(args, moving.scene, result, options.plan, summary)  # before any output
     title = (f"{label} (moving) — {args.method} method"
              + (f" (N = {args.n_points})" if args.method == "points" else "") + f" — {result.status}")
     write_figures(args, summary, lambda plotting: plotting.plot_tracking(result, title=title),
@@ -318,6 +328,7 @@ def _cmd_track(args, dtype) -> int:
                   **{k: v for k, v in summary.items() if k not in ("plot", "gif", "out", "gain_values")},
                   "gain_values": {k: (math.inf if v is None else v) for k, v in summary["gain_values"].items()}}
         _write_out(args, summary, record)
+    write_outputs(args, traj, moving.scene, summary)
 
     def text():
         rows = [
@@ -339,6 +350,7 @@ def _cmd_track(args, dtype) -> int:
             ("compile time", fmt_seconds(compile_time)),
             ("run time", f"{fmt_seconds(run_time)} for {result.iterations} steps"),
         ]
+        rows += summary_rows(summary)
         rows += [(k, summary[k]) for k in ("plot", "gif", "out") if summary[k]]
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
@@ -378,6 +390,7 @@ def _text_summary(s: dict) -> str:
         ("time per step", f"{fmt_seconds(s['time_per_step_s'])} "
          "(run time / steps taken: the planner stops within a few steps of the end)"),
     ]
+    rows += summary_rows(s)
     if s["plot"]:
         rows.append(("plot", s["plot"]))
     if s["gif"]:

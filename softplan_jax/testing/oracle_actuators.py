@@ -11,6 +11,8 @@ closed form of ``softplan_jax.actuators`` (the bending directions, eq. A1) is us
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .oracle_geometry import segment_point_derivs
@@ -18,16 +20,18 @@ from .oracle_geometry import segment_point_derivs
 __all__ = ["transported_offsets", "tendon_lengths_sampled", "chamber_lengths_sampled"]
 
 
-def _rotation_between(a, b):
-    """The smallest rotation taking unit vector a to unit vector b (Rodrigues)."""
-    v = np.cross(a, b)
-    c = float(np.dot(a, b))
-    s = float(np.linalg.norm(v))
+def _rotate(v, a, b):
+    """v turned by the smallest rotation taking unit vector a to unit vector b (Rodrigues), in floats."""
+    kx, ky, kz = a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+    s = math.sqrt(kx * kx + ky * ky + kz * kz)
     if s < 1e-300:
-        return np.eye(3)
-    k = v / s
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
+        return v
+    c = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    kx, ky, kz = kx / s, ky / s, kz / s
+    dot = kx * v[0] + ky * v[1] + kz * v[2]
+    cx, cy, cz = ky * v[2] - kz * v[1], kz * v[0] - kx * v[2], kx * v[1] - ky * v[0]
+    return (v[0] * c + cx * s + kx * dot * (1 - c), v[1] * c + cy * s + ky * dot * (1 - c),
+            v[2] * c + cz * s + kz * dot * (1 - c))
 
 
 def transported_offsets(q, samples: int = 4000):
@@ -42,17 +46,16 @@ def transported_offsets(q, samples: int = 4000):
     """
     q = np.asarray(q, np.float64)
     s = np.linspace(0.0, 1.0, samples)
-    ex, ey, t_prev = np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, 0, 1.0])
+    ex, ey, t_prev = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
     out = []
     for i in range(q.shape[0]):
         F, dF, _ = segment_point_derivs(q, i, s)
-        P, X, Y = np.empty_like(F), np.empty_like(F), np.empty_like(F)
-        for j in range(samples):
-            t = dF[j] / np.linalg.norm(dF[j])
-            R = _rotation_between(t_prev, t)
-            ex, ey, t_prev = R @ ex, R @ ey, t
-            P[j], X[j], Y[j] = F[j], ex, ey
-        out.append((P, X, Y))
+        tangents = (dF / np.linalg.norm(dF, axis=1, keepdims=True)).tolist()
+        X, Y = np.empty_like(F), np.empty_like(F)
+        for j, t in enumerate(tangents):
+            ex, ey, t_prev = _rotate(ex, t_prev, t), _rotate(ey, t_prev, t), t
+            X[j], Y[j] = ex, ey
+        out.append((F, X, Y))
     return out
 
 

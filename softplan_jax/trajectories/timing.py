@@ -247,7 +247,7 @@ def _tracked(result, layout, limits, q, lim):
 
 
 def time_parametrize(result, layout: ActuatorLayout, limits: ActuatorLimits, scenario=None, *, path: str = "smooth",
-                     rate: float = 100.0, max_tip_speed: float | None = None, options=None, grid: int = 8,
+                     rate: float = 100.0, max_tip_speed: float | None = None, options=None, grid: int = 32,
                      max_depth: int = 4, max_q_speed: float = 100.0) -> Trajectory:
     """Time a plan along its certified path as fast as the actuator limits allow (TOPP-RA).
 
@@ -298,7 +298,7 @@ def time_parametrize(result, layout: ActuatorLayout, limits: ActuatorLimits, sce
         except ValueError as err:
             raise ValueError(f"layout: at step {k} of the plan: {err}") from None
     _check_lengths(np.stack([np.asarray(actuator_lengths(qk, layout)) for qk in q]), layout, limits, None,
-                   "at a step of the plan")
+                   "(sample = step of the plan)")
     waypoints = plan_waypoints(q)
     if options is None:
         from ..planning.planner import make_options
