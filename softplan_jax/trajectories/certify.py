@@ -71,7 +71,7 @@ def _box_clear(center, width, scenario, solver, contact):
     return jax.vmap(one)(center, width)
 
 
-_box_clear_jit = package_jit(_box_clear, "curve", static_argnames=("solver", "contact"))
+_box_clear_jit = package_jit(_box_clear, "curve", static_argnames=("solver",))
 
 
 def _prove(boxes, scenario, solver, contact: float, n: int) -> np.ndarray:
@@ -87,8 +87,8 @@ def _prove(boxes, scenario, solver, contact: float, n: int) -> np.ndarray:
         pad = BOX_CHUNK - len(part)
         center = np.concatenate([center, np.repeat(center[-1:], pad, 0)]).reshape(BOX_CHUNK, n, 3)
         width = np.concatenate([width, np.repeat(width[-1:], pad, 0)]).reshape(BOX_CHUNK, n, 3)
-        ok = np.asarray(_box_clear_jit(jnp.asarray(center, dtype), jnp.asarray(width, dtype), scenario,
-                                       solver=solver, contact=float(contact)))
+        ok = np.asarray(_box_clear_jit(jnp.asarray(center, dtype), jnp.asarray(width, dtype), scenario, solver=solver,
+                                       contact=jnp.asarray(contact, dtype)))
         out[a:a + len(part)] = ok[: len(part)] & positive
     return out
 

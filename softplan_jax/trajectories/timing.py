@@ -145,6 +145,9 @@ def _sample_times(profiles, rate: float):
     total = starts[-1]
     breaks = np.unique(np.concatenate([starts[j] + p.time_of(p.piece.breaks) for j, p in enumerate(profiles)]
                                       + [starts]))
+    # One sample for breaks that coincide up to rounding (a piece's end and the next one's start): two samples
+    # 1e-15 s apart would turn the rounding of their lengths into huge divided differences.
+    breaks = breaks[np.concatenate([np.diff(breaks) > 1e-6 / rate, [True]])]
     uniform = np.arange(int(math.floor(total * rate)) + 1) / rate
     near = np.abs(uniform[:, None] - breaks[None, :]).min(axis=1) < 0.25 / rate
     t = np.unique(np.concatenate([uniform[~near], breaks]))
