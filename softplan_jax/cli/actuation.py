@@ -121,7 +121,7 @@ def check_actuator_args(args, inputs, outputs) -> None:
         if os.path.exists(path) and not args.force:
             raise InputError(f"{flag}: {path} exists; pass --force to overwrite it")
     if args.plot_actuators is not None:
-        check_plot_format(args.plot_actuators)
+        check_plot_format(args.plot_actuators, "--plot-actuators")
 
 
 def _layout_and_limits(args, n: int, dtype):

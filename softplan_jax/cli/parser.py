@@ -272,15 +272,15 @@ def check_output_path(path: str, option: str, inputs=()) -> str:
     return path
 
 
-def check_plot_format(path: str) -> None:
-    """``--plot``: the extension names an image format matplotlib can write."""
+def check_plot_format(path: str, option: str = "--plot") -> None:
+    """``--plot`` (or ``option``): the extension names an image format matplotlib can write."""
     from matplotlib.figure import Figure
 
     ext = os.path.splitext(path)[1].lower().lstrip(".")
     supported = Figure().canvas.get_supported_filetypes()
     if ext not in supported:
         raise InputError(
-            f"--plot: cannot tell the image format of {path!r}; use one of the extensions "
+            f"{option}: cannot tell the image format of {path!r}; use one of the extensions "
             f"{', '.join('.' + e for e in sorted(supported))}"
         )
 

@@ -208,7 +208,7 @@ def _refined(profile, tau, split: int = 4):
     return np.unique(np.concatenate([s, *extra]))
 
 
-def _time_planned(pieces, layout, lim, max_tip_speed, max_q_speed, rate, grid, refinements: int = 3):
+def _time_planned(pieces, layout, lim, max_tip_speed, max_q_speed, rate, grid, refinements: int = 1):
     """Time every piece, sample, and where the samples' divided differences exceed a limit, refine
     TOPP-RA's grid there (``refinements`` rounds), then slow the piece down uniformly."""
     vmax, amax = lim.max_speed.reshape(-1), lim.max_acceleration.reshape(-1)
