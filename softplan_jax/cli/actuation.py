@@ -1,4 +1,4 @@
-"""``softplan run``'s actuators: the options of an actuator layout and its limits
+"""``softplan run``'s actuators: the checks of the options of an actuator layout and its limits
 (``--tendons 3 --tendon-radius 0.03 --max-actuator-speed 0.02 ...``), the scene's
 segment length limits that follow from them, the timed trajectory of the plan
 (:func:`softplan_jax.time_parametrize`) written with ``--export`` (CSV and JSON)
@@ -14,45 +14,11 @@ import sys
 
 from .common import InputError, warn
 
-__all__ = ["add_actuator_options", "check_actuator_args", "constrain", "time_run", "write_outputs", "summary_rows"]
+__all__ = ["check_actuator_args", "constrain", "time_run", "write_outputs", "summary_rows"]
 
 _LIMIT_FLAGS = (("min_actuator_length", "--min-actuator-length"), ("max_actuator_length", "--max-actuator-length"),
                 ("max_actuator_speed", "--max-actuator-speed"),
                 ("max_actuator_acceleration", "--max-actuator-acceleration"), ("max_tip_speed", "--max-tip-speed"))
-
-
-def add_actuator_options(run) -> None:
-    """The options of ``softplan run`` for actuators and timed trajectories (one argument group)."""
-    g = run.add_argument_group("actuators and timed trajectories (see the documentation's Actuators page)")
-    g.add_argument("--tendons", type=int, default=None, metavar="K",
-                   help="K >= 3 tendons per segment, evenly spaced, each from the base to its segment's tip")
-    g.add_argument("--chambers", type=int, default=None, metavar="K",
-                   help="K >= 3 extensible chambers per segment, evenly spaced (pneumatic or hydraulic)")
-    g.add_argument("--tendon-radius", type=float, default=None, metavar="R",
-                   help="the tendons' distance from the backbone, > 0 (the scene's length unit, m)")
-    g.add_argument("--chamber-radius", type=float, default=None, metavar="R",
-                   help="the chambers' distance from the backbone, > 0")
-    g.add_argument("--min-actuator-length", type=float, default=None, metavar="M",
-                   help="shortest actuator length, > 0 (the planner's segment length limits follow from it)")
-    g.add_argument("--max-actuator-length", type=float, default=None, metavar="M",
-                   help="longest actuator length, > 0 (the planner's segment length limits follow from it)")
-    g.add_argument("--max-actuator-speed", type=float, default=None, metavar="V",
-                   help="largest actuator speed, > 0 m/s: the timed trajectory is as fast as this allows")
-    g.add_argument("--max-actuator-acceleration", type=float, default=None, metavar="A",
-                   help="largest actuator acceleration, > 0 m/s^2 (default: none)")
-    g.add_argument("--max-tip-speed", type=float, default=None, metavar="V",
-                   help="largest tip speed, > 0 m/s (default: none)")
-    g.add_argument("--timing", choices=("smooth", "linear"), default="smooth",
-                   help="smooth: the spline through the plan's steps where the swept check proves it clear, the "
-                   "plan's straight motions elsewhere (default); linear: the straight motions, stopping at every step")
-    g.add_argument("--sample-rate", type=float, default=100.0, metavar="HZ",
-                   help="samples per second of the timed trajectory, > 0 (default 100; every step is a sample too)")
-    g.add_argument("--export", default=None, metavar="FILE.csv",
-                   help="write the timed trajectory as FILE.csv (one row per sample: t, q, actuator lengths and "
-                   "speeds, tip) and FILE.json (the same with units, arm, layout, limits, status); needs a layout "
-                   "and --max-actuator-speed or --max-tip-speed")
-    g.add_argument("--plot-actuators", default=None, metavar="PATH",
-                   help="write a figure of the actuator lengths, speeds and accelerations against time, with the limits")
 
 
 def _layout_args(args):
@@ -85,10 +51,13 @@ def export_paths(path: str) -> tuple[str, str]:
     return stem + ".csv", stem + ".json"
 
 
-def check_actuator_args(args, inputs, outputs) -> None:
-    """The actuator options of ``softplan run``, checked before planning: sets ``args.actuators``
-    (``(kind, count, radius)`` or None); ``inputs``/``outputs``: paths the outputs must not be."""
+def check_actuator_args(args) -> None:
+    """The actuator options of ``softplan run``, checked before planning (after
+    :func:`~.parser.check_run_args`): sets ``args.actuators`` (``(kind, count, radius)`` or None)."""
     from .parser import check_output_path, check_plot_format
+
+    inputs = [p for p in (args.scenario, getattr(args, "gains_file", None)) if p and os.path.isfile(p)]
+    outputs = [args.plot, args.gif, args.out]
 
     args.actuators = _layout_args(args)
     for name, flag in _LIMIT_FLAGS:

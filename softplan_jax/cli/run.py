@@ -21,7 +21,7 @@ import os
 import sys
 import time
 
-from .actuation import constrain, summary_rows, time_run, write_outputs
+from .actuation import check_actuator_args, constrain, summary_rows, time_run, write_outputs
 from .common import (
     InputError,
     fmt_gain_values,
@@ -117,6 +117,7 @@ def cmd_run(args) -> int:
 
     static_names = paper_names()
     check_run_args(args, static_names + _moving_names())
+    check_actuator_args(args)
     dtype = jnp.float32 if args.float32 else jnp.float64
     if args.scenario in _moving_names() or (args.scenario not in static_names and _is_moving_file(args.scenario)):
         return _cmd_track(args, dtype)

@@ -193,9 +193,13 @@ def _excess(t, lengths, tip, lim, max_tip_speed):
 
 
 def _initial_grid(piece: Piece, grid: int):
-    """TOPP-RA's grid of a piece: ``grid`` intervals between consecutive breaks."""
+    """TOPP-RA's grid of a piece: ``grid`` intervals between consecutive breaks, and a short first and
+    last interval (1e-4 of the first and last span): the piece starts and ends at rest, and with no
+    acceleration limit its first interval would otherwise be crossed at half speed on average."""
     b = piece.breaks
-    return np.unique(np.concatenate([np.linspace(x, y, grid + 1) for x, y in zip(b[:-1], b[1:], strict=True)]))
+    ends = [b[0] + 1e-4 * (b[1] - b[0]), b[-1] - 1e-4 * (b[-1] - b[-2])]
+    return np.unique(np.concatenate([np.linspace(x, y, grid + 1) for x, y in zip(b[:-1], b[1:], strict=True)]
+                                    + [ends]))
 
 
 def _refined(profile, tau, split: int = 4):
