@@ -261,6 +261,21 @@ def check_realisable(lengths, q, radius, angles, kind: str, tolerance: float = R
                          "larger tolerance for measured lengths)")
 
 
+def _inverse(lengths, radius, angles, kind: str, tolerance: float):
+    """The inverse of a kind's lengths, checked (the two public inverses)."""
+    lengths = _check_lengths(lengths, None)
+    radius, angles = _arrangement(lengths, radius, angles, lengths.shape[0])
+    if angles.shape[1] != lengths.shape[1]:
+        raise ValueError(f"lengths has {lengths.shape[1]} {kind}s per segment, angles {angles.shape[1]}")
+    if kind == "tendon":
+        fn = _from_tendons_jit if is_concrete(lengths) else _from_tendons
+    else:
+        fn = _from_chambers_jit if is_concrete(lengths) else _from_chambers
+    q = fn(lengths, radius, angles)
+    check_realisable(lengths, q, radius, angles, kind, tolerance)
+    return q
+
+
 def configuration_from_tendons(lengths, radius, angles, tolerance: float = REALISE_TOLERANCE):
     """The configuration whose tendons have ``lengths`` (the inverse of :func:`tendon_lengths`).
 
@@ -279,13 +294,7 @@ def configuration_from_tendons(lengths, radius, angles, tolerance: float = REALI
     Raises:
       ValueError: bad shapes or values, or (concrete input) lengths no configuration realises.
     """
-    lengths = _check_lengths(lengths, None)
-    radius, angles = _arrangement(lengths, radius, angles, lengths.shape[0])
-    if angles.shape[1] != lengths.shape[1]:
-        raise ValueError(f"lengths has {lengths.shape[1]} tendons per segment, angles {angles.shape[1]}")
-    q = (_from_tendons_jit if is_concrete(lengths) else _from_tendons)(lengths, radius, angles)
-    check_realisable(lengths, q, radius, angles, "tendon", tolerance)
-    return q
+    return _inverse(lengths, radius, angles, "tendon", tolerance)
 
 
 def configuration_from_chambers(lengths, radius, angles, tolerance: float = REALISE_TOLERANCE):
@@ -300,13 +309,7 @@ def configuration_from_chambers(lengths, radius, angles, tolerance: float = REAL
     Returns:
       (n, 3) configuration.
     """
-    lengths = _check_lengths(lengths, None)
-    radius, angles = _arrangement(lengths, radius, angles, lengths.shape[0])
-    if angles.shape[1] != lengths.shape[1]:
-        raise ValueError(f"lengths has {lengths.shape[1]} chambers per segment, angles {angles.shape[1]}")
-    q = (_from_chambers_jit if is_concrete(lengths) else _from_chambers)(lengths, radius, angles)
-    check_realisable(lengths, q, radius, angles, "chamber", tolerance)
-    return q
+    return _inverse(lengths, radius, angles, "chamber", tolerance)
 
 
 def actuator_lengths(q, layout: ActuatorLayout):
