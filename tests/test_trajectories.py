@@ -324,3 +324,18 @@ def test_bad_files(tmp_path, timed):
     with pytest.raises(ValueError, match=r"not valid JSON"):
         sp.load_trajectory(tmp_path / "w.json")
     assert math.isfinite(traj.duration)
+
+
+def test_plot_actuators(timed):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = sp.plotting.plot_actuators(timed["smooth"])
+    assert len(fig.axes) == 3  # lengths, speeds, accelerations (an acceleration limit is set)
+    limit_lines = [ln for ln in fig.axes[1].get_lines() if np.ptp(ln.get_ydata()) == 0 and abs(ln.get_ydata()[0]) > 0]
+    assert {round(abs(ln.get_ydata()[0]), 6) for ln in limit_lines} == {LIMITS["max_speed"]}
+    plt.close(fig)
+    with pytest.raises(ValueError, match=r"traj must be a Trajectory"):
+        sp.plotting.plot_actuators(timed["smooth"].q)
