@@ -72,6 +72,7 @@ def test_actuator_length_limits_bound_the_planner(capsys):
     s = json.loads(out)
     assert [hi for _, hi in s["segment_length_limits"]] == [1.05] * 3
     assert s["extension"]["bounded"] and s["extension"]["stretch"] <= 1.05 + 1e-12
+    assert "--max-actuator-speed" not in err
 
 
 def test_unbounded_extension_is_warned(tmp_path, capsys):

@@ -73,6 +73,10 @@ def check_actuator_args(args) -> None:
     if not (math.isfinite(args.sample_rate) and args.sample_rate > 0):
         raise InputError(f"--sample-rate must be a finite number > 0, got {args.sample_rate}")
     timed = args.export is not None or args.plot_actuators is not None
+    if not timed:
+        unused = [flag for name, flag in _LIMIT_FLAGS[2:] if getattr(args, name) is not None]
+        if unused:
+            warn(f"{', '.join(unused)} time the plan for --export or --plot-actuators; without either, ignored")
     if timed and args.actuators is None:
         raise InputError("--export and --plot-actuators need an actuator layout: --tendons K --tendon-radius R "
                          "(or --chambers K --chamber-radius R)")
