@@ -48,6 +48,7 @@ SCRIPTS = {
     "reach": [[]],
     "moving": [[]],
     "evasion": [[]],
+    "timing": [[]],
     "engine": [[]],
     "step_profile": [[]],
     "fallback_chunk": [[]],

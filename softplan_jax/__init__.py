@@ -7,6 +7,8 @@ sub-namespaces, one per layer of the package, read top-down:
 * :mod:`softplan_jax.cli` -- the ``softplan`` command;
 * :mod:`softplan_jax.plotting` -- figures and animations (matplotlib);
 * :mod:`softplan_jax.tuning` -- tuning the gains on a suite, gains files;
+* :mod:`softplan_jax.trajectories` -- timed trajectories of the actuators (TOPP-RA),
+  their files;
 * :mod:`softplan_jax.sweeps` -- sweeps at scale: a seeded random suite of any
   size planned in chunks, in constant memory, streamed to disk, resumable;
 * :mod:`softplan_jax.search` -- reachability and the certified global fallback;
@@ -15,6 +17,7 @@ sub-namespaces, one per layer of the package, read top-down:
 * :mod:`softplan_jax.clouds` -- obstacles fitted to point clouds;
 * :mod:`softplan_jax.scenarios` -- scenes: static and moving, the paper's,
   random suites, the JSON format;
+* :mod:`softplan_jax.actuators` -- tendon and chamber lengths, their limits;
 * :mod:`softplan_jax.geometry` -- kinematics, curves, exact closest points,
   clearance;
 * :mod:`softplan_jax.base` -- numerics, input checks, status codes, the
@@ -27,6 +30,7 @@ import importlib as _importlib
 from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
 from importlib.metadata import version as _version
 
+from . import actuators as actuators
 from . import clouds as clouds
 from . import geometry as geometry
 from . import moving as moving
@@ -34,6 +38,7 @@ from . import planning as planning
 from . import scenarios as scenarios
 from . import search as search
 from . import sweeps as sweeps
+from . import trajectories as trajectories
 from . import tuning as tuning
 from .base.compilation_cache import disable_compilation_cache, enable_compilation_cache
 from .base.compilation_cache import enable_default_cache as _enable_default_cache
@@ -52,6 +57,7 @@ from .scenarios.motion import make_moving_scenario
 from .scenarios.moving import moving_scenario
 from .search.fallback import plan_fallback
 from .search.tracking import track_fallback
+from .trajectories import Trajectory, load_trajectory, save_trajectory, time_parametrize
 from .tuning.gains_file import load_gains, save_gains
 
 # jax's persistent compilation cache on for the planner's programs, unless the user set one or
@@ -98,6 +104,11 @@ __all__ = [
     "track",
     "track_batch",
     "track_fallback",
+    # actuators over time
+    "Trajectory",
+    "time_parametrize",
+    "save_trajectory",
+    "load_trajectory",
     # gains
     "apply_preset",
     "save_gains",

@@ -30,6 +30,8 @@ PUBLIC = [
     "plan", "plan_batch", "plan_fallback",
     # moving goals and obstacles
     "moving_scenario", "make_moving_scenario", "track", "track_batch", "track_fallback",
+    # actuators over time
+    "Trajectory", "time_parametrize", "save_trajectory", "load_trajectory",
     # gains
     "apply_preset", "save_gains", "load_gains", "enable_compilation_cache", "disable_compilation_cache",
     "__version__",
@@ -39,7 +41,7 @@ PUBLIC = [
 NAMESPACES = {
     "geometry": "motion_bound", "scenarios": "stack_scenarios", "clouds": "fit_curves", "planning": "rollout_jit",
     "search": "reachability", "sweeps": "sweep", "tuning": "tune_smoothed", "moving": "MovingScenario",
-    "plotting": "plot_snapshots", "cli": "main",
+    "plotting": "plot_snapshots", "cli": "main", "actuators": "tendon_lengths", "trajectories": "time_parametrize",
 }
 
 # The DESIGN.md contract: these names must never disappear.
@@ -192,8 +194,8 @@ def test_import_adds_no_import_hook_and_dir_is_the_face():
 # The house: folders by layer, every import pointing down, no loops, no module much over 500 lines.
 
 # Layers from the top floor down; a module may import from its own layer or any layer below.
-LAYERS = ["cli", "plotting", "tuning", "sweeps", "search", "planning", "clouds", "scenarios", "geometry", "base",
-          "testing"]
+LAYERS = ["cli", "plotting", "tuning", "sweeps", "trajectories", "search", "planning", "clouds", "scenarios",
+          "actuators", "geometry", "base", "testing"]
 TOP_LEVEL = {"softplan_jax", "softplan_jax.moving"}  # the faces, above every layer
 MAX_LINES = 500
 

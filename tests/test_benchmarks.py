@@ -206,7 +206,8 @@ def test_run_all_rejects_unknown_scripts(capsys):
 # Scripts whose quick run no other test below runs: `NAME.py --quick --out DIR/NAME` in a subprocess.
 QUICK_ONLY = ["baselines", "closest", "compile_by_degree", "devices", "engine", "evasion", "fallback_chunk",
               "fallback_compile", "gpu", "numpy_baseline", "package_programs", "paper_presets", "plan_loop",
-              "speed_targets", "step_profile", "suite_speed", "sweep_scale", "throughput", "tuners", "warm_start"]
+              "speed_targets", "step_profile", "suite_speed", "sweep_scale", "throughput", "timing", "tuners",
+              "warm_start"]
 
 
 @pytest.mark.bench

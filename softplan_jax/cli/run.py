@@ -21,6 +21,7 @@ import os
 import sys
 import time
 
+from .actuation import check_actuator_args, constrain, summary_rows, time_run, write_outputs
 from .common import (
     InputError,
     fmt_gain_values,
@@ -111,6 +112,7 @@ def cmd_run(args) -> int:
 
     static_names = paper_names()
     check_run_args(args, static_names + _moving_names())
+    check_actuator_args(args)
     dtype = jnp.float32 if args.float32 else jnp.float64
     if args.scenario in _moving_names() or (args.scenario not in static_names and _is_moving_file(args.scenario)):
         return _cmd_track(args, dtype)
@@ -144,8 +146,9 @@ def _compiling_message(what: str = "") -> None:
           "set) ...", file=sys.stderr, flush=True)
 
 
-def _static_inputs(args, dtype) -> tuple:
-    """``(scenario, label, gains, options, gain_values)`` of a static scene (InputError: bad input)."""
+def _static_inputs(args, dtype, actuator_summary: dict) -> tuple:
+    """``(scenario, label, gains, options, gain_values)`` of a static scene (InputError: bad input);
+    the actuators' segment length limits applied, their rows added to ``actuator_summary``."""
     from ..planning.options import make_options
     from ..planning.programs import prng_key
     from ..planning.records import check_rollout_memory
@@ -153,6 +156,7 @@ def _static_inputs(args, dtype) -> tuple:
     try:
         scenario, label = _load(args, dtype)
         scenario, gains, extra, gain_values = resolve_gains(args, scenario, args.method, args.n_points)
+        scenario = constrain(args, scenario, actuator_summary)  # the actuators' segment length limits
         options = make_options(args.method, args.n_points, **_plan_extra(args, extra))
         check_rollout_memory(scenario, options, int(args.max_steps))  # before anything is allocated
         prng_key(args.seed)  # a seed out of range: bad input before anything compiles
@@ -166,7 +170,8 @@ def _cmd_plan(args, dtype) -> int:
     from ..planning.planner import result_from_rollout, unreachable_result
     from ..scenarios.scenario import unreachable_reason
 
-    scenario, label, gains, options, gain_values = _static_inputs(args, dtype)
+    actuator_summary = {}
+    scenario, label, gains, options, gain_values = _static_inputs(args, dtype, actuator_summary)
     times = dict(compile_time_s=0.0, run_time_s=0.0, fallback_time_s=0.0, program_from_cache=False)
     escapes = local_steps = 0
     reason = unreachable_reason(scenario)
@@ -192,6 +197,8 @@ def _cmd_plan(args, dtype) -> int:
         times["fallback_time_s"] = time.perf_counter() - t0
     summary = _plan_summary(args, label, scenario, options, gain_values, result, escapes, times)
     summary["time_per_step_s"] = times["run_time_s"] / max(local_steps, 1)
+    summary.update(actuator_summary)
+    traj = time_run(args, scenario, result, options, summary)  # before any output: nothing written if it fails
     title = (
         f"{label} — {args.method} method"
         + (f" (N = {args.n_points})" if args.method == "points" else "")
@@ -205,6 +212,7 @@ def _cmd_plan(args, dtype) -> int:
                   lambda plotting, path: plotting.animate(scenario, result, path, title=title.split("\n")[0]))
     if args.out is not None:
         _write_out(args, summary, trajectory_record(result, scenario, summary))
+    write_outputs(args, traj, scenario, summary)
     return report(args, summary, lambda: _text_summary(summary), result.reached)
 
 
@@ -246,9 +254,10 @@ def _plan_summary(args, label, scenario, options, gain_values, result, escapes, 
     }
 
 
-def _moving_inputs(args, dtype) -> tuple:
+def _moving_inputs(args, dtype, actuator_summary: dict) -> tuple:
     """``(moving, gains, options, preset, extra, gain_values)`` of a moving scene (InputError:
-    bad input): the preset's tracking options, then those given on the command line."""
+    bad input): the preset's tracking options, then those given on the command line; the
+    actuators' segment length limits applied, their rows added to ``actuator_summary``."""
     from ..planning.options import make_track_options
     from ..planning.programs import prng_key
     from ..planning.records import check_rollout_memory
@@ -263,6 +272,7 @@ def _moving_inputs(args, dtype) -> tuple:
             moving = load_moving_scenario(args.scenario, dtype=dtype)
             preset = {}
         scenario, gains, extra, gain_values = resolve_gains(args, moving.scene, args.method, args.n_points)
+        scenario = constrain(args, scenario, actuator_summary)  # the actuators' segment length limits
         moving = moving._replace(scene=scenario)
         extra = _plan_extra(args, extra)
         for name in ("anticipation", "hold_tolerance", "evasion_speed", "barrier_gain"):
@@ -284,7 +294,8 @@ def _cmd_track(args, dtype) -> int:
     """``softplan run`` on a moving scene: track its goal among its moving obstacles (softplan_jax.track)."""
     from ..planning.tracking import result_from_track
 
-    moving, gains, options, preset, extra, gain_values = _moving_inputs(args, dtype)
+    actuator_summary = {}
+    moving, gains, options, preset, extra, gain_values = _moving_inputs(args, dtype, actuator_summary)
     max_steps = int(args.max_steps)
     _compiling_message(f" for a moving scene, tracked for {max_steps} steps ({max_steps * float(gains.dt):g} s "
                        "of simulated time)")
@@ -298,13 +309,15 @@ def _cmd_track(args, dtype) -> int:
         result = track_fallback(moving, args.method, args.n_points, gains, max_steps, args.seed, **preset, **extra)
     summary = _track_summary(args, options, gain_values, result, float(gains.dt), dtype)
     summary.update(compile_time_s=compile_time, program_from_cache=loaded, run_time_s=run_time,
-                   time_per_step_s=run_time / max(result.iterations, 1))
+                   time_per_step_s=run_time / max(result.iterations, 1), **actuator_summary)
+    traj = time_run(args, moving.scene, result, options.plan, summary)  # before any output
     title = (f"{args.scenario} (moving) — {args.method} method"
              + (f" (N = {args.n_points})" if args.method == "points" else "") + f" — {result.status}")
     write_figures(args, summary, lambda plotting: plotting.plot_tracking(result, title=title),
                   lambda plotting, path: plotting.animate_tracking(result, path, title=title))
     if args.out is not None:
         _write_out(args, summary, _track_record(result, summary))
+    write_outputs(args, traj, moving.scene, summary)
     # --require-reached asks for success: the tip on the goal at the end, "reached" (held from the
     # first reach) or "held" (left and regained); "lost", "max_steps", "collided", ... are not.
     return report(args, summary, lambda: _track_text(summary, result, options),
@@ -382,6 +395,7 @@ def _track_text(summary: dict, result, options) -> str:
          + (" (traced program loaded from the cache)" if summary["program_from_cache"] else "")),
         ("run time", f"{fmt_seconds(summary['run_time_s'])} for {result.iterations} steps"),
     ]
+    rows += summary_rows(summary)
     rows += [(k, summary[k]) for k in ("plot", "gif", "out") if summary[k]]
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
@@ -417,6 +431,7 @@ def _text_summary(s: dict) -> str:
         ("time per step", f"{fmt_seconds(s['time_per_step_s'])} "
          "(run time / steps taken: the planner stops within a few steps of the end)"),
     ]
+    rows += summary_rows(s)
     if s["plot"]:
         rows.append(("plot", s["plot"]))
     if s["gif"]:

@@ -8,9 +8,12 @@ Imported on its own (``import softplan_jax.plotting``): the planner does not nee
 * :mod:`.animation` — animated GIFs of a plan and of a tracking run.
 * :mod:`.clouds` — a point cloud with the curves fitted to it.
 * :mod:`.benchmark` — collision rate against cost per step.
+* :mod:`.actuators` — a timed trajectory's actuator lengths, speeds and accelerations against time, with
+  their limits.
 * :mod:`.scene` — what they share: the plan's data on the host, the view box, the scene and the arm.
 """
 
+from .actuators import plot_actuators
 from .animation import animate, animate_tracking
 from .benchmark import plot_benchmark
 from .clouds import plot_cloud_fit
@@ -27,4 +30,5 @@ __all__ = [
     "animate_tracking",
     "plot_cloud_fit",
     "plot_benchmark",
+    "plot_actuators",
 ]

@@ -11,6 +11,8 @@ the library is never compared with itself:
 * :mod:`.oracle_geometry`: the kinematics (section 2.1, complex-step
   Jacobians), the obstacle curves, and the clearance to moving curves sampled
   in space and time;
+* :mod:`.oracle_actuators`: actuator lengths as polylines of each tendon's path
+  offset in a parallel-transported frame (a NumPy loop);
 * :mod:`.case_makers`: the generators of closest-point cases (random, touching,
   crossing, parallel, boundary minima, long curves, the paper's obstacles);
 * :mod:`.closest_cases`: the case corpus (~1,200 cases in four families) and
@@ -19,6 +21,6 @@ the library is never compared with itself:
     from softplan_jax.testing import closest_cases, oracle
 """
 
-from . import case_makers, closest_cases, oracle, oracle_geometry
+from . import case_makers, closest_cases, oracle, oracle_actuators, oracle_geometry
 
-__all__ = ["case_makers", "closest_cases", "oracle", "oracle_geometry"]
+__all__ = ["case_makers", "closest_cases", "oracle", "oracle_geometry", "oracle_actuators"]
