@@ -71,7 +71,7 @@ def _box_clear(center, width, scenario, solver, contact):
     return jax.vmap(one)(center, width)
 
 
-_box_clear_jit = package_jit(_box_clear, "curve", static_argnames=("solver",))
+_box_clear_jit = package_jit(_box_clear, "exact", static_argnames=("solver",))
 
 
 def _prove(boxes, scenario, solver, contact: float, n: int) -> np.ndarray:
