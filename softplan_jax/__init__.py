@@ -1,30 +1,18 @@
-"""softplan_jax: a JAX-accelerated, differentiable path planner for soft
-continuum arms around curve-like obstacles (branches, pipes, wires).
-
-The top level holds what a planning script uses (``__all__``); the rest is in
-sub-namespaces, one per layer of the package, read top-down:
-
-* :mod:`softplan_jax.cli` -- the ``softplan`` command;
-* :mod:`softplan_jax.plotting` -- figures and animations (matplotlib);
-* :mod:`softplan_jax.tuning` -- tuning the gains on a suite, gains files;
-* :mod:`softplan_jax.trajectories` -- timed trajectories of the actuators (TOPP-RA),
-  their files;
-* :mod:`softplan_jax.sweeps` -- sweeps at scale: a seeded random suite of any
-  size planned in chunks, in constant memory, streamed to disk, resumable;
-* :mod:`softplan_jax.search` -- reachability and the certified global fallback;
-* :mod:`softplan_jax.planning` -- the planner of paper eq. (9), its rollout
-  engine, planning and tracking;
-* :mod:`softplan_jax.clouds` -- obstacles fitted to point clouds;
-* :mod:`softplan_jax.scenarios` -- scenes: static and moving, the paper's,
-  random suites, the JSON format;
-* :mod:`softplan_jax.actuators` -- tendon and chamber lengths, their limits;
-* :mod:`softplan_jax.geometry` -- kinematics, curves, exact closest points,
-  clearance;
-* :mod:`softplan_jax.base` -- numerics, input checks, status codes, the
-  compilation cache.
-
-:mod:`softplan_jax.moving` gathers what moving scenes and tracking need.
-"""
+"""softplan_jax: a JAX-accelerated, differentiable path planner for soft continuum arms around
+curve-like obstacles (branches, pipes, wires). The top level holds what a planning script uses
+(``__all__``); the rest is in sub-namespaces, one per layer of the package, read top-down:
+:mod:`softplan_jax.cli` (the ``softplan`` command), :mod:`softplan_jax.plotting` (matplotlib),
+:mod:`softplan_jax.tuning` (tuning the gains, gains files), :mod:`softplan_jax.trajectories`
+(timed trajectories of the actuators, TOPP-RA, their files), :mod:`softplan_jax.sweeps` (a seeded
+random suite of any size, planned in chunks in constant memory, resumable),
+:mod:`softplan_jax.search` (reachability and the certified global fallback),
+:mod:`softplan_jax.planning` (the planner of paper eq. 9, its rollout engine, planning and
+tracking), :mod:`softplan_jax.clouds` (obstacles fitted to point clouds),
+:mod:`softplan_jax.scenarios` (static and moving scenes, the paper's, random suites, the JSON
+format), :mod:`softplan_jax.actuators` (tendon and chamber lengths, their limits),
+:mod:`softplan_jax.geometry` (kinematics, curves, exact closest points, clearance) and
+:mod:`softplan_jax.base` (numerics, input checks, status codes, the compilation cache);
+:mod:`softplan_jax.moving` gathers what moving scenes and tracking need."""
 
 import importlib as _importlib
 from importlib.metadata import PackageNotFoundError as _PackageNotFoundError

@@ -207,7 +207,7 @@ def test_batched_fallback_under_nested_vmap():
 
 def test_fallback_trip_bound_by_platform():
     """The fallback loop's trip bound: CPU_FALLBACK_TRIPS in a program traced for a CPU,
-    FALLBACK_TRIPS on an accelerator (warm_start's docstring, "Fallback cost")."""
+    FALLBACK_TRIPS on an accelerator (docs: "How the planner works inside", "The fallback's cost")."""
     assert ws.fallback_trips("cpu") == ws.CPU_FALLBACK_TRIPS
     assert ws.fallback_trips("gpu") == ws.fallback_trips("tpu") == ws.FALLBACK_TRIPS
     assert ws.fallback_trips() == ws.fallback_trips(jax.default_backend())

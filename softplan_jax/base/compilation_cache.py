@@ -1,47 +1,14 @@
-"""jax's persistent compilation cache for the planner's users (not part of the
-paper's method: it keeps compiled rollouts on disk, so the second run of a
-script, notebook or ``softplan run`` skips the XLA compilation).
-
-On by default: ``import softplan_jax`` calls :func:`enable_default_cache`, so
-that a script's or notebook's second run loads the planner's compiled programs
-from disk instead of compiling them again (the README's quick start: about
-three times faster from the second run). The directory is
-``$SOFTPLAN_CACHE_DIR/jax`` if set, else ``$XDG_CACHE_HOME/softplan_jax/jax``
-(default ``~/.cache/softplan_jax/jax``). jax keeps the programs that took at
-least ``jax_persistent_cache_min_compile_time_secs`` (default 1 s) to compile:
-the planner's rollouts and searches, and any such program of the same process.
-
-Turning it off: ``SOFTPLAN_JAX_NO_CACHE=1`` (or ``SOFTPLAN_COMPILATION_CACHE=0``)
-in the environment before the import, or :func:`disable_compilation_cache`
-after it (before the first plan; it also stops ``softplan run``'s traced
-programs below). A cache the user configured is never touched: a directory
-already given to jax (the ``JAX_COMPILATION_CACHE_DIR`` environment variable or
-``jax.config.update("jax_compilation_cache_dir", ...)`` before the import; a
-later update simply wins, as jax reads the setting at its first compilation),
-and ``jax_enable_compilation_cache=False``.
-
-jax's cache skips XLA's compilation but not the tracing and lowering of the
-rollout in Python, which cost more than the rest of a second ``softplan run``
-(about 1.5 s of 4 s). :func:`load_or_export` (used by ``rollout_jit.cached``, which ``softplan run``
-calls) also keeps the TRACED rollout on
-disk, as a ``jax.export`` artifact (StableHLO) in ``exported/`` beside the
-``jax/`` directory: a second call with the same key deserialises it and
-compiles it, a hit in jax's cache. The key hashes everything the program
-depends on: the source of every module of this package, the jax and jaxlib
-versions, the backend and device kind, ``jax_enable_x64``, ``XLA_FLAGS``, the
-static arguments (options, ``max_steps``), the pytree structure and the
-argument shapes and dtypes. Scenarios with a
-:class:`~softplan_jax.geometry.curves.ParametricCurve` (a Python function, not data) are
-not kept. Any failure to read or write an artifact falls back to the ordinary
-compilation.
-
-:func:`compiler_options` holds the XLA options of the package's programs, by kind of
-program: ``"exact"`` (exact closest-point solves: no YNN fusions, XLA's elemental emitter),
-``"samples"`` (sampled geometry: no YNN fusions) or None (plain helpers, XLA's defaults named).
-They are passed per program (:class:`package_jit`), never through ``XLA_FLAGS`` or jax's
-global configuration; ``SOFTPLAN_XLA_OPTIONS=0`` compiles with XLA's defaults instead. How
-they were chosen: the documentation's Performance page.
-"""
+"""jax's persistent compilation cache for the planner's users, traced rollouts kept on disk, and the
+XLA options of the package's programs (not part of the paper's method). ``import softplan_jax``
+turns the cache on (:func:`enable_default_cache`; the directory ``$SOFTPLAN_CACHE_DIR/jax``, else
+``$XDG_CACHE_HOME/softplan_jax/jax``, default ``~/.cache/softplan_jax/jax``) unless the user gave
+jax a directory or opted out (``SOFTPLAN_JAX_NO_CACHE=1`` or ``SOFTPLAN_COMPILATION_CACHE=0`` before
+the import, :func:`disable_compilation_cache` before the first plan); :func:`load_or_export` keeps a
+traced rollout as a ``jax.export`` artifact keyed by everything its program depends on; and
+:func:`compiler_options` gives each kind of program (``"exact"``, ``"samples"``, None) its XLA
+options, passed per program (:class:`package_jit`), never through ``XLA_FLAGS`` or jax's global
+configuration (``SOFTPLAN_XLA_OPTIONS=0``: XLA's defaults). Docs: "How the planner works inside",
+"The compilation cache"."""
 
 from __future__ import annotations
 

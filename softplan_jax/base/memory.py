@@ -1,17 +1,11 @@
-"""How much memory a request would take, checked before anything is allocated
-(not part of the paper's method: the boundary of the public functions).
-
-A size a user types (``max_steps``, a batch's scene count, the N of the
-N-point model, an arm's segment count) decides how large the arrays of a
-rollout are. :func:`check_memory` compares an estimate of those bytes with
-the memory this process can have (:func:`available_memory`: the host's
-available memory, within a container's limit, and a GPU's free memory where
-the arrays live there) and raises a ``ValueError`` naming the field, instead
-of letting the allocation fail deep inside XLA with a runtime traceback.
-The estimates are of the arrays the library allocates (records, buffers,
-copies), not of XLA's temporaries: the check refuses what cannot fit, it
-does not promise that everything below the limit will.
-"""
+"""How much memory a request would take, checked before anything is allocated (not part of the
+paper's method: the boundary of the public functions). :func:`check_memory` compares an estimate
+of the arrays that a size a user types makes (``max_steps``, a batch's scene count, the N of the
+N-point model, an arm's segment count) with the memory this process can have
+(:func:`available_memory`: the host's available memory within a container's limit, and a GPU's
+free memory where the arrays live there), and raises a ``ValueError`` naming the field instead of
+letting the allocation fail deep inside XLA. The estimates cover the library's arrays, not XLA's
+temporaries: the check refuses what cannot fit, it does not promise that everything below will."""
 
 from __future__ import annotations
 

@@ -1,23 +1,9 @@
-"""Dtype-aware numerics: the PCC kinematics' singular ratios, a damped
-pseudo-inverse, and every tolerance and threshold of the solvers (the closest
-point of paper §2.3, the rollout's contact test).
-
-The arc of a PCC segment involves ``(1 - cos x) / x`` and ``sin(x) / x``, which
-are 0/0 at ``x = 0`` (a straight segment).  Both are evaluated with a Taylor
-series below a dtype-dependent threshold and with the closed form above it,
-using the "double where" shim so that neither branch ever produces a NaN that
-reverse mode could multiply by zero (jaxlie ``_so3.py``; optax
-``numerics.safe_norm``).
-
-The threshold is chosen so that BOTH branches are accurate to machine
-precision in value and in the first two derivatives:
-
-* the closed form's k-th derivative loses about ``eps / x**k`` to cancellation,
-  so the threshold must not be too small (float64: 0.1 gives ~1e-14 for k = 2);
-* the series, truncated after the ``x**8`` term, has a truncation error below
-  ``x**10 / 11!`` (3e-18 at 0.1, 3e-11 at 0.5: far below float32's 6e-8), and
-  its second derivative below ``90 x**8 / 11!`` (2e-14 at 0.1).
-"""
+"""Dtype-aware numerics: the PCC kinematics' singular ratios ``(1 - cos x) / x`` and ``sin(x) / x``
+(a Taylor series below a dtype-dependent threshold, the closed form above, joined by the "double
+where" shim so that reverse mode never multiplies a NaN by zero; jaxlie ``_so3.py``, optax
+``numerics.safe_norm``), a damped pseudo-inverse, small solves without LAPACK, masked and batched
+evaluation, and every tolerance and threshold of the solvers (the closest point of paper §2.3, the
+rollout's contact test). How the threshold was chosen: docs, "How the planner works inside"."""
 
 from __future__ import annotations
 
@@ -220,7 +206,7 @@ def tie(tree, ref):
     start under ``vmap``. The batching rule of ``lax.scan`` / ``lax.while_loop``
     batches the loop body once more for every carry leaf that starts unbatched
     and comes out batched (a fixpoint); tracing is most of a rollout's compile
-    time (``vmap`` of the checked rollout, batch of 64: trace 2.6 -> 1.9 s).
+    time (docs: "How the planner works inside").
     The ``select(p, x, x)`` is removed by XLA's algebraic simplifier; no runtime
     cost. Integer and bool leaves are tied too; NaN-safe (no arithmetic on ref)."""
     if jnp.size(ref) == 0:
@@ -267,7 +253,7 @@ def when_any(pred, fn, skip, operands, chunk: int | str | None = None):
     its elements: ``fn`` vmapped over the whole batch when ANY element needs it (the
     others keep ``skip``'s value), else ``skip`` alone. For a step that almost never
     needs ``fn`` (the evasive step of :mod:`softplan_jax.planning.evasion`) this costs
-    the batch a predicate, where ``evaluate_where``'s loop cost about a tenth of a step.
+    the batch a predicate, less than ``evaluate_where``'s loop (docs: Moving scenes).
     ``fn`` and ``skip`` return pytrees of the same structure; not differentiable
     (``jax.custom_batching.custom_vmap``). ``chunk``: None, ``fn`` vmapped over the whole
     batch; an int, over the elements that need it only, ``chunk`` at a time

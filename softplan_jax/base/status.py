@@ -16,7 +16,7 @@ __all__ = ["Status", "STATUS_NAMES", "status_name"]
 
 
 class Status(enum.IntEnum):
-    """Rollout status codes (stored as int32 in a :class:`Rollout`;
+    """Rollout status codes (stored as int32 in a :class:`~softplan_jax.planning.records.Rollout`;
     ``Status(code).label`` is the name used in reports and JSON)."""
 
     RUNNING = 0

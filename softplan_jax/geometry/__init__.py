@@ -1,23 +1,13 @@
-"""Geometry of the arm and the obstacles: no planning here.
-
-* :mod:`.kinematics` -- piecewise-constant-curvature forward kinematics
-  (paper section 2.1), Jacobians by ``jax.jacfwd``, the motion bound;
-* :mod:`.curves` -- curve-like obstacles F_o(u) (paper eq. 10);
-* :mod:`.closest` -- the exact closest point between an arm segment and a
-  curve (paper section 2.3): the entry points, the result type, the solver
-  options and the derivatives with respect to q;
-* :mod:`.closest_newton` -- its Newton kernel (the terms of eqs. 13-18, the
-  trust region) and the default solver: the minimum over the arc in closed
-  form, multi-start Newton in the curve parameter;
-* :mod:`.closest_grid` -- the grid-seeded variant of that solver;
-* :mod:`.warm_start` -- the certified warm start of the solver along a path;
-* :mod:`.obstacles` -- every obstacle of a scene at once (curves, point sets,
-  parametric curves);
-* :mod:`.point_sets` -- closest points between the arm and point obstacles
-  (the N-point method, exact point-to-arm distances);
-* :mod:`.clearance` -- clearance during a motion (the swept proof and the
-  between-step search) and the collision checks of a trajectory.
-"""
+"""Geometry of the arm and the obstacles, no planning: PCC kinematics, Jacobians and the motion
+bound (paper §2.1-2.2, :mod:`.kinematics`) and the arm model the engine sees (:mod:`.arm`);
+curve-like obstacles (eq. 10, :mod:`.curves`); the exact closest point between an arm segment and
+a curve (§2.3: the entry points and derivatives :mod:`.closest`, its Newton kernel and default
+solver :mod:`.closest_newton`, the paper's grid-seeded solver :mod:`.closest_grid`, the certified
+warm start along a path :mod:`.warm_start`, the engine's providers :mod:`.closest_pairs`); every
+obstacle of a scene at once (:mod:`.obstacles`); point obstacles (the N-point method and exact
+point-to-arm distances, :mod:`.point_sets`; point-to-curve distances on the host,
+:mod:`.point_curve`); and the clearance during a motion with the collision checks of a trajectory
+(:mod:`.clearance`)."""
 
 from .clearance import dense_trajectory_clearance
 from .closest import ClosestPoint, SolverOptions, closest_point

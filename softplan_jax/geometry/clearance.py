@@ -1,40 +1,13 @@
-"""True clearance and collisions; post-hoc checks of a rollout (DESIGN.md: collision).
-
-The TRUE clearance to an obstacle is the distance from the arm backbone to the
-real obstacle (the curve itself, or the point set), minus the arm radius,
-minus the obstacle radius — whatever model the planner used. A collision is a
-clearance <= 0 anywhere along the motion, including between two planner steps
-(DESIGN.md).
-
-Between two steps the configuration moves along the straight line from q_a to
-q_b (the planner's Euler step). :func:`between_steps` searches that motion for
-the smallest distance: for every obstacle, Gauss-Newton over (tau, s, u) on
-``|P_si(q_a + tau (q_b - q_a)) - F_o(u)|^2``, started from the exact closest
-pairs at both ends. Every point it visits is a real configuration of the
-motion, so what it reports is an actual distance reached during the motion:
-a pass of the arm through a curve is reported even though both sampled
-configurations are clear, and a collision is never invented. (It could in
-principle miss a dip whose basin neither end's closest pair leads into.)
-
-The search is skipped where a proof makes it pointless (:func:`swept_clear`):
-:func:`~softplan_jax.geometry.kinematics.motion_bound` B bounds how far any arm point
-moves during the motion and the distance to an obstacle is 1-Lipschitz in the
-arm point, so the clearance stays >= c_a - B throughout (c_a: the exact
-clearance at q_a); where that exceeds the contact tolerance no collision is
-possible and the search could only report an achieved value above it. The
-skipped slots record min(c_a, c_b), also an achieved clearance. The rollout
-and :func:`apply_collision_checks` search the remaining (motion, slot) entries
-in a while loop (:func:`~softplan_jax.base.numerics.evaluate_where`), so that under
-vmap a batch pays its largest number of them, not a select over all.
-
-:func:`apply_collision_checks` adds the true-clearance and between-step
-checks to a planning-only rollout after the fact (vectorised over time).
-Every per-obstacle loop goes through :mod:`softplan_jax.geometry.obstacles`.
-
-:func:`dense_trajectory_clearance` is the slow, brute-force check of a whole
-trajectory (dense interpolation in q, dense sampling of arm and curve); the
-tests use it as an independent reference.
-"""
+"""True clearance during a motion and the collision checks of a trajectory (docs: Conventions,
+"Clearance and collision"). The true clearance is the distance from the arm backbone to the real
+obstacle (the curve itself, or the point set), minus the arm's and the obstacle's radii, whatever
+model the planner used; a collision is a clearance at or below the contact tolerance at a step or
+during the straight motion in q between two steps. :func:`between_steps` searches that motion
+(Gauss-Newton over (tau, s, u) from both ends' closest pairs: every point it visits is a real
+configuration, so a collision is never invented) where :func:`swept_clear` cannot prove it clear
+(the clearance at its start minus :func:`~softplan_jax.geometry.kinematics.motion_bound`);
+:func:`dense_trajectory_clearance` is the brute-force check that the tests use as an independent
+reference."""
 
 from __future__ import annotations
 

@@ -1,43 +1,13 @@
-"""Closest points between the arm and curve obstacles (paper §2.3): the entry points.
-
-For segment i with ``F_Ri(s)``, s in [0, 1], and an obstacle curve ``F_o(u)``,
-u in [u_min, u_max], minimise ``D_i(s, u)^2 = |F_Ri(s) - F_o(u)|^2`` over the
-box. The paper's three cases are all solved:
-
-1. interior stationary points, ``dD^2/ds = dD^2/du = 0`` (paper eqs. 13–14):
-   2-D Newton from several starts;
-2. the four boundary problems (paper eqs. 15–18): ``u = u_min`` / ``u = u_max``
-   solving ``dD^2/ds = 0`` for s, and ``s = 0`` / ``s = 1`` solving
-   ``dD^2/du = 0`` for u: 1-D Newton from several starts each;
-3. the four endpoint pairs (s, u) in {0, 1} x {u_min, u_max}.
-
-The answer is the minimum over all candidates, then over segments. Two
-solvers do this (``SolverOptions.method``); both pass the accuracy suite of
-``tests/test_closest.py`` (an independent dense-grid oracle) with zero misses:
-the default on all 1,160 cases, ``"grid"`` on the 1,120 polynomial ones.
-
-``"reduced"`` (the default, :class:`SolverOptions`). A PCC segment is a
-circular arc, so for a fixed obstacle point the minimum over s has a closed
-form; Newton then runs on the curve parameter u alone
-(:mod:`softplan_jax.geometry.closest_newton`, which holds the solver and the
-Newton kernel shared by both solvers). About four times cheaper than
-``"grid"`` per query, seven times in a batch (``benchmarks/closest.py``).
-
-``"grid"``: the paper's 2-D Newton on both stationarity equations from an
-(s, u) grid, in :mod:`softplan_jax.geometry.closest_grid`.
-
-Derivatives with respect to ``q``. The solve itself runs on
-``stop_gradient(q)``. ``distance`` is differentiated by the envelope theorem
-(``dD*/dq = dD/dq`` at the optimal ``(s*, u*)`` held fixed; valid for interior
-and boundary minima alike because the box does not depend on q).
-``s``/``u``/``arm_point``/``obstacle_point`` carry the implicit-function
-derivative ``d(s*, u*)/dq = -H_ff^{-1} d g_f/dq`` for the free coordinates f
-(those strictly inside the box), which is what a rollout differentiated end to
-end needs.
-
-Point obstacles (the N-point method of paper §3 and the exact distance of the
-arm to points) are in :mod:`softplan_jax.geometry.point_sets`.
-"""
+"""Closest points between the arm and curve obstacles (paper §2.3): the entry points, the result
+type and the solver options. For segment i and a curve F_o, ``D_i(s, u)^2 = |F_Ri(s) - F_o(u)|^2``
+is minimised over the box ``[0, 1] x [u_min, u_max]`` in the paper's three cases (interior
+stationary points, eqs. 13-14; the four boundary problems, eqs. 15-18; the four endpoint pairs),
+then over segments, by the reduced solver (:class:`SolverOptions`, the default;
+:mod:`softplan_jax.geometry.closest_newton`) or the paper's 2-D solver
+(:mod:`softplan_jax.geometry.closest_grid`). The solve runs on ``stop_gradient(q)``: the distance
+is differentiated by the envelope theorem (``(s*, u*)`` held fixed), and ``s``, ``u`` and the
+points by the implicit function theorem over the free coordinates f (those strictly inside the
+box), ``d(s*, u*)/dq = -H_ff^{-1} dg_f/dq``. Point obstacles: :mod:`softplan_jax.geometry.point_sets`."""
 
 from __future__ import annotations
 

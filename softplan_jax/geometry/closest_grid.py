@@ -1,26 +1,13 @@
 """The paper's 2-D closest-point solver (paper §2.3, eqs. 13-18), picked with
-:class:`GridSolverOptions` wherever a solver is taken.
-
-``D^2`` is evaluated on a ``grid_s x grid_u`` grid of the (s, u) box (ends
-included; half the u samples evenly spaced in u, half in arc length). Case 1
-(interior stationary points, eqs. 13-14) starts from the grid's 2-D local
-minima and from the local minima of two distance profiles -- each arm sample's
-distance to the curve, each curve sample's distance to the segment, both
-polished by a few 1-D Newton steps -- which resolve basins that fall between
-grid columns; case 2 (the boundary problems, eqs. 15-18) starts from each
-edge's local minima; case 3 is the four endpoint pairs. Every start is a point
-of the box, so the answer is never worse than the best grid point.
-
-Each Newton step solves ``H dx = -g`` with the gradient and Hessian of
-``D^2 / 2`` from the shared kernel :func:`softplan_jax.geometry.closest.pair_terms`;
-``H`` is shifted where it is not positive definite (a descent direction), a
-coordinate on a bound whose gradient points outward is held (projected
-Newton), and the step is limited by the shared trust region
-(:func:`softplan_jax.geometry.closest.trust_region_radius`) and accepted only if it
-lowers ``D^2``. The default solver (:class:`~softplan_jax.geometry.closest.SolverOptions`)
-is in :mod:`softplan_jax.geometry.closest`; this one is kept as the paper's formulation
-and as a cross-check (it passes the accuracy suite on the polynomial cases).
-"""
+:class:`GridSolverOptions` wherever a solver is taken: Newton on both stationarity equations from
+the local minima of ``D^2`` on a ``grid_s x grid_u`` grid of the (s, u) box and of two distance
+profiles (case 1), from each edge's local minima (case 2, one coordinate free) and the four
+endpoint pairs (case 3), with the shared kernel
+(:func:`~softplan_jax.geometry.closest_newton.pair_terms`) and trust region
+(:func:`~softplan_jax.geometry.closest_newton.trust_region_radius`), the Hessian shifted where it
+is not positive definite and a coordinate on a bound held where its gradient points outward
+(projected Newton). Kept as the paper's formulation and as a cross-check of the default solver
+(:mod:`softplan_jax.geometry.closest_newton`)."""
 
 from __future__ import annotations
 

@@ -1,33 +1,13 @@
 """The Newton kernel of the closest-point solvers, and the default (reduced) solver (paper §2.3).
-
-One kernel. The gradient and Hessian of ``D^2 / 2`` (paper eqs. 13-18),
-``D_i(s, u)^2 = |F_Ri(s) - F_o(u)|^2``, are written once, in
-:func:`pair_terms`; every Newton loop (both solvers, the profile polish, the
-implicit derivative, the convergence test) uses it, and all share one
-trust-region update (:func:`trust_region_radius`): a step is capped to a trust
-radius, accepted only if it lowers ``D^2`` (the radius may then grow),
-otherwise the point stays and the radius shrinks fourfold; every iterate stays
-in the box. Tolerances and curvature floors come from
-:mod:`softplan_jax.base.numerics` (dtype-aware). Fixed iteration counts, so
-everything compiles once; grid sizes, start and iteration counts were chosen
-by measurement against the oracle (``tests/test_closest.py``,
-``benchmarks/closest.py``).
-
-The reduced solver (:func:`solve_pair_reduced`, the default). A PCC segment
-(:class:`Segment`) is a circular arc, so for a fixed obstacle point the
-minimum over s has a closed form (:func:`project_to_arc`):
-``g(u) = min_s D_i(s, u)^2`` is exact for every u, and
-``min_{s,u} D^2 = min_u g(u)``. The inner minimum contains the s-boundary
-problems (paper eqs. 17-18: s* = 0 or 1); u = u_min and u = u_max are sampled,
-which gives the u-boundary problems (eqs. 15-16) and with them the endpoint
-pairs. The interior case is Newton on the remaining stationarity equation
-dD^2/du = 0 at s = s*(u) (eq. 14, with the Schur complement of the 2x2
-Hessian of eqs. 13-14 as its curvature; :func:`reduced_newton`), from the
-smallest local minima of g on a u-grid and of an arm-side profile (each of
-``grid_s`` arm points' nearest curve point), which finds basins narrower than
-the u-grid's spacing. The entry points and the derivatives with respect to q
-are in :mod:`softplan_jax.geometry.closest`.
-"""
+:func:`pair_terms` writes the gradient and Hessian of ``D^2 / 2`` (eqs. 13-18) once, and every
+Newton loop shares one trust-region update (:func:`trust_region_radius`). The reduced solver
+(:func:`solve_pair_reduced`) uses that a PCC segment (:class:`Segment`) is a circular arc:
+``g(u) = min_s D_i(s, u)^2`` is exact in closed form (:func:`project_to_arc`; it contains the
+s-boundary problems, eqs. 17-18), u = u_min and u = u_max are sampled (eqs. 15-16 and the endpoint
+pairs), and the interior case is Newton on dD^2/du = 0 at s = s*(u) (eq. 14, with the Schur
+complement of the 2x2 Hessian of eqs. 13-14 as its curvature; :func:`reduced_newton`) from the
+smallest local minima of g on a u-grid and of an arm-side profile. The entry points and the
+derivatives with respect to q are in :mod:`softplan_jax.geometry.closest`."""
 
 from __future__ import annotations
 
@@ -183,7 +163,7 @@ def trust_region_step_1d(x, step, radius, width, lo, hi):
 def local_minima_1d(vals, k: int):
     """Indices (k,) of the k smallest local minima of a 1-D array (non-minima last, by
     index; distinct indices). k passes of argmin, not ``lax.top_k`` (a sort on CPU):
-    the same indices, a few per cent off the full solver's step (benchmarks/warm_start.py)."""
+    the same indices, cheaper (docs: "How the planner works inside")."""
     inf = jnp.full((1,), jnp.inf, vals.dtype)
     padded = jnp.concatenate([inf, vals, inf])
     is_min = (vals <= padded[:-2]) & (vals <= padded[2:])

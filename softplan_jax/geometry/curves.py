@@ -1,21 +1,10 @@
-"""Curve-like obstacles ``F_o(u) = [f_x(u), f_y(u), f_z(u)]``, u in [u_min, u_max]
-(paper eq. 10).
-
-* :class:`PolynomialCurve` — coefficients ``(3, K)``, lowest degree first. Many
-  of them stack into one padded batch (``(m, 3, K)`` plus a mask) so that scenes
-  with different obstacle counts and degrees share one compiled shape.
-* :class:`ParametricCurve` — any JAX-traceable ``fn(u) -> (3,)``; derivatives by
-  ``jax.jacfwd``.
-* :func:`line_segment` — a straight segment from ``a`` to ``b`` as a degree-1
-  polynomial curve with u in [0, 1].
-
-Curves fitted to scanned point clouds (paper §2.3: "derived from a set of
-points ... using regression") are made in :mod:`softplan_jax.clouds`.
-
-Both curve classes are pytrees whose array leaves are ``coeffs``/``u_range``/
-``radius``; they give ``point``, ``derivative`` and ``second_derivative`` of a
-scalar ``u``. ``radius`` is the obstacle's thickness, used for clearance only.
-"""
+"""Curve-like obstacles ``F_o(u) = [f_x(u), f_y(u), f_z(u)]``, u in [u_min, u_max] (paper eq. 10):
+:class:`PolynomialCurve` (coefficients ``(3, K)``, lowest degree first; many stack into one padded
+batch, ``(m, 3, K)`` plus a mask, so that scenes share one compiled shape), :class:`ParametricCurve`
+(any JAX-traceable ``fn(u) -> (3,)``, derivatives by ``jax.jacfwd``) and :func:`line_segment`. Both
+classes are pytrees giving ``point``, ``derivative`` and ``second_derivative`` of a scalar u;
+``radius`` is the obstacle's thickness, for clearance only. Curves fitted to point clouds (paper
+§2.3: "derived from a set of points ... using regression") are made in :mod:`softplan_jax.clouds`."""
 
 from __future__ import annotations
 
@@ -55,7 +44,7 @@ __all__ = [
 # multiply-add per coefficient in the traced program); higher degrees by one product
 # with the power basis (:func:`_powers`), whose program does not grow with the degree.
 # The two agree to rounding; the split keeps the low-degree scenes (the paper's, random
-# suites, fits up to their default max_degree 8) on the same arithmetic as before.
+# suites, fits up to their default max_degree 8) on Horner's arithmetic, bit for bit.
 HORNER_MAX_DEGREE = 8
 
 

@@ -1,21 +1,11 @@
-"""Piecewise-constant-curvature (PCC) kinematics, exactly as the paper's §2.1–2.2.
-
-A configuration ``q`` has shape ``(n, 3)``: row i is ``[L_i, theta_i, phi_i]``.
-Segment i bends by ``theta_i`` in the direction ``phi_i``; its tip frame relative
-to its base is ``H_i^{i-1} = [[R_i, P_i], [0, 1]]`` with the paper's
-``R_i = Rz(phi_i) Ry(theta_i)`` and ``P_i`` (Webster & Jones 2010). The base of
-segment 0 is the origin with the identity orientation, z up.
-
-Every function here is pure and composes with ``jit``, ``vmap`` and ``grad``.
-``theta = 0`` (a straight segment) is an ordinary input: the ratios
-``(1 - cos x)/x`` and ``sin(x)/x`` come from :mod:`softplan_jax.base.numerics`, so
-values and derivatives of every order are finite and accurate there.
-
-There is one function per operation, plain and traceable: jit at the call
-site. Each validates its input: shapes always (at trace time), values (finite,
-``L > 0``, ``s`` in [0, 1], segment index in range) only when the input is
-concrete, i.e. not a tracer inside ``jit``/``vmap``/``grad``.
-"""
+"""Piecewise-constant-curvature (PCC) kinematics, exactly as the paper's §2.1-2.2 (Webster & Jones
+2010): ``q`` has shape ``(n, 3)``, row i ``[L_i, theta_i, phi_i]``; segment i's tip frame relative
+to its base is ``[[R_i, P_i], [0, 1]]`` with the paper's ``R_i = Rz(phi_i) Ry(theta_i)``; segment
+0's base is the origin with the identity orientation, z up. One plain, traceable function per
+operation (jit at the call site); ``theta = 0`` is an ordinary input (the ratios of
+:mod:`softplan_jax.base.numerics`: finite, accurate values and derivatives of every order).
+Shapes are checked at trace time, values (finite, ``L > 0``, ``s`` in [0, 1], the segment index)
+only when the input is concrete."""
 
 from __future__ import annotations
 
@@ -155,7 +145,7 @@ def _tip_jacobian(q):
 
 # Called on concrete arrays (a script, a notebook), the functions below run as one compiled
 # program each (found in the persistent compilation cache on later runs) instead of dozens of
-# op-by-op dispatches (about 2 s for a point Jacobian on a warm start); inside a trace (jit,
+# op-by-op dispatches (docs: "How the planner works inside"); inside a trace (jit,
 # grad, vmap) they are traced as they are, so the planner's programs do not change.
 _tip_jit = package_jit(_tip, None)
 _point_jacobian_jit = package_jit(_point_jacobian, None)
@@ -216,8 +206,8 @@ def motion_bound(q_a, q_b):
     """A sound bound on how far any arm point moves between two configurations.
 
     The motion is the planner's Euler step, the straight line
-    ``q(t) = q_a + t (q_b - q_a)``, t in [0, 1] (DESIGN.md: the motion between
-    two steps). For every segment i the bound holds for every point
+    ``q(t) = q_a + t (q_b - q_a)``, t in [0, 1] (docs: Conventions, "Clearance
+    and collision"). For every segment i the bound holds for every point
     ``P_si(q(t))``, s in [0, 1], and every t: ``|P_si(q(t)) - P_si(q_a)| <= bound[i]``.
     It is the conservative-advancement bound of continuous collision detection
     for articulated bodies (Schwarzer, Saha & Latombe 2005; Redon et al. 2005),

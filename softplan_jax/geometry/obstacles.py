@@ -1,25 +1,11 @@
-"""A scene's obstacles as one padded layout (DESIGN.md: "obstacles").
-
-A :class:`~softplan_jax.scenarios.Scenario` holds three groups of obstacle
-slots: stacked polynomial curves (``curves``, padded, ``curve_mask``), stacked
-point sets (``points`` (m_p, N, 3), padded, ``point_mask``) and parametric
-curves (the tuple ``parametric``). Every per-obstacle array of the library
-(closest points, clearance, radii, masks, the rollout's records) has ONE
-leading axis of ``m = m_c + m_p + m_par`` slots, in that group order. This
-module is the only one that knows that order: planner, metrics and plotting
-ask it for the closest points of a whole scene (:func:`true_closest`,
-:func:`model_closest`), for per-slot radii and masks
-(:func:`radius_and_mask`), for the count (:func:`obstacle_count`) and for
-samples to draw (:func:`obstacle_samples`), or map their own per-obstacle
-function over the slots (:func:`map_obstacles`) or per-group function over
-the groups of slots of one kind (:func:`map_obstacle_groups`).
-
-The closest points are the paper's: exact for curves (paper §2.3, eqs. 13-18,
-:mod:`softplan_jax.geometry.closest`), exact for point sets (the arm backbone against
-each point), or the N-point model of paper §3 (the arm sampled at
-``points_per_segment`` points per segment against ``n_points`` points of each
-curve) for ``method="points"``.
-"""
+"""A scene's obstacles as one padded layout: stacked polynomial curves, stacked point sets and
+parametric curves, in that order, give every per-obstacle array of the library one leading axis
+of ``m = m_c + m_p + m_par`` slots. This module is the only one that knows that order: it gives
+the closest points of a whole scene (exact, paper §2.3: :func:`true_closest`; as the planner
+models the obstacles, the N points of paper §3 for ``method="points"``: :func:`model_closest`),
+per-slot radii, masks and clearances, samples to draw, and maps a per-obstacle or per-group
+function over the slots (:func:`map_obstacles`, :func:`map_obstacle_groups`). Docs: "How the
+planner works inside"."""
 
 from __future__ import annotations
 
@@ -168,7 +154,7 @@ def radius_and_mask(scenario):
 
 def clearance_of(pairs: ClosestPoint, scenario):
     """(m,) the clearance of closest pairs (leading axis m): distance minus the arm's radius
-    minus the obstacle's (DESIGN.md: the true clearance), +inf for padding slots."""
+    minus the obstacle's (docs: Conventions, "Clearance and collision"), +inf for padding slots."""
     radius, mask = radius_and_mask(scenario)
     return jnp.where(mask, pairs.distance - scenario.arm_radius - radius, jnp.inf)
 

@@ -1,18 +1,9 @@
-"""Exact distance from points to a polynomial curve, on the host (NumPy).
-
-The closest point of ``F(u) = sum_k c_k u**k`` to a point p solves the
-stationarity condition ``(F(u) - p) . F'(u) = 0`` (paper eq. 14 with the arm
-point fixed at p), a polynomial of degree 2d - 1 in u.
-:func:`closest_parameters` takes its roots (all points at once) and both ends
-of the range as candidates and keeps the nearest: the global minimum, to
-rounding. :func:`project_newton` is the cheap local version (safeguarded Newton
-from warm starts). :func:`point_curve_distance` combines both for one point
-(the roots, polished, and a polished grid as a guard against the rounding of a
-high degree's roots): what the scene checks (a goal inside an obstacle) and
-the reachability proofs use; :func:`point_curve_lower_bound` is the cheap
-bound from below that lets the goal check skip the curves that are clearly
-far. Point clouds fitted with these live in :mod:`softplan_jax.clouds`.
-"""
+"""Exact distance from points to a polynomial curve, on the host (NumPy). The stationarity condition
+``(F(u) - p) . F'(u) = 0`` (paper eq. 14 with the arm point fixed at p) is a polynomial of degree
+2d - 1 in u, whose roots and the range's ends give the global minimum to rounding
+(:func:`closest_parameters`); :func:`project_newton` is the cheap local version,
+:func:`point_curve_distance` combines both for one point (what the scene checks and the
+reachability proofs use), and :func:`point_curve_lower_bound` is a cheap bound from below."""
 
 from __future__ import annotations
 

@@ -1,16 +1,9 @@
-"""Closest points between the arm and point obstacles.
-
-* The N-point method (paper §3, :func:`closest_point_to_points`): the arm
-  sampled at 10 points per segment (paper Table 1) against the obstacle's
-  points, brute force (the analogue of MATLAB's ``dsearchn``).
-* The exact distance from points to the arm backbone
-  (:func:`point_distance`, :func:`point_set_closest`): the boundary problem of
-  paper eqs. (15)-(16) with a fixed obstacle point, solved per segment in
-  closed form (:func:`~softplan_jax.geometry.closest_newton.project_to_arc`),
-  differentiable in q like the curve solver (implicit function theorem for s,
-  envelope theorem for the distance).
-* :class:`FixedPoint`: a point as a degenerate curve, for the curve routines.
-"""
+"""Closest points between the arm and point obstacles: the N-point method of paper §3
+(:func:`closest_point_to_points`: the arm sampled at 10 points per segment, paper Table 1, against
+the points, brute force like MATLAB's ``dsearchn``); the exact distance from points to the arm
+backbone (:func:`point_distance`, :func:`point_set_closest`: the boundary problem of paper eqs.
+(15)-(16) with a fixed obstacle point, in closed form per segment, differentiable in q like the
+curve solver); and :class:`FixedPoint`, a point as a degenerate curve."""
 
 from __future__ import annotations
 

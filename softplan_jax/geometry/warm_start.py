@@ -1,97 +1,15 @@
-"""Warm-started, certified closest points for the planner's steps.
-
-From one planner step to the next the arm moves a little, so each
-(segment, curve) pair's closest point moves a little too. This module carries
-each pair's curve parameter u* from step to step, polishes it with a few
-Newton iterations (:func:`~softplan_jax.geometry.closest.reduced_newton`), then
-CERTIFIES with a cheap lower bound that the result is the global minimum over
-the whole curve; only the pairs whose certificate fails are solved again by
-the full solver (:func:`~softplan_jax.geometry.closest.solve_pair_reduced`, with the
-same options: a fallback gives exactly the full solver's answer).
-
-The reduced problem. For segment i the squared distance of a point p to the
-arc, ``d_i(p)^2 = min_s |F_Ri(s) - p|^2``, is exact in closed form
-(:func:`~softplan_jax.geometry.closest.project_to_arc`), so the pair's minimum is
-``min_u d_i(F_o(u))`` over the curve's range: a 1-D problem in u.
-
-The lower bound on a piece [a, b] of the curve. Let
-``x(t) = (1 - t) F_o(a) + t F_o(b)`` be the chord and ``l = |F_o(b) - F_o(a)|``.
-For ANY set A, ``d_A(x)^2 - |x|^2 = min_{y in A} (|y|^2 - 2 y.x)`` is concave in
-x (a minimum of affine functions), so it lies above its chords; with
-``|x(t)|^2 = (1 - t)|x0|^2 + t|x1|^2 - t (1 - t) l^2`` this gives::
-
-    d_A(x(t))^2 >= (1 - t) d_A(x0)^2 + t d_A(x1)^2 - t (1 - t) l^2
-
-(exact when A is a single point; second order in l, where the Lipschitz bound
-``d_A(centre) - radius`` is first order, too weak for far obstacles). The
-curve leaves its chord by at most ``e = (b - a)^2 / 8 max |F_o''|`` on the
-piece (the linear interpolation error) and ``d_A`` is 1-Lipschitz, so every u
-in the piece has ``d_i(F_o(u)) >= sqrt(min_t [rhs]) - e``; the minimum over t
-of the quadratic is in closed form. ``max |F_o''|``: for a
-:class:`~softplan_jax.geometry.curves.PolynomialCurve` a rigorous bound (the Taylor
-expansion of F_o'' at the piece's centre, term by term; exact for degree
-<= 2); for a :class:`~softplan_jax.geometry.curves.ParametricCurve` the largest of
-``PARAMETRIC_SAMPLES`` samples over the range times ``PARAMETRIC_SAFETY`` (2),
-computed once per scenario: NOT a proof, a curve whose second derivative
-peaks sharply between samples can defeat it.
-
-The pieces: a geometric grid around each polished u_i. Outside the trusted
-window (below), each side of u_i is cut at ``NODES`` points
-``u_i +- w (R / w)^(k / (NODES - 1))``, k = 0 .. NODES - 1, from the window's
-edge (w: its half-width) to the end of the range (R: the distance to it), so a
-piece is a fixed fraction of its distance from u_i. Then near a minimum where
-the distance grows like ``sin(alpha) |u - u_i|`` (alpha: the angle between arm
-and curve) every piece passes once ``tan(alpha)`` exceeds a fixed fraction
-(scale free), where evenly spaced cells fail near the window whenever the
-curve runs nearly parallel to the arm. Cost: ``2 NODES`` point-to-arc
-distances per pair and step, in square roots and divisions only
-(:func:`~softplan_jax.geometry.closest.arc_distance2`: the certificate needs the
-values, not the minimisers; measured in ``benchmarks/kernel.py`` (git history, b850131): 18.6 ->
-7.5 µs of the tree's step with project_to_arc's trigonometry gone), pair
-fallbacks 0.4-0.6 % with 8 nodes per side against 3 % with 16 even cells
-(``benchmarks/warm_start.py``).
-
-The certificate (per obstacle). Each segment i's polished pair gives an
-achievable distance D_i; ``D_w = min_i D_i``. The WINDOW of half-width
-``w = WINDOW (u_max - u_min) / (grid_u - 1)`` around u_i (1.5 mean spacings of
-the full solver's u-grid wide) is trusted to hold no value below D_i when the
-polish converged (the first-order test
-:func:`~softplan_jax.geometry.closest.first_order_converged`): THE ASSUMPTION, the one
-the full solver makes inside a cell of its u-grid, that no second, lower
-basin hides within about a grid spacing of a local minimum. Every piece
-outside the window must have a lower bound >= D_w minus a rounding tolerance
-(``TOLERANCE`` eps (1 + the curve's size)). Segment i is certified when its
-polish converged and all its pieces pass; then its true minimum is
->= min(D_i, D_w), so the obstacle's minimum over segments is D_w. A failed
-segment gets the full solve (keeping the smaller of the full and the polished
-D^2, both achievable); a segment certified against D_w stays certified when a
-fallback lowers D_w, so one pass is enough.
-
-Fallback cost. The failed pairs are solved one by one in a
-``lax.while_loop`` (flattened over the curves of a stack). Under ``vmap`` a
-batching rule (``jax.custom_batching.custom_vmap``) folds the batch axis into
-that loop: it solves the failed pairs of ALL members, ``chunk`` side by side
-per iteration, so a batch pays for its failures only, where plain ``vmap``
-would run the loop as long as the member with the most failures and solve a
-pair for every member in each iteration. At the first step of a rollout (no
-warm state) every pair fails and takes the full solve. The chunk is
-``max(FALLBACK_CHUNK, ceil(pairs / trips))`` (pairs: the batch's curve-segment
-pairs), so the loop's trips per step stay bounded (at most ``trips``) however
-wide the batch: with a fixed chunk of 8 they grew with the width (measured on
-random_scenarios(0, 1024), 200 steps: 0.28 failed pairs per scene-step, so a
-mean of 21 trips per step at 1,024 scenes side by side and 84 at 4,096; every
-trip is a serial round of small kernels on a GPU). ``trips`` is
-``FALLBACK_TRIPS`` (64) on an accelerator and ``CPU_FALLBACK_TRIPS`` (192) in a
-program traced for a CPU (:func:`fallback_trips`), where a trip costs little
-beyond its pairs' solves, so a smaller chunk solves fewer pairs that did not
-fail (``benchmarks/fallback_chunk.py``). At 64 lanes and 8 slots (1,536 pairs)
-the chunk is 8 on a CPU (24 on an accelerator); at 256 lanes, 32 (96).
-
-Derivatives. Everything here runs without derivatives (stop_gradient); the
-winning pair goes through :func:`~softplan_jax.geometry.closest.closest_from_pairs`,
-the tail of :func:`~softplan_jax.geometry.closest.curve_closest`, so the derivatives
-w.r.t. q (implicit function theorem, envelope theorem) are the full solver's.
-"""
+"""Warm-started, certified closest points for the planner's steps (paper §2.3). Each (segment,
+curve) pair's curve parameter u* is carried from step to step, polished by a few Newton
+iterations of the reduced problem ``min_u d_i(F_o(u))`` (``d_i`` the exact distance to the arc;
+:func:`~softplan_jax.geometry.closest_newton.reduced_newton`), and certified the global minimum by
+a lower bound on geometric pieces of the curve around it: for any set A, ``d_A(x)^2 - |x|^2`` is
+concave, so along a chord ``d_A(x(t))^2 >= (1 - t) d_A(x0)^2 + t d_A(x1)^2 - t (1 - t) l^2``, less
+the curve's distance from its chord, ``(b - a)^2 / 8 max |F_o''|``. Only the pairs whose
+certificate fails take the full solve
+(:func:`~softplan_jax.geometry.closest_newton.solve_pair_reduced`, the same options), a batch's
+failures solved side by side by a ``custom_vmap`` rule; the derivatives are the full solver's
+(:func:`~softplan_jax.geometry.closest.closest_from_pairs`). The bound, the window it trusts, the
+fallback's cost and how the constants were chosen: docs, "How the planner works inside"."""
 
 from __future__ import annotations
 
@@ -121,12 +39,8 @@ __all__ = ["CurveData", "curve_data", "warm_curves"]
 
 # Cut points of the lower bound per side of u* (window edge and range end included).
 NODES = 8
-# Newton iterations polishing the previous step's u* (the full solver: 4 starts x 8).
-# Measured (benchmarks/kernel.py at b850131, benchmarks/warm_start.py, 200 random scenes): 4, 3, 2
-# iterations give pair fallback rates 0.53 %, 0.63 %, 1.5 % and batched steps of
-# 30, 27, 25 us. 3: with 2, a start off by 0.01 of the curve's range (about one large
-# planner step) often needs the fallback (tests/test_warm_start.py: 11 of 48 cases
-# certified, against 20+ with 3), and the tree needed 52 pair fallbacks in 54 steps.
+# Newton iterations polishing the previous step's u* (the full solver: 4 starts x 8); fewer
+# fallbacks than 2, cheaper than 4 (docs: "How the planner works inside").
 POLISH_ITERATIONS = 3
 # Half-width of the trusted window around a polished u*, in mean spacings of the full
 # solver's u-grid (u_max - u_min) / (grid_u - 1): the window is 1.5 spacings wide.
@@ -138,8 +52,8 @@ PARAMETRIC_SAFETY = 2.0
 PARAMETRIC_SAMPLES = 257
 # Failed pairs solved side by side per iteration of the fallback loop under vmap: at least
 # FALLBACK_CHUNK, and at least 1 / trips of the batch's pairs, so that a step's trips through
-# the loop stay bounded as the batch widens (module docstring, "Fallback cost"): FALLBACK_TRIPS
-# on an accelerator, CPU_FALLBACK_TRIPS on a CPU (benchmarks/fallback_chunk.py).
+# the loop stay bounded as the batch widens: FALLBACK_TRIPS on an accelerator,
+# CPU_FALLBACK_TRIPS on a CPU (docs: "How the planner works inside", "The fallback's cost").
 FALLBACK_CHUNK = 8
 FALLBACK_TRIPS = 64
 CPU_FALLBACK_TRIPS = 192
@@ -292,13 +206,11 @@ def _fallback_fn(solver: SolverOptions):
 
     Plain ``vmap`` would turn the while loop over failed pairs into one that
     runs until the batch member with the most failures is done, every
-    iteration solving a pair for EVERY member: a batch of B paid B full pair
-    solves per failure of its worst member (measured: 8 of 44 µs per
-    scenario-step, batch of 64). The rule instead folds the batch axis into
+    iteration solving a pair for EVERY member: a batch of B would pay B full pair
+    solves per failure of its worst member. The rule instead folds the batch axis into
     the array and solves only the failed pairs of all members, a chunk at a time
-    (:func:`_solve_failed`; ``benchmarks/kernel.py`` at b850131, batch of 64 and
-    a chunk of 8: 39 -> 31 µs per scenario-step). Nested ``vmap`` folds one axis per level. custom_vmap has
-    no reverse-mode rule; none is needed, as every input is stop_gradient-ed
+    (:func:`_solve_failed`; docs: "How the planner works inside"). Nested ``vmap`` folds one
+    axis per level. custom_vmap has no reverse-mode rule; none is needed, as every input is stop_gradient-ed
     (the JVP of a rollout sees only symbolic-zero tangents here).
     """
 
@@ -319,8 +231,8 @@ def _fallback_fn(solver: SolverOptions):
 
 
 def fallback_trips(platform: str | None = None) -> int:
-    """The bound on the fallback loop's trips per step (module docstring, "Fallback
-    cost"): :data:`CPU_FALLBACK_TRIPS` for ``platform`` "cpu", else :data:`FALLBACK_TRIPS`
+    """The bound on the fallback loop's trips per step (docs: "How the planner works
+    inside"): :data:`CPU_FALLBACK_TRIPS` for ``platform`` "cpu", else :data:`FALLBACK_TRIPS`
     (None: ``jax.default_backend()``, the platform a program traced now runs on unless
     placed elsewhere). Either bound solves the same pairs; only the cost differs."""
     platform = jax.default_backend() if platform is None else platform

@@ -1,18 +1,12 @@
-"""Planning: the potential-field planner of paper eq. (9) on one rollout engine.
-
-* :mod:`.gains` -- the gains of eq. (9) and the gain functions beyond the paper;
-* :mod:`.step` -- the field of eq. (9), the safe step, one planner step;
-* :mod:`.engine` -- the rollout loop (plan to the goal or track a moving one),
-  paid by the step, and the batch loop that refills its lanes;
-* :mod:`.programs` -- :func:`rollout` (pure) and its compiled programs,
-  :data:`rollout_jit` (one scene) and :data:`rollout_batch` (a batch);
-* :mod:`.planner` -- the entry points :func:`plan` and :func:`plan_batch`
-  and their results;
-* :mod:`.tracking` -- :func:`track` and :func:`track_batch` for moving goals
-  and obstacles; :mod:`.evasion` -- the evasive step among fast obstacles;
-* :mod:`.presets` -- named calibrations (``"paper"``, ``"default"``);
-* :mod:`.batching` -- host-side helpers of batch runs.
-"""
+"""Planning: the potential-field planner of paper eq. (9) on one rollout engine. The gains and gain
+functions (:mod:`.gains`) and static options (:mod:`.options`); the field, the safe step and one
+planner step (:mod:`.step`); the loop that plans to a goal or tracks a moving one and refills a
+batch's lanes (:mod:`.engine`, its world :mod:`.world`, its records :mod:`.records`); the pure
+:func:`rollout` and its compiled programs :data:`rollout_jit` and :data:`rollout_batch`
+(:mod:`.programs`); the entry points :func:`plan` and :func:`plan_batch` (:mod:`.planner`), and
+:func:`track` and :func:`track_batch` for moving goals and obstacles (:mod:`.tracking`, its
+evasive step :mod:`.evasion`); named calibrations (:mod:`.presets`), post-hoc collision checks
+(:mod:`.checks`) and host-side helpers of batch runs (:mod:`.batching`)."""
 
 from ..base.status import STATUS_NAMES, Status, status_name
 from .checks import apply_collision_checks

@@ -1,19 +1,11 @@
-"""Batches over devices: the device mesh, padding, and progress of
-:func:`softplan_jax.plan_batch` and :data:`softplan_jax.rollout_batch`.
-
-Not part of the paper's method: the planner's scenarios are independent, so a
-batch is split along its leading axis over the local devices
-(``jax.sharding.Mesh`` with one axis, ``"batch"``) and every device runs the
-vmapped rollout on its own shard (``jax.shard_map``, no cross-device
-communication). On a CPU, ``XLA_FLAGS=--xla_force_host_platform_device_count=K``
-(set before jax is imported) splits the host into K devices.
-
-Several hosts (``jax.distributed``): ``devices="global"`` makes the mesh of
-EVERY process's devices (``jax.devices()``), so the same ``shard_map`` program
-runs over all hosts; each process passes the same suite, puts only its own
-devices' shards on them (:func:`shard_batch`), and gets the whole result back
-(:func:`gather`). See the documentation's Performance page, "Many scenarios, several devices".
-"""
+"""Batches over devices (not part of the paper's method): the device mesh, padding, sharding and
+progress of :func:`~softplan_jax.plan_batch` and :data:`~softplan_jax.planning.rollout_batch`. The
+scenarios are independent, so a batch is split along its leading axis over a one-axis
+``jax.sharding.Mesh`` (``"batch"``) and every device runs the vmapped rollout on its own shard
+(``jax.shard_map``, no cross-device communication); ``devices="global"`` makes the mesh of every
+process's devices under ``jax.distributed``, each process putting only its own devices' shards
+(:func:`shard_batch`) and getting the whole result back (:func:`gather`). Docs: Performance,
+"Many scenarios, several devices"."""
 
 from __future__ import annotations
 
@@ -104,8 +96,8 @@ def pad_batch(tree, size: int):
 def lanes_map(f, *args):
     """``jax.vmap(f)(*args)`` (every leaf of ``args`` with a leading lane axis B); for one lane
     (B = 1), ``f`` of the lane itself with the axis added back: the same values, traced without
-    vmap's batching rules (in the global fallback's program they cost about a third of its
-    trace, and a while_loop whose trip count is a lane's became a batched-predicate loop).
+    vmap's batching rules (cheaper to trace, and a while_loop whose trip count is a lane's stays
+    a loop with an unbatched predicate; docs: "How the planner works inside").
     XLA may round the two programs differently (last bits)."""
     if jax.tree_util.tree_leaves(args)[0].shape[0] != 1:
         return jax.vmap(f)(*args)

@@ -1,47 +1,13 @@
-"""The evasive step: moving away from an obstacle that comes faster than the safe step allows.
-
-Tracking among moving curves scales each step so that the arm's motion bound
-plus every obstacle's travel stays within the clearance budget
-(:func:`~softplan_jax.planning.step.safe_scale`). When an obstacle alone can
-travel further in one step than that budget (``f (c_j - floor) < S_j dt``),
-no scale of the field's step is proven safe, and the tracker used to end
-``too_fast``. There the engine tries this step instead.
-
-**Direction: a barrier filter on the field's step.** With the exact clearance
-``c_j`` to obstacle j and its gradient ``a_j = dc_j/dq = -J_j^T n_j``
-(``n_j`` the unit vector from the closest arm point to the closest obstacle
-point, ``J_j`` that arm point's Jacobian; the envelope theorem), the clearance
-changes at ``dc_j/dt >= a_j . qdot - S_j`` while the obstacle approaches at
-most at its speed bound ``S_j``. The control-barrier condition on
-``h_j = c_j - c*_j``, ``dh_j/dt >= -gamma h_j``, asks::
-
-    a_j . qdot >= b_j = S_j - gamma (c_j - c*_j),    c*_j = floor + S_j dt / f
-
-where ``c*_j`` is the clearance at which the ordinary safe step is proven again
-(so below it the arm must move away faster than the obstacle can come). The
-velocity is the closest one to the field's (paper eq. 9, the straight step
-to ``q_full``) meeting every condition: a small quadratic program
-``min |qdot - qdot_field|^2 s.t. a_j . qdot >= b_j``, solved by Hildreth's
-row-action method (:func:`barrier_velocity`). It is then capped so that the
-arm's motion bound over the step is at most ``speed dt`` (``speed``: the
-actuators' limit, ``TrackOptions.evasion_speed``).
-
-**Certified in space and time** (:func:`certify_motion`). The evasive motion
-is the straight line ``q(tau) = q_k + (tau/dt) (q_target - q_k)`` over the
-step's interval, as every other step, so the between-step checks and the
-independent brute force see the path actually taken. It is proven clear by
-conservative advancement in time: from ``tau`` with exact clearances ``c_j``
-at ``(q(tau), t_k + tau)``, every arm point moves at most ``U h / dt`` in a
-time ``h`` (``U`` the motion bound of the whole line: its ``Lbar`` bounds every
-piece) and obstacle j at most ``S_j h``; so
-
-    h = min_j f (c_j - floor) / (U / dt + S_j)
-
-keeps the clearance above ``floor`` on ``[tau, tau + h]``. A motion that moves
-away earns longer pieces. The line is accepted when the pieces cover the step
-within ``evasion_substeps`` pieces; otherwise the rollout ends ``too_fast``
-at q_k, the last configuration proven clear, as before.
-"""
+"""The evasive step: moving away from an obstacle that comes faster than the safe step allows
+(``f (c_j - floor) < S_j dt``: no scale of the field's step is proven safe; docs: Moving scenes,
+"The evasive step"). The velocity is the one closest to the field's (paper eq. 9) that meets the
+control-barrier condition ``a_j . qdot >= S_j - gamma (c_j - c*_j)`` for every obstacle j
+(``a_j = dc_j/dq = -J_j^T n_j`` by the envelope theorem, ``c*_j = floor + S_j dt / f``), a small
+quadratic program solved by Hildreth's row-action method (:func:`barrier_velocity`), capped at
+the actuators' speed. Its straight motion is proven clear by conservative advancement in time,
+in pieces ``h = min_j f (c_j - floor) / (U / dt + S_j)`` (U the motion bound of the whole line;
+:func:`certify_motion`); where the pieces do not cover the step the rollout ends ``too_fast`` at
+q_k, the last configuration proven clear."""
 
 from __future__ import annotations
 

@@ -33,15 +33,15 @@ class PlanOptions(NamedTuple):
       check_collisions: compute the true clearance and the between-step
         check inside the rollout (default). False gives a planning-only
         rollout (clearance records NaN, never "collided"), for timing the
-        planner alone; :func:`apply_collision_checks` adds the checks after.
+        planner alone; :func:`~softplan_jax.planning.checks.apply_collision_checks` adds the checks after.
       contact_tolerance: a clearance at or below this counts as a collision
         (zero-radius curves that cross meet at a single point, which a
         solver reaches only to rounding). The rollout uses
         ``max(contact_tolerance, 10 sqrt(eps))``: 1e-6 in float64, 3.5e-3 in float32.
       solver: the exact closest-point solver: SolverOptions (default) or
         GridSolverOptions (the paper's 2-D solver).
-      step: "safe" (default): the clearance-bounded step (see the module
-        docstring); "plain": the paper's step ``q + dt qdot`` (paper eq. 9).
+      step: "safe" (default): the clearance-bounded step
+        (:func:`~softplan_jax.planning.step.safe_scale`); "plain": the paper's step ``q + dt qdot`` (paper eq. 9).
       safe_fraction: the safe step keeps the motion bound of every step below
         this fraction of ``(clearance - floor)``, in (0, 1]; floor is twice the
         contact tolerance, so the clearance never falls to the contact tolerance.
@@ -61,8 +61,8 @@ class PlanOptions(NamedTuple):
         of the motion minus :func:`~softplan_jax.geometry.kinematics.motion_bound`
         stays above the contact tolerance); the statuses are the same, the
         search is skipped where it cannot find a collision (see
-        ``Rollout.between``). False: search every motion (the earlier
-        behaviour, for comparison).
+        ``Rollout.between``). False: search every motion (for
+        comparison).
       step_chunk: steps between two checks of "done" by the rollout engine
         (:mod:`softplan_jax.planning.engine`): a rollout stops computing within this many
         steps after it finished. Changes the cost, never the results.
@@ -132,7 +132,7 @@ class TrackOptions(NamedTuple):
       plan: the PlanOptions of the step (method, N, safe step, escapes, goal
         tolerance, solver, warm start, ...). ``check_collisions`` must be on.
       hold_tolerance: the goal counts as held while |g(t) - tip| <= this, > 0.
-      feedforward: add dg/dt to the attraction (module docstring).
+      feedforward: add dg/dt to the attraction (:func:`~softplan_jax.planning.step.tracking_attraction`).
       search_substeps: instants of the between-step search, >= 1.
       anticipation: seconds of look-ahead of the repulsion, >= 0: eq. (9)'s
         field sees obstacle j inflated by ``S_j * anticipation`` (S_j its
@@ -144,7 +144,7 @@ class TrackOptions(NamedTuple):
         evasive step of :mod:`softplan_jax.planning.evasion` (a barrier filter
         on the field's step, certified by conservative advancement in time)
         instead of ending ``too_fast``; it ends ``too_fast`` only where the
-        evasive motion is not proven clear either. False: end there, as before.
+        evasive motion is not proven clear either. False: end there.
         Acts only where the rollout would otherwise end ``too_fast``.
       evasion_speed: the actuators' limit for the evasive step [m/s]: the
         arm's motion bound over a step at most ``evasion_speed * dt``, > 0.

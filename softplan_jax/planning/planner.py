@@ -1,15 +1,9 @@
-"""Planning entry points: :func:`plan` (one scene) and :func:`plan_batch` (many),
-over the compiled rollouts of :mod:`softplan_jax.planning.programs`.
-
-The step (paper eq. 9 with the safe step) is :mod:`softplan_jax.planning.step`;
-the loop that rolls it out, stops when the work is done and refills a batch's
-lanes is :mod:`softplan_jax.planning.engine`. Each rollout records q, the tip and
-the TRUE clearance to every obstacle (the real curve or point set, whatever
-model the planner used), and checks the motion BETWEEN steps for a pass through
-an obstacle (:func:`softplan_jax.geometry.clearance.between_steps`), searched
-only where the motion bound does not prove the motion clear
-(:func:`softplan_jax.geometry.clearance.swept_clear`; ``PlanOptions.swept_proof``).
-"""
+"""Planning entry points: :func:`plan` (one scene) and :func:`plan_batch` (many), over the compiled
+rollouts of :mod:`softplan_jax.planning.programs`. Each rollout records q, the tip and the true
+clearance to every obstacle (the real curve or point set, whatever model the planner used), and
+checks the motion between steps for a pass through an obstacle
+(:func:`~softplan_jax.geometry.clearance.between_steps`) where the motion bound does not prove it
+clear (:func:`~softplan_jax.geometry.clearance.swept_clear`; ``PlanOptions.swept_proof``)."""
 
 from __future__ import annotations
 
@@ -174,8 +168,8 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
       seed: int seed (or PRNG key) of the escapes' random walks.
       device: where the rollout runs: None (default) jax's default device,
         except where that is an accelerator: then the host CPU, which plans one
-        scene faster (a step is a few hundred small kernels; on one H200 the
-        tree took 29 ms on the GPU, 14 ms on its host's CPU, benchmarks/gpu.py);
+        scene faster (a step is a few hundred small kernels; docs: Performance,
+        "On a GPU");
         ``"default"``: jax's default device whatever it is; or a ``jax.Device``
         (jax's default device itself, with the scenario on it, runs the same
         compiled program as None). Batches belong on the accelerator
@@ -278,7 +272,7 @@ def unreachable_result(scenario: Scenario, options: PlanOptions, reason: str) ->
 def result_from_rollout(r: Rollout, scenario: Scenario) -> PlanResult:
     """Trim a single (unbatched) Rollout to the steps taken, on the host."""
     # One transfer, then NumPy slices: slicing the device arrays at steps taken would compile
-    # a slice program for every new step count (~25 ms each on a CPU, three per plan).
+    # a slice program for every new step count (docs: Performance, "One scene").
     r = jax.device_get(r)
     it = int(r.iterations)
     _, mask = radius_and_mask(scenario)
@@ -303,7 +297,7 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
     devices, in chunks of one shape.
 
     Args:
-      scenarios: a batched Scenario (:func:`stack_scenarios`, or
+      scenarios: a batched Scenario (:func:`~softplan_jax.scenarios.stack_scenarios`, or
         :func:`softplan_jax.scenarios.random_scenarios`).
       seed: int seed or PRNG key; scenario b's escapes use
         ``jax.random.split(key(seed), B)[b]`` whatever the chunk. Or one key per

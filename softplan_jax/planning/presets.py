@@ -1,28 +1,12 @@
-"""Gain presets as data: gains + planner options + start pose, by name.
-
-A preset bundles everything that the paper leaves unstated and that decides
-what a run shows:
-
-* ``"paper"``: the calibration that reproduces the paper's QUALITATIVE
-  findings on its scenes (Sim2: the 1- and 10-point models collide while the
-  curve method reaches). Gains ``k_att = 1``, ``v_max = 0.1``,
-  ``dt = 1``, ``eta = 1e-3``, ``d0 = 0.15``, no repulsion cap
-  (``rep_max = inf``: Khatib's field as printed), the plain pseudo-inverse
-  (``damping = 0``: ``J^T (J J^T)^-1``, well defined because the start pose is
-  bent: the tip Jacobian has full rank 3 there), start pose ``theta = 0.1``,
-  ``phi = 0`` on every segment (the arm bent in the x-z plane; lengths kept),
-  and the paper's
-  plain step :data:`softplan_jax.planning.planner.PAPER_STEP` (no clearance bound, no
-  escapes). These values are a calibration, not the paper's: the paper states
-  neither its gains nor its start pose.
-* ``"default"``: the library's defaults (:func:`softplan_jax.default_gains`,
-  the clearance-bounded step with escapes, the scenario's own start pose).
-
-Use::
-
-    scenario, gains, options = sp.apply_preset("paper", sp.paper_scenario("sim2"))
-    result = sp.plan(scenario, "points", 10, gains=gains, **options)
-"""
+"""Gain presets as data: gains, planner options and start pose, by name. ``"paper"`` is the
+calibration that reproduces the paper's qualitative findings on its scenes (Sim2: the 1- and
+10-point models collide while the curve method reaches) with values the paper does not state:
+``k_att = 1``, ``v_max = 0.1``, ``dt = 1``, ``eta = 1e-3``, ``d0 = 0.15``, no repulsion cap, the
+plain pseudo-inverse (well defined at its bent start pose), ``theta = 0.1`` and ``phi = 0`` on
+every segment at the start, and the paper's plain step
+(:data:`~softplan_jax.planning.options.PAPER_STEP`); ``"default"`` is the library's defaults.
+Use: ``scenario, gains, options = sp.apply_preset("paper", sp.paper_scenario("sim2"))``, then
+``sp.plan(scenario, "points", 10, gains=gains, **options)``."""
 
 from __future__ import annotations
 

@@ -1,31 +1,13 @@
-"""One planner step: the potential field of paper eq. (9) and the safe step (the gains
-are in :mod:`.gains`, re-exported here).
-
-One step::
-
-    qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj)          (paper eq. 9)
-    q   <- q + dt * qdot,  L_i clipped to [L_min_i, L_max_i]
-
-with ``V_e = goal - tip`` and ``V_sj = (obstacle point) - (closest arm point)``
-for obstacle j; ``J^+`` is the damped least-squares pseudo-inverse.
-
-* ``method="curve"`` (the paper's proposed method): a curve obstacle's closest
-  point comes from the exact solver of :mod:`softplan_jax.geometry.closest`.
-* ``method="points"``: every curve is replaced by ``n_points`` points evenly
-  spaced in u and handled by the N-point method (arm sampled at 10 points per
-  segment, Jacobian at the arm sample nearest the obstacle).
-Point-set obstacles always use the N-point method.
-
-The safe step (``PlanOptions.step = "safe"``, the default) scales the Euler step
-by :func:`safe_scale`'s ``alpha = min(1, (f (c - floor) - travel) / B)``, where
-``B`` is :func:`softplan_jax.geometry.kinematics.motion_bound` (a sound bound on how far
-any arm point moves during the step), ``c`` the clearance of the planner's
-obstacle model and ``travel`` how far a moving obstacle can come during the
-step (0 for a static scene): no arm point can reach an obstacle during the
-step (conservative advancement). The same rule certifies every motion of the
-global search (:mod:`softplan_jax.search.tree`). ``step = "plain"`` is the
-paper's step, unscaled (the paper tables use it).
-"""
+"""One planner step: the potential field of paper eq. (9),
+``qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj)`` with ``V_e = goal - tip``, ``V_sj`` from the
+closest arm point to obstacle j's closest point (exact for ``method="curve"``, the N-point model
+of paper §3 for ``"points"`` and for point sets) and ``J^+`` the damped least-squares
+pseudo-inverse, then ``q <- q + dt qdot`` with the lengths clipped to ``[L_min_i, L_max_i]``. The
+safe step (the default) scales it by :func:`safe_scale`'s
+``alpha = min(1, (f (c - floor) - travel) / B)``, B the
+:func:`~softplan_jax.geometry.kinematics.motion_bound` (conservative advancement), the rule that
+also certifies every motion of the global search; ``step = "plain"`` is the paper's step,
+unscaled. The gains are in :mod:`.gains` (re-exported here)."""
 
 from __future__ import annotations
 

@@ -1,54 +1,12 @@
-"""Tracking a moving goal among moving curves, collision-free by construction.
-
-The planner is the same step and the same loop as static planning
-(:mod:`softplan_jax.planning.step`, :mod:`softplan_jax.planning.engine`: paper eq. 9) on the
-scene at the step's time: at step k (time ``t_k = k dt``, dt the gains'
-integration step) the curves are where :func:`~softplan_jax.scenarios.motion.scenario_at`
-puts them and the goal is ``g(t_k)``. Beyond the static planner:
-
-* **Feed-forward** (``TrackOptions.feedforward``, default on): the tip velocity
-  of eq. (9)'s attraction is ``k_att V_e + dg/dt``, saturated at ``v_max``
-  (:func:`~softplan_jax.planning.step.tracking_attraction`); without it a proportional law lags a goal
-  moving at speed w by ``w / k_att``.
-* **The clearance-bounded step with moving obstacles.** Obstacle j moves at
-  most ``S_j dt`` during a step (:func:`~softplan_jax.scenarios.motion.speed_bounds`, a
-  proof). The step's scale alpha keeps
-
-      alpha * motion_bound(q_k, q_k + dt qdot) + S_j dt <= f (c_j - floor)   for every j,
-
-  so by the triangle inequality the arm-to-obstacle distance stays above
-  ``floor`` at every instant of the step (conservative advancement with both
-  bodies moving). When ``f (c_j - floor) < S_j dt`` even standing still is not
-  provably safe: the rollout ends with status ``too_fast`` at the last
-  configuration proven clear, never with a collision reported as success.
-* **Between-step check.** The motion from (q_{k-1}, t_{k-1}) to (q_k, t_k) is
-  proven clear where ``c_{k-1} - B - S_j dt`` exceeds the contact tolerance
-  (:func:`~softplan_jax.geometry.clearance.swept_clear` with the clearance reduced by the
-  obstacle's travel); elsewhere (the N-point models) the exact clearance is
-  evaluated at ``search_substeps`` instants in between, arm and curves
-  interpolated together (a search, as the static between-step check: an
-  achieved clearance).
-* **The evasive step** (``TrackOptions.evasion``, default on). Where even
-  standing still is not provably safe, the arm moves away instead of
-  stopping: a barrier filter on the field's step from the exact clearances
-  and their gradients, capped at the actuators' speed, and proven clear in
-  space and time by conservative advancement
-  (:mod:`softplan_jax.planning.evasion`). Only where that proof fails too does
-  the rollout end ``too_fast``. The step from q_k is recorded in ``evasive``.
-* **Tracking, not stopping.** The rollout runs to ``max_steps`` (a horizon of
-  ``max_steps dt`` seconds); it stops early only on a collision, a non-finite
-  number or ``too_fast``. Then: ``reached`` (|g(t) - tip| < goal_tolerance at
-  some step), ``held_steps`` (steps from the first reach until the error first
-  exceeds ``hold_tolerance``), and the status ``reached`` (held to the end),
-  ``held`` (reached, left the hold tolerance, and back within it at the last
-  step), ``lost`` (reached, left, and not within the hold tolerance at the
-  last step) or ``max_steps`` (never reached).
-
-Stalls start the random-walk escapes of the static planner (not while the tip
-holds the goal); a stall with no escape left does not end the rollout, since
-the scene keeps changing. A static scene is a moving scene at rest: the engine
-plans it with the same step (:func:`~softplan_jax.plan`).
-"""
+"""Tracking a moving goal among moving curves, collision-free by construction (docs: Moving scenes).
+The planner is the step and the loop of static planning (paper eq. 9;
+:mod:`softplan_jax.planning.engine`) on the scene at the step's time ``t_k = k dt``, with the goal's
+velocity fed forward to the attraction, the safe step keeping
+``alpha motion_bound + S_j dt <= f (c_j - floor)`` for every obstacle j (``S_j`` its proven speed
+bound), the evasive step where even standing still is not proven safe
+(:mod:`softplan_jax.planning.evasion`), and the between-step check with the obstacles' travel. The
+rollout runs to its horizon (``max_steps dt`` seconds), stopping early only on a collision, a
+non-finite number or ``too_fast``, and reports whether the goal was reached and held."""
 
 from __future__ import annotations
 

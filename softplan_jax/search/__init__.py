@@ -1,17 +1,11 @@
-"""The global fallback: reachability of the goal, a certified tree search, and
-:func:`plan_fallback`, which runs them where the local planner of eq. (9) stops short.
-
-* :mod:`.reach` -- is a collision-free configuration with the tip on the goal
-  there? (:func:`reachability`; proofs of unreachability where it has one);
-* :mod:`.tree` -- RRT-Connect over certified straight motions (conservative
-  advancement), shortcuts, smoothing, and the densified path; the motions are
-  :mod:`.motions`, and :mod:`.machine` runs the whole search as one loop with one
-  exact solve per iteration;
-* :mod:`.fallback` -- :func:`plan_fallback`: the local planner first, then the
-  two above for every scene it left stalled;
-* :mod:`.tracking` -- :func:`track_fallback`: the tracker among moving obstacles,
-  then, where it never reaches the goal, a run guided by the search's path at rest.
-"""
+"""The global fallback, for where the local planner of paper eq. (9) stops short: reachability of
+the goal (:mod:`.reach`: multi-start IK, with proofs of unreachability where it has one);
+RRT-Connect over certified straight motions, with shortcuts, smoothing and a densified path
+(:mod:`.tree`; its motions :mod:`.motions`; the whole search one loop with one exact solve per
+iteration, :mod:`.machine`); :func:`plan_fallback` (:mod:`.fallback`: the local planner first,
+then the two above for every scene it left stalled); and :func:`track_fallback` (:mod:`.tracking`:
+the tracker among moving obstacles, then, where it never reaches the goal, a run guided by the
+search's path at rest)."""
 
 from .fallback import plan_fallback
 from .reach import REACH_REASONS, Reachability, ReachOptions, reachability

@@ -1,35 +1,13 @@
-"""Plan with the global fallback: the local planner first, then reachability and a certified search.
-
-:func:`plan_fallback` runs the potential-field planner of paper eq. (9)
-(:func:`~softplan_jax.planning.planner.plan_batch`); for every scene that it leaves
-``stalled`` or at ``max_steps``:
-
-1. :func:`~softplan_jax.search.reach.reachability` decides whether a collision-free
-   configuration puts the tip on the goal. If none is found the scene's status
-   becomes ``unreachable``, with the reason (``beyond_reach`` and
-   ``goal_in_obstacle`` are proofs; ``no_ik_solution`` means the multi-start
-   IK found none) and the best tip distance.
-2. Otherwise :func:`~softplan_jax.search.tree.global_search` (RRT-Connect
-   with certified motions) searches from configurations along the local
-   planner's path to the certified goal configurations. The returned path is
-   the local path up to the configuration the search left from, then the
-   search's path; every one of its steps is certified by the swept proof
-   (exact clearance at the step's start minus the motion bound above the
-   contact tolerance), and the result records that check. If the search
-   finds nothing the local result stands, with the reason ``search_exhausted``.
-
-Scenes the local planner reached, or that collided (an N-point model can),
-keep their local result. Steps 1 and 2 (the IK, the search, and the check of
-the path it finds) are one compiled program
-(:func:`~softplan_jax.search.tree.reach_and_search_batch`: one loop with one
-exact solve site), run on a batch in chunks of one shape (``chunk`` scenes
-vmapped, the last chunk padded), so a batch compiles once.
-The default chunk is 1, one scene at a time: a vmapped search runs its
-loops in lockstep until the slowest scene of the chunk is done, and on the
-CPU the first chunk of 8 of random_scenarios(1, 1024)'s rescued scenes took
-114 s (about 30 s of it compilation) where one scene at a time takes about
-1 s; a larger chunk is for accelerators.
-"""
+"""Plan with the global fallback (docs: Reaching every goal). :func:`plan_fallback` runs the
+potential-field planner of paper eq. (9) and, for every scene it leaves ``stalled`` or at
+``max_steps``, decides reachability (:func:`~softplan_jax.search.reach.reachability`: status
+``unreachable`` with its reason where no certified goal configuration is found) and otherwise
+searches from configurations along the local path to the certified goal configurations
+(:func:`~softplan_jax.search.tree.global_search`). The returned path is the local path up to the
+configuration the search left from, then the search's, every step certified by the swept proof.
+The IK, the search and the check of its path are one compiled program
+(:func:`~softplan_jax.search.tree.reach_and_search_batch`), run on chunks of one shape: one scene
+at a time by default, since a chunk runs its loops in lockstep until its slowest scene is done."""
 
 from __future__ import annotations
 
@@ -98,7 +76,7 @@ def plan_fallback(scenarios: Scenario, method: str = "curve", n_points: int = 10
         (the local planner's settings; ``options`` are :class:`~softplan_jax.PlanOptions` fields).
       reach: :class:`~softplan_jax.search.reach.ReachOptions` of the IK and of the search.
       chunk: scenes per compiled search call (vmapped; the last chunk is padded).
-        Default 1: one scene at a time, the fastest on the CPU (module docstring).
+        Default 1: one scene at a time, the fastest on the CPU (docs: Reaching every goal).
       progress: one line per finished stage/chunk on stderr.
 
     Returns:

@@ -1,37 +1,13 @@
-"""The global search as one loop with one exact solve per iteration.
-
-:func:`~softplan_jax.search.tree.global_search` is a sequence of certified motions:
-RRT-Connect's extensions and connections, the shortcut attempts, the smoothing
-moves, and the walk along the final polyline. Written as nested loops, each kind
-of motion holds its own copy of the exact closest-point solver in the compiled
-program (six copies, most of the search's compile time). Here they are one
-``while_loop`` over a state machine: every iteration first lets the phase's
-handler consume the motion that just ended and set up the next one (a
-``lax.switch`` on the phase), then takes one conservative-advancement substep of
-the current motion, the only place the solver appears:
-
-    q = q_a + t dq,   alpha = safe_scale(q, q_e, c(q), 2 contact, f[, step_motion])
-    t <- 1 if alpha >= 1 else t + alpha (1 - t)
-
-(:func:`~softplan_jax.planning.step.safe_scale`; a motion stops at its end, when a
-solve does not converge, or after its substeps). Each motion does the arithmetic
-of the nested loops in the same order, so the search's results are the same.
-
-Phases, in order (``_P_*``): grow the trees (extend tree a, then connect tree b,
-until connected or out of iterations), the connected path, shortcut attempts,
-smoothing passes (two motions per inner node), the walk in steps of at most
-``step_motion`` (one motion over every edge of the polyline), the check of the
-path the walk wrote, done. The check solves anew at every step of a found path
-(one step per iteration, the same solve): the exact clearances that the result
-reports, and the swept proof of :func:`~softplan_jax.geometry.clearance.swept_clear`
-(the metrics' own test, not the walk's safe step) for every motion between steps.
-
-For the fallback the loop first finds the goal roots: the IK of
-:func:`~softplan_jax.search.reach.goal_configurations`, each round's starts
-assessed one per iteration at the same solve (``_P_IK_ROUND`` sets a round up,
-``_P_IK_SOLVE`` ends it), then the search where a start is certified. So the
-fallback's one program holds one copy of the solver.
-"""
+"""The global search as one loop with one exact solve per iteration. RRT-Connect's extensions and
+connections, the shortcut attempts, the smoothing moves, the walk along the final polyline, the
+check of the found path and, for the fallback, the IK's assessments are phases (``_P_*``) of one
+``while_loop`` over a state machine: each iteration lets the phase's handler consume the motion
+that just ended and set up the next one (a ``lax.switch`` on the phase), then takes one
+conservative-advancement substep of the current motion,
+``q = q_a + t dq, alpha = safe_scale(q, q_e, c(q), 2 contact, f), t <- 1 if alpha >= 1 else
+t + alpha (1 - t)`` (:func:`~softplan_jax.planning.step.safe_scale`), the only exact solve, so the
+compiled program holds one copy of the solver. Each motion does the arithmetic of nested loops in
+the same order (docs: "How the planner works inside", "The search machine")."""
 
 from __future__ import annotations
 

@@ -1,36 +1,13 @@
-"""Reachability of the goal: multi-start inverse kinematics with exact clearances.
-
-Can any collision-free configuration put the tip on the goal? Answered for the
-goal alone, before (or instead of) a full rollout, in three stages, all
-jitted and vmapped over the starts (and over scenes in a batch):
-
-1. **Proofs of unreachability** (host side, exact): every point of a PCC arm
-   lies within the backbone length ``sum_i L_i`` of the base (each segment's
-   chord is at most its arc), so a goal farther than ``sum_i L_max_i`` from the
-   base is ``beyond_reach``; a goal closer than ``arm_radius + radius_j`` to
-   obstacle j's centre line (exact point-curve distance) puts the tip inside
-   obstacle j: ``goal_in_obstacle``.
-2. **Tip IK** from ``ReachOptions.ik_starts`` starts (the scene's start q0,
-   an optional extra configuration such as where the local planner stopped,
-   and random configurations in the sampling box of :class:`ReachOptions`):
-   Levenberg-Marquardt on ``goal - tip(q)`` with the lengths kept in
-   ``[L_min, L_max]`` (a step that does not reduce the error is refused and
-   the damping raised).
-3. **Clearance in the null space**: ``dq = J_e^+ (goal - tip) + (I - J_e^+ J_e)
-   sum_j w_j grad c_j`` with ``w_j = max(0, 2 ik_clearance - c_j)`` and ``grad
-   c_j = n_j^T J_sj`` (the envelope theorem at the exact closest pair of paper
-   §2.3; n_j the unit vector from the obstacle point to the arm point): the
-   tip stays on the goal while the arm moves away from the obstacles it nears.
-
-A start is a **certified goal configuration** when, at its final q, the exact
-closest pairs to every obstacle converged, the smallest clearance is at least
-``ik_clearance`` and ``|goal - tip| <= ik_tolerance``. A goal with at least
-one is ``reachable``; without one it is ``unreachable``, with the reason
-``beyond_reach`` or ``goal_in_obstacle`` where that is proven, else
-``no_ik_solution`` (no start of this search found one: a decision by
-multi-start search, not a proof), and the best tip distance reached by a
-collision-free configuration.
-"""
+"""Reachability of the goal: can any collision-free configuration put the tip on the goal? Answered
+for the goal alone (docs: Reaching every goal): proofs on the host (``beyond_reach``: farther than
+``sum_i L_max_i`` from the base, as every point of a PCC arm lies within its backbone length;
+``goal_in_obstacle``: closer than ``arm_radius + radius_j`` to obstacle j's centre line), then,
+jitted and vmapped over the starts, tip IK (Levenberg-Marquardt on ``goal - tip(q)``, lengths in
+``[L_min, L_max]``) and null-space steps ``dq = J_e^+ (goal - tip) + (I - J_e^+ J_e) sum_j w_j grad
+c_j`` with ``w_j = max(0, 2 ik_clearance - c_j)`` and ``grad c_j = n_j^T J_sj`` (the envelope theorem
+at the exact closest pair of paper §2.3). A start is a certified goal configuration when its exact
+solves converged, its clearance is at least ``ik_clearance`` and ``|goal - tip| <= ik_tolerance``;
+without one the reason is a proof or ``no_ik_solution`` (a multi-start decision, not a proof)."""
 
 from __future__ import annotations
 
@@ -384,8 +361,7 @@ def goal_configurations_batch(scenarios: Scenario, keys, q_extra, options: Reach
     ``q_extra`` (B, n, 3) or None), as ``jax.vmap`` of it computes them, with one loop for the
     batch: each round runs every scene's round (vmapped) and keeps it where that scene's loop
     goes on, until none does. (Under vmap, jax turns the per-scene loop into this same loop,
-    but traces and batches its body more than once: the IK's trace took 3.4 s that way, 2.5 s this
-    way, for one scene alone; 3.1 and 2.8 s in benchmarks/fallback_compile.py.) A batch of one
+    but traces and batches its body more than once; docs: "How the planner works inside".) A batch of one
     scene is traced without vmap (:func:`~softplan_jax.planning.batching.lanes_map`), as the
     global fallback's program traces its IK: the two give the same arrays bit for bit where a
     start is certified at once (rounds 0 and 1), and to rounding over the null-space rounds

@@ -1,31 +1,11 @@
-"""Tracking that does not give up: the global search where the tracker never reaches its goal.
-
-:func:`track_fallback` tracks a moving scene (:func:`~softplan_jax.track`, with the
-evasive step); where the tracker never reaches the goal within the horizon
-(status ``max_steps``: the field's local minima, as at rest), it
-
-1. plans the scene at rest (the curves at their rest pose, the goal in the rest
-   frame of the curve it rides, if any) with :func:`~softplan_jax.plan_fallback`:
-   the local planner, reachability and the certified global search;
-2. turns that plan's tip path into a moving goal: ``waypoints`` points
-   resampled by arc length, timed at ``waypoint_speed`` (default half the
-   attraction's ``v_max``) from t = 0, ending on the goal (carried by its curve's
-   motion when the goal rides one: the same frame as the plan);
-3. tracks again with that goal path. Every step is still the tracker's (the safe
-   step, the evasive step, the between-step checks): the path only guides the
-   attraction, so the run is collision-free by the same construction, while the
-   obstacles move as they do. A guided run that does not reach the goal runs
-   once more with other seeds of the escapes' random walks (``retries``; on the
-   training seed 0, 512 scenes: 488 reached and held without, 490 with one
-   retry, 490 with two).
-
-The second run is judged against the TRUE goal g(t) (:func:`~softplan_jax.planning.records.hold_statistics`
-on ``|g(t_k) - tip_k|``) and kept when it reaches the goal; ``planner`` says how
-the result got there ("local": the tracker alone; "search": guided by the
-search's path), ``reason`` why a fallback did not help. A goal that follows a
-path of its own (a :class:`~softplan_jax.scenarios.motion.GoalPath` of more than
-one point) is not guided (reason ``moving_goal_path``).
-"""
+"""Tracking that does not give up (docs: Moving scenes, "Reaching a goal the field does not lead
+to"). :func:`track_fallback` tracks a moving scene (:func:`~softplan_jax.track`) and, where the
+tracker never reaches the goal, plans the scene at rest with :func:`~softplan_jax.plan_fallback`,
+turns that plan's tip path into a moving goal (``waypoints`` points by arc length at
+``waypoint_speed``, carried by the goal's curve where it rides one) and tracks again with it:
+every step is still the tracker's, so the run stays collision-free by construction. The guided run
+is judged against the true goal g(t) and kept where it reaches it (``planner``, ``reason``); a goal
+with a path of its own is not guided."""
 
 from __future__ import annotations
 

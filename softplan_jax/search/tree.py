@@ -1,45 +1,12 @@
-"""The global fallback: RRT-Connect in configuration space with certified edges.
-
-When the potential-field planner (paper eq. 9) stalls or runs out of steps,
-:func:`global_search` looks for a path from where it stopped to one of the
-certified goal configurations of :mod:`softplan_jax.search.reach`:
-
-* **Certified motions.** Every motion is a straight line in q (phi moves the
-  short way round: :func:`wrap_delta`), walked by conservative advancement:
-  at q, the exact clearance c of every obstacle (paper §2.3, the closest-point
-  solver whose convergence is certified) and the sound motion bound B of the
-  rest of the line (:func:`~softplan_jax.geometry.kinematics.motion_bound`) give the
-  fraction ``alpha = min(1, f (c - 2 contact) / B)`` of it that no arm point
-  can cross an obstacle on: the local planner's safe step,
-  :func:`~softplan_jax.planning.step.safe_scale`. A motion advances until it reaches its end, a solve does not
-  converge, or its substeps run out (near an obstacle the substeps shrink
-  geometrically); what it reaches is proven collision-free, all the way.
-* **RRT-Connect** (Kuffner & LaValle 2000) with a tree at the start and a tree
-  whose roots are up to ``goal_roots`` certified goal configurations; trees
-  alternate; an extension moves towards a random configuration by at most
-  ``extend_distance`` of motion bound; the other tree then tries to connect
-  to the new node in one straight certified motion. Nearest neighbours by the
-  motion bound itself (a bound on how far the arm moves). Fixed-size trees:
-  a batch of scenes runs vmapped in one compiled program.
-* **Shortcuts and smoothing.** Random shortcuts (a straight certified motion
-  between two path nodes replaces the nodes between them), then passes that
-  move each inner node halfway towards the midpoint of its neighbours when both
-  new motions are certified.
-* **The returned path** walks the final polyline again by conservative
-  advancement, with steps of at most ``step_motion`` of motion bound: every
-  step of it satisfies the swept proof of :func:`softplan_jax.geometry.clearance.swept_clear`
-  (the exact clearance at its start exceeds its motion bound plus the contact
-  tolerance), so the path is collision-free by construction, and the tests
-  check it against the brute-force :func:`~softplan_jax.geometry.clearance.dense_trajectory_clearance`.
-* **The check.** The exact clearances at every step of the returned path are solved
-  anew and every motion between steps must pass the metrics' swept proof
-  (:func:`~softplan_jax.geometry.clearance.swept_clear`): the result's clearances; the
-  fallback discards a path that fails (impossible by construction).
-
-The motions are :mod:`.motions`; the whole search (trees, shortcuts, smoothing,
-the walk, the check) runs as one ``while_loop`` with one exact solve per iteration
-(:mod:`.machine`), so the compiled program holds one copy of the solver.
-"""
+"""The global fallback's search: RRT-Connect (Kuffner & LaValle 2000) in configuration space with
+certified edges, from where the potential-field planner (paper eq. 9) stopped to the certified goal
+configurations of :mod:`softplan_jax.search.reach`. Every motion is a straight line in q walked by
+conservative advancement (the exact clearance of paper §2.3 against the sound motion bound: the
+local planner's safe step, :func:`~softplan_jax.planning.step.safe_scale`), so what it reaches is
+collision-free all the way; random shortcuts and smoothing follow, the final polyline is walked
+again in steps of at most ``step_motion`` of motion bound, and the check solves every step anew
+and requires the swept proof of every motion between steps. The whole search runs as one loop with
+one exact solve per iteration (:mod:`.machine`). Docs: Reaching every goal."""
 
 from __future__ import annotations
 

@@ -1,19 +1,11 @@
-"""Tuning the gains of eq. (9) on a suite of scenes, and gains files.
-
-* :mod:`.space` -- what is tuned: :class:`GainSpace`, the parameters of the gains
-  and of a gain function;
-* :mod:`.objective` -- the objective: Gaussian smoothing of the rollout score
-  over those parameters and its unbiased gradient estimate;
-* :mod:`.tuner` -- the tuner, :func:`tune_smoothed` (stochastic gradient descent
-  on that estimate, with optax), whose defaults are the recommended recipe
-  (:data:`RECIPE_SPACE`, :data:`RECIPE_WEIGHTS`, :func:`recipe_start`, :func:`recipe_sigma`);
-* :mod:`.gains_file` -- tuned gains as JSON, with the obstacle model they were
-  tuned for;
-* :mod:`.pathwise` -- the pathwise-gradient tuner (``tune_gains``), kept as the
-  baseline of the tuning comparisons: it differentiates through the rollout, whose
-  score is piecewise constant in the gains, so its gradient sees little of what
-  the smoothed tuner optimises.
-"""
+"""Tuning the gains of eq. (9) on a suite of scenes, and gains files (docs: Tuning the gains): what
+is tuned (:mod:`.space`, :class:`GainSpace`); the objective (:mod:`.objective`: Gaussian smoothing
+of the rollout score and its unbiased gradient estimate); the tuner :func:`tune_smoothed`
+(:mod:`.tuner`: stochastic gradient descent with optax, whose defaults are the recommended recipe);
+tuned gains as JSON, with the obstacle model they were tuned for (:mod:`.gains_file`); and the
+pathwise-gradient tuner ``tune_gains`` (:mod:`.pathwise`), kept as the baseline of the tuning
+comparisons: it differentiates through the rollout, whose score is piecewise constant in the
+gains, so its gradient sees little of what the smoothed tuner optimises."""
 
 from . import pathwise as pathwise
 from .gains_file import gains_from_dict, gains_to_dict, load_gains, save_gains

@@ -1,35 +1,12 @@
-"""Gains files: tuned :class:`~softplan_jax.planning.planner.Gains` or
-:class:`~softplan_jax.planning.planner.GainFunction` kept as JSON (format
-``softplan-gains/1``), with the obstacle model they were tuned for.
-
-::
-
-    {
-      "format": "softplan-gains/1",
-      "method": "points",
-      "n_points": 10,
-      "gains": {"k_att": 2.0, "v_max": 0.5, "eta": 0.004, "d0": 0.3,
-                "rep_max": 1.0, "damping": 0.05, "dt": 0.6},
-      "metadata": {"tuned_by": "grid", "seed": 0}
-    }
-
-* ``method``: ``"curve"`` or ``"points"``; ``n_points``: N of the N-point model
-  (written for both methods, compared only for ``"points"``).
-* ``gains``: the seven scalar gains, JSON numbers; ``rep_max`` may be ``null``
-  (no cap on the repulsion, ``inf`` in :class:`Gains`), ``damping`` may be 0.
-  With ``rep_profile`` (K numbers, K >= 2) AND ``seg_weights`` (n numbers, one
-  per arm segment) the file holds a :class:`GainFunction`; with neither, a
-  :class:`Gains`. A gain function may also have ``goal_profile``: 4 lists of
-  K >= 2 numbers, the log-multipliers of k_att, v_max, eta and d0 over the
-  distance to the goal (absent: none).
-* ``metadata``: optional, any JSON object (how and on what the gains were
-  tuned); written as given and not interpreted.
-
-Every malformed file is rejected with a ValueError that names the field, e.g.
-``gains file field gains.d0: must be a finite positive number, got -1``;
-values are validated by :func:`softplan_jax.planning.planner.check_gains`. Loading with
-``method`` / ``n_points`` refuses a file tuned for another obstacle model.
-"""
+"""Gains files: tuned :class:`~softplan_jax.planning.gains.Gains` or
+:class:`~softplan_jax.planning.gains.GainFunction` kept as JSON (format ``softplan-gains/1``; docs:
+"Scenario and gains files"): the obstacle model they were tuned for (``method``, ``n_points``), the
+seven scalar ``gains`` (``rep_max`` null: no cap), a gain function's ``rep_profile``,
+``seg_weights`` and optional ``goal_profile``, and free ``metadata``. Every malformed file is
+rejected with a ValueError that names the field (``gains file field gains.d0: must be a finite
+positive number, got -1``), the values checked by the planner's rules
+(:func:`~softplan_jax.planning.planner.check_gains`); loading with ``method`` / ``n_points``
+refuses a file tuned for another obstacle model."""
 
 from __future__ import annotations
 

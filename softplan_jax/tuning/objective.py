@@ -1,58 +1,13 @@
-"""The Gaussian-smoothed rollout objective of gain tuning, and its score-function
-gradient: a gradient that predicts finite steps.
-
-Why not the pathwise gradient. A rollout of this planner is chaotic in its
-gains: closest points switch between local minima (the repulsion's direction
-jumps), the straight start pose makes phi's Jacobian singular, the Khatib
-field grows like 1/d^3 near contact, the clearance-bounded step creeps along
-obstacles, stalls start random walks and the status latches. Measured on 16
-random scenes at the default gains, escapes and stalls off and the state never
-frozen: the autodiff gradient of a 100-step loss has components of 1e9-1e11
-where central differences give 0.003-3, and the differences themselves change
-sign between h = 1e-2, 1e-3 and 1e-4. The pathwise gradient of the exact
-rollout exists almost everywhere and predicts nothing beyond a tiny
-neighbourhood (:func:`softplan_jax.tuning.rollout_loss` keeps it, for short
-horizons).
-
-The objective here. Parameters ``theta`` (a :class:`GainSpace`: log scalar
-gains, and optionally a repulsion profile and per-segment weights of a
-:class:`~softplan_jax.planning.gains.GainFunction`) are perturbed per ROLLOUT, and the
-objective is the expectation over the perturbation and the scenes::
-
-    J(theta) = E_scene E_{eps ~ N(0, I)} [ L(decode(theta + sigma eps), scene) ]
-
-with ``L`` the per-rollout score of the library's own planner (safe step,
-escapes, collision checks; :func:`rollout_score`): the area under the tip's
-error curve (normalised by the start's error), plus 1 if the goal was not
-reached, plus 2 more if the arm collided -- so J is a smooth surrogate of the
-failure rate. J is a Gaussian convolution of a bounded function, hence smooth
-at the scale sigma whatever the rollout does, and its gradient has the
-score-function (likelihood-ratio) form, estimated with antithetic pairs::
-
-    grad J = E[ L(theta + sigma eps) eps ] / sigma
-           ~ 1/N sum_n (L(theta + sigma eps_n) - L(theta - sigma eps_n)) eps_n / (2 sigma)
-
-(Williams 1992; Salimans et al. 2017 for the antithetic form; Mohamed et al.
-2020, "Monte Carlo gradient estimation in machine learning", section 5).
-``sigma`` is one number or one per coordinate of theta (the smoothing
-distribution ``N(theta, diag(sigma^2))``; the formulas hold per coordinate).
-
-The pieces. :func:`smoothing_sample` rolls out 2N perturbed settings around a
-centre theta0 (antithetic pairs, one training scene each, ONE vmapped, jitted
-batch). :func:`smoothed_objective` is THE objective: the importance-weighted
-estimate of J from that sample, ``1/2N sum_k L_k N(x_k; theta, diag(sigma^2)) /
-N(x_k; theta0, diag(sigma^2))`` -- unbiased for J at every theta near theta0, smooth
-in theta, so ``jax.grad`` of it is exact for it and predicts its finite steps;
-at theta0 that gradient is the antithetic estimate above.
-:func:`estimate_objective` adds standard errors. ``tests/test_smoothing.py``
-checks the gradient against central differences of the same objective (every
-component within 10 %, three gain settings, one sigma and one per coordinate)
-and against central differences of J from FRESH rollouts at theta +- h (common
-random numbers; within three standard errors).
-
-The tuner that steps along these estimates, :func:`~softplan_jax.tuning.tuner.tune_smoothed`,
-is in :mod:`softplan_jax.tuning.tuner`.
-"""
+"""The Gaussian-smoothed rollout objective of gain tuning and its score-function gradient: a
+gradient that predicts finite steps, where the pathwise gradient of a chaotic rollout does not
+(docs: Tuning the gains). The parameters ``theta`` (a :class:`GainSpace`) are perturbed per
+rollout, ``J(theta) = E_scene E_{eps ~ N(0, I)} [L(decode(theta + sigma eps), scene)]`` with ``L``
+the score :func:`rollout_score`, and :func:`smoothed_objective` estimates J from one sample of
+antithetic pairs (:func:`smoothing_sample`) with importance weights,
+``1/2N sum_k L_k N(x_k; theta, diag(sigma^2)) / N(x_k; theta0, diag(sigma^2))``: unbiased near
+theta0 and smooth in theta, so ``jax.grad`` of it is exact for it, and at theta0 that gradient is
+the antithetic estimate ``1/N sum_n (L(theta0 + sigma eps_n) - L(theta0 - sigma eps_n)) eps_n /
+(2 sigma)`` (Williams 1992; Salimans et al. 2017; Mohamed et al. 2020, section 5)."""
 
 from __future__ import annotations
 
@@ -98,7 +53,7 @@ class ScoreWeights(NamedTuple):
         fallback plans).
       fallback: the fallback's time (:func:`softplan_jax.plan_fallback`), in
         rollouts of ``max_steps`` steps, charged by ``steps`` to a rollout that
-        does not reach (``benchmarks/tuning_gain_function.py`` measures it).
+        does not reach (docs: Tuning the gains, "What a plan costs").
       path_length: weight of the tip's path length, normalised by the start's
         tip error (1: a straight line to the goal).
     """

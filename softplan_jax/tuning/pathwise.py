@@ -1,19 +1,11 @@
-"""Gradient tuning of the gain functions through whole rollouts (optax): the
-gains of paper eq. (9), which the paper sets by hand, tuned beyond the paper.
-
-The loss of one rollout (:func:`rollout_loss`) is differentiable in the gains:
-the planner step is smooth in the gains, the closest points carry implicit
-derivatives (:mod:`softplan_jax.geometry.closest`), and the status logic only freezes
-the state. It combines
-
-* ``w_path``: the mean tip error |V_e| over the steps (rewards reaching early),
-* ``w_final``: the final tip error,
-* ``w_clearance``: a soft penalty ``tau * softplus((margin - clearance)/tau)``
-  on the true clearance of every obstacle at every step.
-
-:func:`tune_gains` optimises the logarithms of the gains (they stay positive)
-with an optax optimiser over a batch of scenarios.
-"""
+"""Gradient tuning of the gains through whole rollouts (optax), the pathwise baseline of the tuning
+comparisons. :func:`rollout_loss` is differentiable in the gains (the planner step is smooth in
+them, the closest points carry implicit derivatives, :mod:`softplan_jax.geometry.closest`, and the
+status logic only freezes the state): ``w_path`` times the mean tip error |V_e| over the steps,
+plus ``w_final`` times the final one, plus ``w_clearance`` times a soft penalty
+``tau softplus((margin - clearance) / tau)`` on the true clearance of every obstacle at every
+step. :func:`tune_gains` optimises the gains' logarithms with an optax optimiser over a batch of
+scenarios."""
 
 from __future__ import annotations
 
@@ -93,8 +85,7 @@ def _to_gains(params, fixed):
 # scenes as an argument, compiled with rollout_compiler_options(method)), so that
 # they share one compilation through jax's persistent cache. tune_gains applies
 # the chain rule to the log-gains itself. The package's XLA options roughly halve
-# the gradient's compile time (tree, 200 steps: 15 -> 9 s of XLA; a batch of 4
-# random scenes, 150 steps: 25 -> 14 s) at the same run time (66 vs 68 ms).
+# the gradient's compile time at the same run time (docs: Performance, "Compilation").
 _loss_and_grad = jax.jit(jax.value_and_grad(batch_loss), static_argnames=("options", "max_steps"))
 
 # AOT-compiled _loss_and_grad, keyed by argument structure, shapes, dtypes and statics.

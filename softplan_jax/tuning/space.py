@@ -39,9 +39,7 @@ class GainSpace(NamedTuple):
     tip's error obeys ``e <- (1 - dt k_att) e`` (with ``J J^+`` close to the
     identity away from singularities) and converges only for ``dt < 2 / k_att``
     (1.0 at the default ``k_att = 2``). Beyond it the arm oscillates about its
-    goal: on random scenes success falls from 71-95 % at dt = 0.8 to 15-32 % at
-    dt = 1.1 (``benchmarks/tuning_validation/landscape.py``, b850131), a cliff in every
-    score, which a smoothing scale of 0.2 in log dt straddles from dt = 0.8. In
+    goal, a cliff in every score (docs: Tuning the gains, "The optimiser"). In
     logit coordinates the bound lies at infinity, so neither a step nor the
     smoothing's perturbations cross it.
 

@@ -1,14 +1,10 @@
 """Tuning the gains by stochastic gradient descent on the smoothed objective of
-:mod:`softplan_jax.tuning.objective` (its importance-weighted estimate and the
-antithetic score-function gradient).
-
-:func:`tune_smoothed` runs optax on these gradients (SGD with momentum, a
-decaying step and iterate averaging by default; optionally along the natural
-gradient ``sigma^2 grad J``), a fresh draw of scenes and perturbations per
-update, with progress, the training history, and the rollout budget accounted
-for. ``benchmarks/tuning.py`` compares it with a grid, random search and CMA-ES
-at equal budgets on held-out scenes.
-"""
+:mod:`softplan_jax.tuning.objective`: :func:`tune_smoothed` runs optax on its antithetic
+score-function gradients (SGD with momentum, a decaying step and iterate averaging by default;
+optionally along the natural gradient ``sigma^2 grad J``), a fresh draw of scenes and
+perturbations per update, with progress, the training history and the rollout budget accounted
+for. Its defaults are the recommended recipe (docs: Tuning the gains, with the recipe's choices
+and its comparison with a grid, random search, Optuna's TPE and CMA-ES)."""
 
 from __future__ import annotations
 
@@ -41,13 +37,10 @@ fraction of the Euler bound, and a 6-knot goal-distance profile of k_att, v_max,
 RECIPE_WEIGHTS = ScoreWeights(steps=1.0)
 """The recommended objective, :func:`tune_smoothed`'s default: the failure and progress terms
 of :class:`ScoreWeights`, plus the time to a plan (steps / max_steps where the goal is
-reached, 1 otherwise). ``fallback`` stays 0: ``unreached`` already charges a failure,
-and on the validation seed the fallback's full time (``fallback=5``: its median 0.55 s
-where it runs, ``benchmarks/results/reach.md``, is about five 100-step rollouts) made the
-score's differences, and with them the natural gradient's steps, several times larger:
-the tuned function was worse (91.0 % against 99.6 % of ``random_scenarios(2, 256)``
-reached with the recipe's sigma, tuner seed 0; 92.6 % against 97.7 % with the profile's
-sigma at 0.3). With larger weights, lower ``learning_rate`` alike."""
+reached, 1 otherwise). ``fallback`` stays 0: ``unreached`` already charges a failure, and
+the fallback's time made the score's differences, and with them the natural gradient's
+steps, larger and the tuned function worse (docs: Tuning the gains, "What a plan costs").
+With larger weights, lower ``learning_rate`` alike."""
 
 
 def recipe_start(dtype=None) -> Gains:
@@ -63,10 +56,8 @@ def recipe_sigma(space: GainSpace) -> tuple:
     """The recommended smoothing scales of ``space``'s coordinates: 0.7 for dt's logit
     (``stable_dt``: a broad ridge below the Euler bound), 0.3 for the other log-gains and
     for a repulsion profile's and segment weights' log-multipliers, 0.5 for the
-    goal-distance profile's. Chosen on the validation seed ``random_scenarios(2, 256)``
-    with tuner seeds 0-2 (never the held-out seed): the goal profile at 0.3 / 0.5 / 0.7 /
-    1.0 reached 95.7-97.7 / 98.8-99.6 / 99.2-100 / 94.9-97.7 % of its scenes in a mean of
-    28.7-34.4 / 21.9-23.5 / 22.5-28.5 / 22.3-23.7 steps (issue 39's closing note)."""
+    goal-distance profile's, chosen on the validation seed ``random_scenarios(2, 256)``
+    (docs: Tuning the gains, "How the rest of the recipe was chosen")."""
     wide = {"dt"} if space.stable_dt else set()
     scalars = tuple(0.7 if k in wide else 0.3 for k in space.names)
     return scalars + (0.3,) * (space.knots + space.segments) + (0.5,) * (len(GOAL_GAINS) * space.goal_knots)
