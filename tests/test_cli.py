@@ -60,6 +60,11 @@ def test_run_sim1_with_plot(tmp_path, capsys):
     assert code == 0, err
     assert png.exists() and png.stat().st_size > 10_000
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "overwrote" not in err
+    png.write_bytes(b"replaced below")  # an existing figure: replaced with --force, and said so
+    code, _, err = run_main(capsys, "run", "sim1", "--max-steps", STEPS, "--plot", png, "--force")
+    assert code == 0, err
+    assert f"softplan: overwrote {png} (--force)" in err and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     for label in ("scenario", "method", "status", "iterations", "reached", "collided",
                   "min true clearance", "final tip error", "compile time", "time per step"):
         assert label in out, f"{label!r} missing from the summary:\n{out}"
@@ -271,6 +276,8 @@ def _bad_cases(tmp: str, scenario_file: str):
         ("gif not .gif", ["run", "sim1", "--gif", j(tmp, "anim.png")]),
         ("gif in missing directory", ["run", "sim1", "--gif", j(tmp, "no", "anim.gif")]),
         ("plot and gif the same", ["run", "sim1", "--plot", j(tmp, "a.gif"), "--gif", j(tmp, "a.gif")]),
+        ("plot existing file", ["run", "sim1", "--plot", j(tmp, "figure.png")]),
+        ("gif existing file", ["run", "sim1", "--gif", j(tmp, "motion.gif")]),
         ("out unknown extension", ["run", "sim1", "--out", j(tmp, "trajectory.txt")]),
         ("out without extension", ["run", "sim1", "--out", j(tmp, "trajectory")]),
         ("out existing file", ["run", "sim1", "--out", scenario_file]),
@@ -317,6 +324,8 @@ def test_bad_input_exits_2(tmp_path, capsys, case_id):
     (tmp_path / "unknown_key.json").write_text(json.dumps({**good, "colour": "red"}), encoding="utf-8")
     scenario_file = tmp_path / "scenario.json"
     scenario_file.write_text(json.dumps(good), encoding="utf-8")
+    (tmp_path / "figure.png").write_bytes(b"a figure of mine")
+    (tmp_path / "motion.gif").write_bytes(b"an animation of mine")
     files = sorted(tmp_path.iterdir())
     contents = {p: p.read_bytes() for p in files}
 
@@ -351,7 +360,7 @@ def test_batch_command(tmp_path, capsys):
     s = json.loads(stdout)
     assert (s["scenarios"], s["devices"], s["chunk"], s["max_steps"]) == (3, 1, 3, 200)
     assert sum(s["status_counts"].values()) == 3 and s["steps_per_s"] > 0 and s["scenes_per_s"] > 0
-    assert "plan_batch: 1/1 chunks, 3/3 scenarios on 1 device" in err
+    assert "batch: 1/1 chunks, 3/3 scenes, reached" in err and "(compile " in err
     saved = np.load(out)
     ref = sp.plan_batch(sp.random_scenarios(3, 3, obstacles=(1, 5), curve_slots=5), max_steps=200, seed=3)
     np.testing.assert_array_equal(saved["status"], np.asarray(ref.status))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import os
 
-from .common import EXIT_OK, InputError, check_points_args, fmt_seconds
+from .common import EXIT_OK, InputError, check_points_args, fmt_seconds, return_freed_chunks
 from .parser import check_distributed_args, check_gains_arg, initialize_distributed
 
 __all__ = ["cmd_sweep"]
@@ -44,6 +44,7 @@ def _check_args(args) -> bool:
 def cmd_sweep(args) -> int:
     """``softplan sweep``: run (or resume) the sweep and print its summary; the exit code."""
     distributed = _check_args(args)
+    return_freed_chunks()
     gains_file = check_gains_arg(args.gains)
     import jax
 
