@@ -202,13 +202,19 @@ def test_run_out_json_and_npz_round_trip(tmp_path, capsys):
     assert json.loads(path_json.read_text())["q"] == data["q"]
 
 
-def test_scenarios_lists_paper_scenarios(capsys):
+def test_scenarios_lists_paper_and_moving_scenarios(capsys):
     code, out, err = run_main(capsys, "scenarios")
     assert code == 0, err
     for name in ("sim1", "sim2", "tree"):
         assert name in out
+    assert "tree_fruit" in out and "wire_sweep" in out  # the moving presets the README runs, too
     code, out, _ = run_main(capsys, "scenarios", "--json")
-    assert [r["name"] for r in json.loads(out)] == ["sim1", "sim2", "tree"]
+    rows = json.loads(out)
+    assert [r["name"] for r in rows] == ["sim1", "sim2", "tree", "tree_sway", "tree_fruit", "wire_sweep"]
+    assert [r["kind"] for r in rows] == ["paper"] * 3 + ["moving"] * 3
+    assert rows[2]["goal"] == [1.0, 0.7, 1.45] and rows[3]["goal"] == rows[2]["goal"]  # tree_sway: the tree's goal
+    assert [r["goal_moves"] for r in rows[3:]] == [False, True, False]  # the fruit moves with its branch
+    assert [r["obstacles"] for r in rows] == [1, 1, 5, 5, 5, 1]
 
 
 @pytest.mark.parametrize("name", ["sim1", "sim2", "tree"])

@@ -12,13 +12,26 @@ import threading
 
 from ..base.files import publish
 
-__all__ = ["EXIT_INTERRUPTED", "interrupt_guard", "atomic_output", "exit_interrupted"]
+__all__ = ["EXIT_INTERRUPTED", "interrupt_guard", "atomic_output", "exit_interrupted", "interrupted_say",
+           "interrupted_next_step"]
 
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, the shell's convention
 
 _PARTIAL: set[str] = set()  # temporary files being written
 _LOCK = threading.Lock()
 _MESSAGE = b"softplan: interrupted\n"
+_NEXT_STEP = [b""]  # a line after the message: what to do next (interrupted_say)
+
+
+def interrupted_say(text: str) -> None:
+    """If Ctrl-C ends this command, write ``softplan: <text>`` after ``softplan: interrupted``
+    (e.g. that the same command resumes); "" says nothing more."""
+    _NEXT_STEP[0] = f"softplan: {' '.join(text.split())}\n".encode() if text.strip() else b""
+
+
+def interrupted_next_step() -> str:
+    """The line :func:`interrupted_say` set ("" when none)."""
+    return _NEXT_STEP[0].decode()
 
 
 def exit_interrupted() -> None:
@@ -31,7 +44,7 @@ def exit_interrupted() -> None:
         except OSError:
             pass
     try:
-        os.write(2, _MESSAGE)  # not sys.stderr: its lock may be held by the interrupted thread
+        os.write(2, _MESSAGE + _NEXT_STEP[0])  # not sys.stderr: its lock may be held by the interrupted thread
     except OSError:
         pass
     os._exit(EXIT_INTERRUPTED)

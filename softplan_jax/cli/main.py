@@ -15,7 +15,7 @@ from .batch import cmd_batch
 from .common import EXIT_BAD_INPUT, InputError
 from .export import cmd_export
 from .fit import cmd_fit
-from .interrupt import EXIT_INTERRUPTED, interrupt_guard
+from .interrupt import EXIT_INTERRUPTED, interrupt_guard, interrupted_next_step, interrupted_say
 from .parser import build_parser
 from .run import cmd_run
 from .scenario_list import cmd_scenarios
@@ -42,6 +42,7 @@ def console_main() -> int:
 
 
 def _main(argv) -> int:
+    interrupted_say("")  # a command of its own: nothing said after "interrupted" unless it says so
     parser = build_parser()
     try:
         try:
@@ -67,8 +68,9 @@ def _main(argv) -> int:
         msg = " ".join(str(err).split())  # one line
         print(f"softplan: error: {msg}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:  # outside the guard's reach (not the main thread): one line all the same
+    except KeyboardInterrupt:  # outside the guard's reach (not the main thread): the same lines all the same
         print("softplan: interrupted", file=sys.stderr)
+        print(interrupted_next_step(), file=sys.stderr, end="")
         return EXIT_INTERRUPTED
 
 

@@ -142,8 +142,8 @@ def cmd_run(args) -> int:
         result = unreachable_result(scenario, options, reason)
     else:
         # Progress on stderr: the compilation is the long part of a first run.
-        print("softplan: compiling the planner (once per scenario shape and option set; later runs load it "
-              "from the cache) ...", file=sys.stderr, flush=True)
+        print("softplan: preparing the planner (compiled the first time a scene shape and option set is planned, "
+              "loaded from the cache after) ...", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         # Traced program and XLA executable both cached on disk: a second run loads them.
         run, loaded = rollout_jit.cached(scenario, gains, options, max_steps)
@@ -254,8 +254,9 @@ def _cmd_track(args, dtype) -> int:
     from ..planning.programs import strong_gains
 
     gains = strong_gains(gains, dtype)
-    print("softplan: a moving scene: tracking its goal for "
-          f"{max_steps} steps ({max_steps * float(gains.dt):g} s; compiling once) ...", file=sys.stderr, flush=True)
+    print("softplan: a moving scene: tracking its goal over "
+          f"{max_steps} steps, {max_steps * float(gains.dt):g} s of the scene's time (not the wait; the program is "
+          "compiled the first time, loaded from the cache after) ...", file=sys.stderr, flush=True)
     fn = track_program(options, max_steps, False)
     # Twice: the first call compiles (or finds the program in jit's cache), the second is timed alone.
     t0 = time.perf_counter()
