@@ -266,3 +266,28 @@ def json_float(x):
     """A float for JSON (inf/nan as None)."""
     x = float(x)
     return x if np.isfinite(x) else None
+
+
+def bar_figure(values: dict, path: str, xlabel: str, title: str) -> None:
+    """A horizontal bar chart on a log axis: ``values`` {case: {version: seconds}}, one bar per
+    version and case, written to ``path`` (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(values)
+    versions = list(dict.fromkeys(v for n in names for v in values[n]))
+    fig, ax = plt.subplots(figsize=(8, 0.6 * len(names) + 1.5))
+    y = np.arange(len(names))
+    for i, v in enumerate(versions):
+        ax.barh(y + 0.4 * i, [values[n].get(v, np.nan) for n in names], height=0.38, label=v)
+    ax.set_yticks(y + 0.2 * (len(versions) - 1), names, fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlabel(xlabel)
+    ax.legend()
+    ax.set_title(title)
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

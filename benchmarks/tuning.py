@@ -1,10 +1,13 @@
-"""Gradient tuning against grid, random and CMA-ES search at equal budgets, on
-held-out scenes.
+"""Does the gradient tuner beat the other tuners at equal budgets, on held-out scenes? Two parts:
+gradient tuning of constant gains against grid, random and CMA-ES search (this module), and
+``--tuners``: the recipe's gain function against Optuna's TPE and CMA-ES over several tuner
+seeds (``_tuners.py``, its own options and report, ``results/tuners``).
 
-One command regenerates the whole comparison, in one process (progress on stderr)::
+One command regenerates each part, in one process (progress on stderr)::
 
     python benchmarks/tuning.py            # train seed 0 (64 scenes), held-out seed 1 (1,024 scenes)
     python benchmarks/tuning.py --quick    # smoke run, written to benchmarks/results/quick/
+    python benchmarks/tuning.py --tuners [--quick]
 
 Every rollout is the library's default planner (safe step, escapes, collision
 checks in the scan). Per obstacle model (curve, N = 10, N = 50):
@@ -46,9 +49,9 @@ checks in the scan). Per obstacle model (curve, N = 10, N = 50):
 
 The tuners' settings (start, optimiser, step size, pairs, averaging) were
 chosen on a validation seed (``random_scenarios(2, 256)``), never on the
-held-out one; the validation scripts and logs, and the rerun of the gradient
-and random search with tuner seeds 0-4 (``tuning_seeds.py``), are in git
-history (``git show b850131:benchmarks/tuning_validation/README.md``).
+held-out one; the validation scripts and logs (``benchmarks/tuning_validation/``),
+and the rerun of the gradient and random search with tuner seeds 0-4
+(``tuning_seeds.py``), left the folder; git keeps them.
 
 Held-out: every choice (and the default gains) on ``random_scenarios(eval
 seed, n_eval)``, ``--max-steps`` steps; success = reached without collision;
@@ -223,6 +226,12 @@ def choice_key(reached, collided) -> tuple:
 
 
 def main(argv=None) -> dict:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--tuners" in argv:  # the second part: the recipe against Optuna's TPE and CMA-ES, several tuner seeds
+        import _tuners
+
+        argv.remove("--tuners")
+        return _tuners.main(argv)
     args = parse_args(argv)
     import jax
 

@@ -1,11 +1,11 @@
-"""The gradient tuner against the tuners practitioners reach for first (Optuna's TPE,
-CMA-ES), at equal rollouts, on constant gains and on the goal-distance gain function,
-judged on held-out scenes over several tuner seeds.
+"""The second part of ``tuning.py`` (``--tuners``): the gradient tuner against the tuners
+practitioners reach for first (Optuna's TPE, CMA-ES), at equal rollouts, on constant gains and
+on the goal-distance gain function, judged on held-out scenes over several tuner seeds.
 
 One command regenerates the comparison (progress on stderr; about 25 min on 2 CPUs)::
 
-    python benchmarks/tuners.py            # train seed 0 (64 scenes), held-out seed 1 (1,024 scenes), 5 tuner seeds
-    python benchmarks/tuners.py --quick    # smoke run, written to benchmarks/results/quick/
+    python benchmarks/tuning.py --tuners            # train seed 0 (64 scenes), held-out seed 1 (1,024), 5 tuner seeds
+    python benchmarks/tuning.py --tuners --quick    # smoke run, written to benchmarks/results/quick/
 
 Every tuner sees the same training scenes and the same objective, the mean
 :func:`softplan_jax.tuning.rollout_score` with ``--weights`` (default the recipe's
@@ -384,7 +384,7 @@ def markdown(args, rep) -> str:
     rows, summary, paired = rep["rows"], rep["summary"], rep["paired"]
     L = ["# Tuners at equal rollouts: the gradient against Optuna's TPE and CMA-ES (held-out scenes)", ""]
     L += machine_lines(rep["machine"])
-    L += [f"- command: `python benchmarks/tuners.py{' --quick' if args.quick else ''}`, one process; wall "
+    L += [f"- command: `python benchmarks/tuning.py --tuners{' --quick' if args.quick else ''}`, one process; wall "
           f"{rep['wall_seconds']:.0f} s, compile included",
           f"- training: `random_scenarios({args.train_seed}, {args.n_train})`, {args.train_steps} steps; held-out: "
           f"`random_scenarios({args.eval_seed}, {args.n_eval})`, {args.max_steps} steps; tuner seeds {args.seeds}; "
