@@ -291,3 +291,20 @@ def bar_figure(values: dict, path: str, xlabel: str, title: str) -> None:
     os.makedirs(os.path.dirname(path), exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def held_out_parser(doc: str, train_steps: str, max_steps: str):
+    """The argument parser of a train-then-hold-out comparison (science.py, tuning.py and its
+    ``--tuners`` part), with their common flags: --quick, the training and held-out seeds and
+    sizes, and the rollout steps of each (``train_steps``, ``max_steps``: their help texts)."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="smoke run (small sizes) into results/quick/")
+    ap.add_argument("--train-seed", type=int, default=0)
+    ap.add_argument("--eval-seed", type=int, default=1)
+    ap.add_argument("--n-train", type=int, default=None, help="training scenes (default 64; quick 8)")
+    ap.add_argument("--n-eval", type=int, default=None, help="held-out scenes (default 1024; quick 16)")
+    ap.add_argument("--train-steps", type=int, default=None, help=train_steps)
+    ap.add_argument("--max-steps", type=int, default=None, help=max_steps)
+    return ap

@@ -50,7 +50,6 @@ Paired comparisons on the same scenes (bootstrap 95 % intervals over scenes). Wr
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
@@ -70,14 +69,10 @@ PROFILE_BOX = (-1.5, 1.5)
 
 
 def parse_args(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="smoke run (small sizes) into results/quick/")
-    ap.add_argument("--train-seed", type=int, default=0)
-    ap.add_argument("--eval-seed", type=int, default=1)
-    ap.add_argument("--n-train", type=int, default=None, help="training scenes (default 64; quick 8)")
-    ap.add_argument("--n-eval", type=int, default=None, help="held-out scenes (default 1024; quick 16)")
-    ap.add_argument("--train-steps", type=int, default=None, help="rollout steps when tuning (default 100; quick 30)")
-    ap.add_argument("--max-steps", type=int, default=None, help="rollout steps held out (default 150; quick 40)")
+    from _common import held_out_parser
+
+    ap = held_out_parser(__doc__, "rollout steps when tuning (default 100; quick 30)",
+                         "rollout steps held out (default 150; quick 40)")
     ap.add_argument("--budget", type=int, default=None, help="rollouts per tuner run (default 3072; quick 32)")
     ap.add_argument("--pairs", type=int, default=None, help="the gradient's antithetic pairs (default 32; quick 4)")
     ap.add_argument("--seeds", default=None, help="comma list of tuner seeds (default 0,1,2,3,4; quick 0,1)")
