@@ -589,7 +589,7 @@ def figures(results: dict, args, fig_dir: str, sp) -> None:
             if name == "default":
                 g = base
             elif name == "function":
-                g = GainFunction(**{k: jnp.asarray(v, jnp.float64) for k, v in ch.items()})
+                g = GainFunction(**{k: None if v is None else jnp.asarray(v, jnp.float64) for k, v in ch.items()})
             else:
                 g = base._replace(**{k: jnp.asarray(ch[k], jnp.float64) for k in TUNED})
             d = np.linspace(1e-3, float(g.d0) * 1.05, 200)
