@@ -171,9 +171,9 @@ def lanes_program(opts, max_steps: int, lanes: int, trips: int):
     around ``lower`` and restored after."""
     import functools
 
-    from softplan_jax.base.compilation_cache import rollout_compiler_options
     from softplan_jax.geometry import warm_start as ws
     from softplan_jax.planning.engine import run_lanes
+    from softplan_jax.planning.options import rollout_compiler_options
 
     fn = jax.jit(functools.partial(run_lanes, options=opts, max_steps=max_steps, lanes=lanes),
                  compiler_options=rollout_compiler_options("curve"))

@@ -45,9 +45,7 @@ def save(path: str, fallback: bool, quick: bool = False) -> int:
     from _common import finish_machine, machine_info, machine_lines, write_results
 
     import softplan_jax as sp
-    from softplan_jax.planning.planner import make_options
-    from softplan_jax.planning.programs import rollout_jit
-    from softplan_jax.planning.tracking import make_track_options, track_program
+    from softplan_jax.planning import make_options, make_track_options, rollout_jit
 
     machine = machine_info("float64")
     out, t0 = {}, time.perf_counter()
@@ -75,9 +73,9 @@ def save(path: str, fallback: bool, quick: bool = False) -> int:
                                                                    max_steps=T)))
     print(f"random batches: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
     for name in ("tree_sway",) if quick else ("tree_sway", "tree_fruit", "wire_sweep"):
-        fn = track_program(make_track_options("curve"), 100 if quick else 400, False)
-        put(f"moving/{name}", jax.device_get(fn(sp.moving_scenario(name), sp.default_gains(),
-                                                jax.random.PRNGKey(0))))
+        r = rollout_jit(sp.moving_scenario(name), sp.default_gains(), make_track_options("curve"),
+                        100 if quick else 400, jax.random.PRNGKey(0))
+        put(f"moving/{name}", jax.device_get(r))
     if not quick:
         put("moving/batch", sp.track_batch(sp.moving.random_moving_scenarios(1, 32), max_steps=300))
     print(f"moving scenes: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)

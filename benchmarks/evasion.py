@@ -119,7 +119,7 @@ def main(argv=None):
     from stats import paired_table, pct_interval
 
     import softplan_jax as sp
-    from softplan_jax.planning.tracking import make_track_options, track_program
+    from softplan_jax.planning import make_track_options, rollout_batch, rollout_jit
     from softplan_jax.testing import oracle
 
     quick = args.quick
@@ -224,7 +224,8 @@ def main(argv=None):
     variants = {}
     for evasion in (False, True):
         opts = make_track_options("curve", evasion=evasion)
-        one, many = track_program(opts, T, False), track_program(opts, T, True)
+        one = lambda m, g, k, opts=opts: rollout_jit(m, g, opts, T, k)  # noqa: E731
+        many = lambda m, g, k, opts=opts: rollout_batch(m, g, opts, T, k, devices=1)  # noqa: E731
         tag = "on" if evasion else "off"
         variants[f"swaying tree, evasion {tag}"] = lambda one=one: one(sway, gains, key)
         variants[f"{len(quiet)} quiet scenes, evasion {tag}"] = lambda many=many: many(movers, gains, keys)

@@ -245,7 +245,7 @@ def part_tracking(args, rep):
     import numpy as np
 
     import softplan_jax as sp
-    from softplan_jax.planning.tracking import make_track_options, track_program
+    from softplan_jax.planning import make_track_options, rollout_batch
 
     B, T = args.tracking_size, args.tracking_steps
     suites = {"default": sp.moving.random_moving_scenarios(1, B),
@@ -254,7 +254,8 @@ def part_tracking(args, rep):
     keys = jax.random.split(jax.random.PRNGKey(0), B)
     calls = {}
     for evasion in (False, True):
-        prog = track_program(make_track_options("curve", evasion=evasion), T, True)
+        opts = make_track_options("curve", evasion=evasion)
+        prog = lambda m, g, k, opts=opts: rollout_batch(m, g, opts, T, k, devices=1)  # noqa: E731
         for name, suite in suites.items():
             calls[f"{name}, evasion {'on' if evasion else 'off'}"] = \
                 lambda prog=prog, suite=suite: prog(suite, gains, keys)

@@ -68,8 +68,8 @@ import numpy as np
 from scipy import optimize, spatial
 
 import softplan_jax as sp
+from softplan_jax.planning import PAPER_STEP, planner_step
 from softplan_jax.planning.planner import make_options
-from softplan_jax.planning.step import PAPER_STEP, planner_step
 
 __all__ = [
     "NumpyScenario",

@@ -42,6 +42,7 @@ SCRIPTS = {
     "tuning": [[], ["--tuners"]],
     "reach": [[]],
     "evasion": [[]],
+    "timing": [[]],
     "throughput": [[]],
     # this version alone; against another: --with "ab:--base OTHER/softplan_jax" (its docstring)
     "ab": [[]],

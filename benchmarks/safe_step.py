@@ -49,7 +49,7 @@ VARIANTS = ("plain", "safe", "default")
 
 def variant_options(variant: str) -> dict:
     """PlanOptions fields of a variant (imported lazily: this module imports no jax)."""
-    from softplan_jax.planning.step import PAPER_STEP
+    from softplan_jax.planning import PAPER_STEP
 
     return {
         "plain": dict(PAPER_STEP),  # the earlier default: the paper's step, no escapes, stall test 60 / 1e-4
@@ -107,7 +107,7 @@ def main(argv=None) -> dict:
 
     import softplan_jax as sp
     from softplan_jax.base.status import status_name
-    from softplan_jax.geometry.clearance import apply_collision_checks
+    from softplan_jax.planning import apply_collision_checks
     from softplan_jax.planning.planner import make_options
     from softplan_jax.planning.programs import rollout_batch
 

@@ -30,7 +30,7 @@ On the paper's tree scenario (five curves, three segments), float64 and float32:
    ahead, interleaved rounds, min and median.
 
 Every rollout is compiled with the XLA options of the public rollouts for
-its method (``compilation_cache.rollout_compiler_options``: what ``sp.plan``
+its method (``planning.options.rollout_compiler_options``: what ``sp.plan``
 and ``plan_batch`` run), and so are the loss and its gradient (what
 ``tune_gains`` and the tuning notebook compile). Every figure is a median of repeats of a compiled call with
 ``block_until_ready``; compile time is never in a run time. Writes
@@ -66,8 +66,8 @@ from _common import (  # noqa: E402
 )
 
 import softplan_jax as sp  # noqa: E402
-from softplan_jax.base.compilation_cache import rollout_compiler_options  # noqa: E402
 from softplan_jax.geometry.obstacles import radius_and_mask  # noqa: E402
+from softplan_jax.planning.options import rollout_compiler_options  # noqa: E402
 from softplan_jax.planning.planner import make_options  # noqa: E402
 from softplan_jax.planning.programs import rollout, rollout_jit  # noqa: E402
 from softplan_jax.tuning.pathwise import rollout_loss  # noqa: E402
@@ -82,7 +82,7 @@ def median_run(fn, *args, repeats):
 def compiled(fn, *args, **static):
     """``fn`` traced, lowered and compiled, and the seconds that took, with the XLA
     options that the public rollouts (``rollout_jit``, ``rollout_batch``) and
-    ``tune_gains`` use for the method (``compilation_cache.rollout_compiler_options``)."""
+    ``tune_gains`` use for the method (``planning.options.rollout_compiler_options``)."""
     t0 = time.perf_counter()
     copts = rollout_compiler_options(static["options"].method)
     c = (jax.jit(fn, static_argnames=tuple(static), compiler_options=copts)

@@ -7,6 +7,8 @@ sub-namespaces, one per layer of the package, read top-down:
 * :mod:`softplan_jax.cli` -- the ``softplan`` command;
 * :mod:`softplan_jax.plotting` -- figures and animations (matplotlib);
 * :mod:`softplan_jax.tuning` -- tuning the gains on a suite, gains files;
+* :mod:`softplan_jax.trajectories` -- timed trajectories of the actuators (TOPP-RA),
+  their files;
 * :mod:`softplan_jax.sweeps` -- sweeps at scale: a seeded random suite of any
   size planned in chunks, in constant memory, streamed to disk, resumable;
 * :mod:`softplan_jax.search` -- reachability and the certified global fallback;
@@ -15,21 +17,20 @@ sub-namespaces, one per layer of the package, read top-down:
 * :mod:`softplan_jax.clouds` -- obstacles fitted to point clouds;
 * :mod:`softplan_jax.scenarios` -- scenes: static and moving, the paper's,
   random suites, the JSON format;
+* :mod:`softplan_jax.actuators` -- tendon and chamber lengths, their limits;
 * :mod:`softplan_jax.geometry` -- kinematics, curves, exact closest points,
   clearance;
 * :mod:`softplan_jax.base` -- numerics, input checks, status codes, the
   compilation cache.
 
 :mod:`softplan_jax.moving` gathers what moving scenes and tracking need.
-Names that used to be at the top level still work, with a ``DeprecationWarning``
-that names their new place (see the API reference, docs/api/).
 """
 
 import importlib as _importlib
-import warnings as _warnings
 from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
 from importlib.metadata import version as _version
 
+from . import actuators as actuators
 from . import clouds as clouds
 from . import geometry as geometry
 from . import moving as moving
@@ -37,9 +38,8 @@ from . import planning as planning
 from . import scenarios as scenarios
 from . import search as search
 from . import sweeps as sweeps
+from . import trajectories as trajectories
 from . import tuning as tuning
-from ._compat import OLD_MODULES as _OLD_MODULES
-from ._compat import install as _install_old_module_paths
 from .base.compilation_cache import disable_compilation_cache, enable_compilation_cache
 from .base.compilation_cache import enable_default_cache as _enable_default_cache
 from .base.status import Status
@@ -47,18 +47,19 @@ from .geometry.closest import closest_point
 from .geometry.curves import ParametricCurve, PolynomialCurve, line_segment
 from .geometry.kinematics import point_jacobian, segment_point, tip_position
 from .geometry.point_sets import closest_point_to_points
-from .planning.planner import PlanResult, make_options, plan, plan_batch
+from .planning.gains import GainFunction, Gains, default_gains
+from .planning.options import PAPER_STEP, PlanOptions, make_options
+from .planning.planner import PlanResult, plan, plan_batch
 from .planning.presets import apply_preset
-from .planning.step import PAPER_STEP, GainFunction, Gains, PlanOptions, default_gains
 from .planning.tracking import track, track_batch
 from .scenarios import Scenario, load_scenario, make_scenario, paper_scenario, random_scenarios, save_scenario
 from .scenarios.motion import make_moving_scenario
 from .scenarios.moving import moving_scenario
 from .search.fallback import plan_fallback
 from .search.tracking import track_fallback
+from .trajectories import Trajectory, load_trajectory, save_trajectory, time_parametrize
 from .tuning.gains_file import load_gains, save_gains
 
-_install_old_module_paths()
 # jax's persistent compilation cache on for the planner's programs, unless the user set one or
 # opted out (SOFTPLAN_JAX_NO_CACHE=1; see softplan_jax.base.compilation_cache).
 _enable_default_cache()
@@ -103,6 +104,11 @@ __all__ = [
     "track",
     "track_batch",
     "track_fallback",
+    # actuators over time
+    "Trajectory",
+    "time_parametrize",
+    "save_trajectory",
+    "load_trajectory",
     # gains
     "apply_preset",
     "save_gains",
@@ -112,49 +118,14 @@ __all__ = [
     "__version__",
 ]
 
-# Names that were at the top level before the package had sub-namespaces: name -> its namespace.
-_MOVED = {
-    **{n: "geometry" for n in (
-        "segment_transform", "segment_frames", "tip_jacobian", "backbone_points",
-        "motion_bound", "stack_curves", "curve_points", "ClosestPoint", "SolverOptions", "GridSolverOptions",
-        "point_distance", "true_closest", "dense_trajectory_clearance",
-        "apply_collision_checks")},
-    **{n: "clouds" for n in (
-        "fit_polynomial_curve", "CurveFit", "CloudFit", "FitWarning", "fit_curve", "fit_curves", "curve_distance",
-        "load_cloud", "save_fit_scenario")},
-    **{n: "scenarios" for n in (
-        "default_start", "stack_scenarios", "scenario_warnings", "scenario_from_dict", "scenario_to_dict")},
-    **{n: "planning" for n in (
-        "attraction", "repulsion", "planner_step", "STATUS_NAMES", "status_name", "Rollout", "rollout", "rollout_jit",
-        "rollout_batch", "result_from_rollout", "Preset", "PRESETS", "preset")},
-    **{n: "search" for n in ("ReachOptions", "Reachability", "REACH_REASONS", "reachability")},
-    **{n: "moving" for n in (
-        "CurveMotion", "GoalPath", "MovingScenario", "curve_motion", "goal_path", "stack_moving_scenarios",
-        "scenario_at", "goal_at", "speed_bounds", "MOVING_SCENARIOS", "random_moving_scenarios", "TrackOptions",
-        "Track", "TrackResult")},
-    **{n: "tuning" for n in (
-        "gains_to_dict", "gains_from_dict", "GainSpace", "ScoreWeights", "rollout_score", "score_batch",
-        "SmoothingSample", "smoothing_sample", "smoothed_objective", "ObjectiveEstimate", "estimate_objective",
-        "TuneResult", "tune_smoothed")},
-    **{n: "tuning.pathwise" for n in ("LossWeights", "TuningResult", "rollout_loss", "batch_loss", "tune_gains")},
-    "compilation_cache_dir": "base.compilation_cache",
-}
-
 _LAZY_MODULES = ("plotting", "cli")  # imported on first use: matplotlib, argparse
 
 
 def __getattr__(name):
-    if name in _MOVED:
-        where = _MOVED[name]
-        _warnings.warn(f"softplan_jax.{name} is deprecated; use softplan_jax.{where}.{name}", DeprecationWarning,
-                       stacklevel=2)
-        return getattr(_importlib.import_module(f"{__name__}.{where}"), name)
     if name in _LAZY_MODULES:
-        return _importlib.import_module(f"{__name__}.{name}")
-    if name in _OLD_MODULES:  # a flat module of before the layers: forwarded, with a DeprecationWarning
         return _importlib.import_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_MOVED) | set(_LAZY_MODULES))
+    return sorted(set(globals()) | set(_LAZY_MODULES))

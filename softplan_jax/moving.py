@@ -6,7 +6,8 @@ The types and scenes live in :mod:`softplan_jax.scenarios` (:mod:`.scenarios.mot
 :mod:`softplan_jax.search.tracking`.
 """
 
-from .planning.tracking import Track, TrackOptions, TrackResult, make_track_options, track, track_batch
+from .planning.options import TrackOptions, make_track_options
+from .planning.tracking import Track, TrackResult, track, track_batch
 from .scenarios.json_format import load_moving_scenario, save_moving_scenario
 from .scenarios.motion import (
     CurveMotion,

@@ -73,13 +73,14 @@ session.enable()
 # are the ones test_engine, test_safe_step, test_smoothing (the tree's planner_step),
 # test_goal_gains (the constant gains' plan of the tree) and the notebooks use
 # (test_moving's tracking rollout, the tree shape at 200 steps, is the quickstart
-# notebook's section 7); test_warm_start's plan_batch is
+# notebook's section 7; test_trajectories times the tree's plan and tracks tree_sway as they do);
+# test_warm_start's plan_batch is
 # the program of test_cli's batch command; test_gains_file plans with test_cli's and
 # test_presets' programs.
 SHARED = {
     "planner": ["test_planner", "test_engine", "test_safe_step", "test_smoothing", "test_goal_gains", "test_moving",
-                "test_notebooks"],
-    "cli": ["test_warm_start", "test_cli", "test_presets", "test_gains_file"],
+                "test_trajectories", "test_notebooks"],
+    "cli": ["test_warm_start", "test_cli", "test_cli_actuators", "test_presets", "test_gains_file"],
     # test_sweep's fallback runs test_reach's search programs (same padded shape and options).
     "reach": ["test_reach", "test_sweep"],
 }

@@ -33,7 +33,7 @@ from session import free_port, one_device_env, subprocess_env
 
 import softplan_jax as sp
 from softplan_jax.base.numerics import evaluate_where, solve_small, tie
-from softplan_jax.geometry.clearance import apply_collision_checks
+from softplan_jax.planning import apply_collision_checks
 from softplan_jax.planning.planner import make_options
 from softplan_jax.planning.programs import rollout_jit
 

@@ -170,7 +170,7 @@ def test_run_all_rejects_unknown_scripts(capsys):
 QUICK_ONLY = [("ab", "ab", []), ("baselines", "baselines", []), ("closest", "closest", []),
               ("evasion", "evasion", []), ("gpu", "gpu", []), ("paper_presets", "paper_tables", ["--presets"]),
               ("speed_targets", "speed_targets", []), ("sweep_scale", "sweep_scale", []),
-              ("throughput", "throughput", []), ("tuners", "tuning", ["--tuners"])]
+              ("throughput", "throughput", []), ("timing", "timing", []), ("tuners", "tuning", ["--tuners"])]
 
 
 @pytest.mark.bench

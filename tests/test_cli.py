@@ -32,7 +32,7 @@ SUMMARY_FIELDS = {
     "status", "iterations",
     "max_steps", "reached", "collided", "min_clearance", "final_error", "goal_tolerance", "compile_time_s", "run_time_s",
     "time_per_step_s", "plot", "gif", "out", "program_from_cache",
-    "planner", "reason", "global_start", "best_error", "fallback", "fallback_time_s",
+    "planner", "reason", "global_start", "best_error", "fallback", "fallback_time_s", "extension",
 }
 
 

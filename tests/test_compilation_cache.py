@@ -101,8 +101,9 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
         CPU_COMPILER_OPTIONS,
         CURVE_CPU_COMPILER_OPTIONS,
         XLA_DEFAULT_OPTIONS,
-        rollout_compiler_options,
+        compiler_options,
     )
+    from softplan_jax.planning.options import rollout_compiler_options
     from softplan_jax.planning.planner import make_options
     from softplan_jax.planning.programs import rollout, rollout_jit
 
@@ -112,10 +113,13 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     assert rollout_compiler_options("points") == {**XLA_DEFAULT_OPTIONS, **CPU_COMPILER_OPTIONS}
     assert rollout_compiler_options("curve") == {**XLA_DEFAULT_OPTIONS, **CPU_COMPILER_OPTIONS,
                                                  **CURVE_CPU_COMPILER_OPTIONS}
-    assert rollout_compiler_options(None) == XLA_DEFAULT_OPTIONS
-    assert rollout_compiler_options() == rollout_compiler_options("curve")
+    assert compiler_options(None) == XLA_DEFAULT_OPTIONS
+    assert rollout_compiler_options() == rollout_compiler_options("curve") == compiler_options("exact")
+    assert rollout_compiler_options("points") == compiler_options("samples")
     with pytest.raises(ValueError, match="method"):
         rollout_compiler_options("Curve")
+    with pytest.raises(ValueError, match="kind"):
+        compiler_options("curve")
     ours = rollout_jit.lower(sc, g, opts, 15).compile().as_text()
     plain = jax.jit(lambda s, g, k: rollout(s, g, opts, 15, k)).lower(sc, g, key).compile().as_text()
     assert "ynn_fusion" in plain and "ynn_fusion" not in ours
@@ -125,11 +129,11 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     np.testing.assert_allclose(np.asarray(inner), np.asarray(outer), rtol=0, atol=1e-9)
     try:
         monkeypatch.setenv("SOFTPLAN_XLA_OPTIONS", "0")
-        rollout_compiler_options.cache_clear()
+        compiler_options.cache_clear()
         assert rollout_compiler_options("points") is None and rollout_compiler_options("curve") is None
     finally:
         monkeypatch.undo()
-        rollout_compiler_options.cache_clear()
+        compiler_options.cache_clear()
     assert rollout_compiler_options("points") == {**XLA_DEFAULT_OPTIONS, **CPU_COMPILER_OPTIONS}
 
 
@@ -140,16 +144,16 @@ def test_xla_options_this_jaxlib_does_not_know_are_left_out(monkeypatch):
     known = dict(cc.CPU_COMPILER_OPTIONS)
     monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True, **known})
     try:
-        cc.rollout_compiler_options.cache_clear()
-        assert cc.rollout_compiler_options("points") == {**cc.XLA_DEFAULT_OPTIONS, **known}
+        cc.compiler_options.cache_clear()
+        assert cc.compiler_options("samples") == {**cc.XLA_DEFAULT_OPTIONS, **known}
         monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True})
         monkeypatch.setattr(cc, "CURVE_CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option_either": False})
         monkeypatch.setattr(cc, "XLA_DEFAULT_OPTIONS", {"xla_cpu_no_such_option_either": True})
-        cc.rollout_compiler_options.cache_clear()
-        assert cc.rollout_compiler_options("curve") is None and cc.rollout_compiler_options("points") is None
+        cc.compiler_options.cache_clear()
+        assert cc.compiler_options("exact") is None and cc.compiler_options("samples") is None
     finally:
         monkeypatch.undo()
-        cc.rollout_compiler_options.cache_clear()
+        cc.compiler_options.cache_clear()
 
 
 def test_package_jit_inside_the_users_jit_and_transforms():
@@ -162,7 +166,7 @@ def test_package_jit_inside_the_users_jit_and_transforms():
     import jax.numpy as jnp
     import numpy as np
 
-    from softplan_jax.base.compilation_cache import package_jit, rollout_compiler_options
+    from softplan_jax.base.compilation_cache import compiler_options, package_jit
 
     f = package_jit(lambda x, k: jnp.sin(x) * k, static_argnames=("k",))
     x = jnp.linspace(0.0, 1.0, 5)
@@ -180,9 +184,9 @@ def test_package_jit_inside_the_users_jit_and_transforms():
 
     with pytest.raises(ValueError, match="bad input"):
         package_jit(bad)(x)
-    with pytest.raises(ValueError, match="method"):
-        package_jit(lambda x: x, method="Curve")(x)
-    assert rollout_compiler_options("curve")  # the suite's CPU jaxlib knows the options
+    with pytest.raises(ValueError, match="kind"):
+        package_jit(lambda x: x, kind="curve")(x)
+    assert compiler_options("exact")  # the suite's CPU jaxlib knows the options
 
 
 def test_planner_step_rejects_options_that_are_not_plan_options():

@@ -15,6 +15,7 @@ import pkgutil
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import softplan_jax as sp
@@ -208,6 +209,20 @@ def test_docs_gains_file_loads(tmp_path):
     path.write_text(blocks[0])
     gains = sp.load_gains(path, method="points", n_points=10)
     assert isinstance(gains, sp.Gains) and float(gains.d0) == 0.3
+
+
+def test_docs_timed_trajectory_loads(tmp_path):
+    """The timed trajectory example (JSON) loads; its samples are within its limits."""
+    blocks = _docs_json("softplan-timed-trajectory/1")
+    assert len(blocks) == 1, f"expected one timed trajectory in {FORMATS_PAGE.name}"
+    path = tmp_path / "docs_timed.json"
+    path.write_text(blocks[0])
+    traj = sp.load_trajectory(path)
+    assert traj.layout.kind == "tendon" and traj.t.shape == (3,) and traj.lengths.shape == (3, 1, 3)
+    assert traj.report.ok and traj.path == "linear" and traj.duration == 1.500002
+    # The example's lengths are those of its configurations.
+    lengths = np.stack([np.asarray(sp.actuators.actuator_lengths(q, traj.layout)) for q in traj.q])
+    np.testing.assert_allclose(lengths, traj.lengths, atol=1e-5)
 
 
 @pytest.mark.slow  # compiles a rollout for the documented scene's own shape (~30 s)

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.base.compilation_cache import rollout_compiler_options
 from softplan_jax.planning.engine import (
     ACCELERATOR_LANES,
     DEFAULT_LANES,
@@ -21,6 +20,7 @@ from softplan_jax.planning.engine import (
     run,
     run_lanes,
 )
+from softplan_jax.planning.options import rollout_compiler_options
 from softplan_jax.planning.planner import make_options, plan_device
 from softplan_jax.planning.programs import batch_keys, rollout, rollout_jit
 from softplan_jax.planning.step import safe_scale

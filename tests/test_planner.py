@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.base.compilation_cache import rollout_compiler_options
+from softplan_jax.planning.options import rollout_compiler_options
 from softplan_jax.planning.planner import make_options, result_from_rollout
 from softplan_jax.planning.programs import rollout_jit
 from softplan_jax.testing import oracle
@@ -324,7 +324,7 @@ def test_plan_rejects_bad_gains(paper):
 def test_post_hoc_collision_checks_equal_in_scan_checks():
     """apply_collision_checks on a planning-only rollout == the checked rollout,
     on a scene that collides (weak repulsion, a wire across the path) and one that does not."""
-    from softplan_jax.geometry.clearance import apply_collision_checks
+    from softplan_jax.planning import apply_collision_checks
 
     q0 = sp.scenarios.default_start()
     wire = sp.line_segment([0.9, -1.5, 1.2], [0.9, 1.5, 1.9])
@@ -380,7 +380,8 @@ def test_swept_proof_skips_only_motions_that_cannot_collide():
     end clearance) is at least the search's value. The skipped motions nearest the contact
     tolerance are checked by brute force too. Not vacuous: most motions are skipped, some
     are searched, some rollouts collide."""
-    from softplan_jax.geometry.clearance import apply_collision_checks, contact_tolerance
+    from softplan_jax.geometry.clearance import contact_tolerance
+    from softplan_jax.planning import apply_collision_checks
 
     always = make_options("curve", check_collisions=False, swept_proof=False, **sp.PAPER_STEP)
     post = jax.jit(apply_collision_checks, static_argnums=2)

@@ -104,7 +104,7 @@ def test_batch_loop_equals_jax_vmap_of_the_scene_loop(decided):
     arrays agree bit for bit on scenes that end at different rounds (certified at once,
     beyond reach: every null-space round). Slow: the reference is a 3-scene IK program of its
     own (about 8 s to trace and compile) that nothing else uses."""
-    from softplan_jax.base.compilation_cache import rollout_compiler_options
+    from softplan_jax.planning.options import rollout_compiler_options
     from softplan_jax.search.reach import goal_configurations
 
     batch, _ = decided
@@ -204,7 +204,7 @@ def test_plot_shows_the_global_part(rescued):
 
 def test_fallback_programs_compile_with_the_package_xla_options(decided):
     """The fallback's program and reachability's compile with the package's XLA options for
-    exact solves (compilation_cache.rollout_compiler_options("curve")): no YNN fusions, which
+    exact solves (planning.options.rollout_compiler_options("curve")): no YNN fusions, which
     XLA's defaults put in an exact solve's program (test_compilation_cache's rollout test
     shows it on a plain jit). Checked on the IK, with the shapes the fixture compiled (its
     program comes from the persistent cache); an earlier version of
@@ -215,8 +215,8 @@ def test_fallback_programs_compile_with_the_package_xla_options(decided):
     one = jax.tree_util.tree_map(lambda x: x[:1], batch)
     ik = _goal_configurations_jit(OPTS, sp.geometry.SolverOptions(), 1e-6, True)
     fallback = _fallback_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
-    # Both are package_jit's with the curve method's options (test_compilation_cache tests package_jit).
-    assert all(isinstance(f, package_jit) and f._method == "curve" for f in (ik, fallback))
+    # Both are package_jit's with the exact solves' options (test_compilation_cache tests package_jit).
+    assert all(isinstance(f, package_jit) and f._kind == "exact" for f in (ik, fallback))
     keys = jax.random.split(jax.random.PRNGKey(0), 1)
     assert "ynn_fusion" not in ik.lower(one, keys, one.q0).compile().as_text()
 

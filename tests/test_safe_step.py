@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.geometry.clearance import apply_collision_checks
+from softplan_jax.planning import apply_collision_checks
 from softplan_jax.planning.planner import make_options, result_from_rollout
 from softplan_jax.planning.programs import rollout_batch, rollout_jit
 from softplan_jax.testing import oracle

@@ -15,10 +15,10 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.geometry import warm_start as ws
-from softplan_jax.geometry.clearance import apply_collision_checks
 from softplan_jax.geometry.closest import DEFAULT_OPTIONS
 from softplan_jax.geometry.closest_newton import Segment, project_to_arc, solve_pair_reduced
 from softplan_jax.geometry.kinematics import segment_frames
+from softplan_jax.planning import apply_collision_checks
 from softplan_jax.planning.planner import make_options
 
 SAMPLES = 2001  # dense samples of u per case

@@ -35,23 +35,12 @@ argument shapes and dtypes. Scenarios with a
 not kept. Any failure to read or write an artifact falls back to the ordinary
 compilation.
 
-:func:`rollout_compiler_options` holds the XLA options the rollouts are
-compiled with, per obstacle model: every rollout
-without XLA's YNN fusions, and the curve method's also without its MLIR fusion
-emitters (a quarter less compile time; the N-point model's batched step runs
-slower with it, so it keeps them, named explicitly). XLA's optimisation level
-is named too, at its default: an ``XLA_FLAGS`` setting of the level or of the
-emitter does not change the package's programs. The package's small helper
-programs (the kinematics on concrete arrays, the random scenes' goals) are
-compiled with XLA's defaults, named the same way (``package_jit(fn, None)``).
-The package's other programs take the curve method's (:class:`package_jit`): the
-global fallback's three (the IK, the search, the path check),
-:func:`~softplan_jax.closest_point`, :func:`~softplan_jax.planning.planner_step` (its
-method's) and the brute-force :func:`~softplan_jax.dense_trajectory_clearance`. They
-are passed per program (``jax.jit(..., compiler_options=...)``), so they apply to this
-package's programs only and never to the user's other jax code: no ``XLA_FLAGS``, no
-global jax configuration. ``SOFTPLAN_XLA_OPTIONS=0`` compiles with XLA's
-defaults instead.
+:func:`compiler_options` holds the XLA options of the package's programs, by kind of
+program: ``"exact"`` (exact closest-point solves: no YNN fusions, XLA's elemental emitter),
+``"samples"`` (sampled geometry: no YNN fusions) or None (plain helpers, XLA's defaults named).
+They are passed per program (:class:`package_jit`), never through ``XLA_FLAGS`` or jax's
+global configuration; ``SOFTPLAN_XLA_OPTIONS=0`` compiles with XLA's defaults instead. How
+they were chosen: the documentation's Performance page.
 """
 
 from __future__ import annotations
@@ -62,28 +51,14 @@ import os
 import tempfile
 
 __all__ = ["compilation_cache_dir", "enable_compilation_cache", "enable_default_cache", "disable_compilation_cache",
-           "load_or_export", "package_jit", "rollout_compiler_options"]
+           "load_or_export", "package_jit", "compiler_options", "PROGRAM_KINDS"]
 
-# XLA CPU options of the rollout programs, measured by
-# benchmarks/xla_options.py (results/xla_options.md; git history at b850131), float64, checked rollouts:
-# - xla_cpu_experimental_ynn_fusion_type="" (every rollout): no XNNPACK (YNN) fusions; the
-#   planner's small (..., 3) arrays gain nothing from them and pay layout copies. Median
-#   run time per step -8 % single (tree), -33 % batched (64 random scenes); compile no slower.
-# - xla_cpu_use_fusion_emitters=False (curve-method rollouts only): XLA's elemental IR
-#   emitter for loop fusions instead of the MLIR fusion emitters. The curve rollout is ~550
-#   small kernels, and each one cost the MLIR pipeline ~6 ms of LLVM time: compile 6.0 ->
-#   4.7 s single, 7.0 -> 5.1 s batched; run time within 3 %. Not for the N-point method: its
-#   program compiles in ~1 s anyway, and its batched step ran 35-45 % slower with it
-#   (float64 7.5 -> 10.3 us, float32 6.2 -> 9.1 us per scenario-step, tree, batch of 64).
-# Tried and not taken: xla_llvm_disable_expensive_passes (no further gain),
-# xla_backend_optimization_level=1 (compile no faster, run +4-17 % against no YNN).
+# XLA CPU options of the package's programs (docs: Performance, "XLA options"): no YNN fusions for
+# every planner program, and XLA's elemental IR emitter for the exact solves' many small kernels.
 CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 CURVE_CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
-# Under every program's options, the package's plain ones included (package_jit(fn, None)): XLA's
-# own defaults of two options, named per program so that XLA_FLAGS settings of them do not change
-# the package's programs. The test suite compiles its ~2,000 small programs (eager ops, test
-# helpers) with both lowered (tests/conftest.py), and the programs it tests must stay the ones
-# users run.
+# XLA's own defaults of two options, named under every program's options so that XLA_FLAGS
+# settings of them (the test suite lowers both) do not change the package's programs.
 XLA_DEFAULT_OPTIONS = {"xla_backend_optimization_level": 3, "xla_cpu_use_fusion_emitters": True}
 
 
@@ -195,42 +170,39 @@ def _known_option(name: str, value) -> bool:
     return True
 
 
+PROGRAM_KINDS = ("exact", "samples", None)
+
+
 @functools.cache
-def rollout_compiler_options(method: str | None = "curve") -> dict | None:
-    """The XLA options that :data:`~softplan_jax.planning.planner.rollout_jit`,
-    :data:`~softplan_jax.planning.planner.rollout_batch` and ``rollout_jit.cached`` compile a
-    rollout of the planner's ``method`` ("curve" or "points") with (and, through
-    :class:`package_jit`, the package's other programs), on the CPU backend:
-    :data:`XLA_DEFAULT_OPTIONS` (XLA's defaults, named), then :data:`CPU_COMPILER_OPTIONS`, and
-    for "curve" also :data:`CURVE_CPU_COMPILER_OPTIONS`; None: :data:`XLA_DEFAULT_OPTIONS`
-    alone (the package's plain programs); each kept only if this jaxlib knows it. None (XLA's
-    defaults) on other backends, when it knows none of them, or with ``SOFTPLAN_XLA_OPTIONS=0``
-    in the environment. Decided on the first rollout, not at import (the backend is not
-    initialised by importing)."""
+def compiler_options(kind: str | None = "exact") -> dict | None:
+    """The XLA options a package program of this ``kind`` compiles with on the CPU backend:
+    :data:`XLA_DEFAULT_OPTIONS` (XLA's defaults, named), then for ``"exact"`` and ``"samples"``
+    :data:`CPU_COMPILER_OPTIONS`, and for ``"exact"`` also :data:`CURVE_CPU_COMPILER_OPTIONS`;
+    each kept only if this jaxlib knows it. None (XLA's defaults) on other backends, when it
+    knows none of them, or with ``SOFTPLAN_XLA_OPTIONS=0``. Decided on the first call, not at
+    import (importing does not initialise the backend). ValueError for an unknown kind."""
     import jax
 
-    if method not in ("curve", "points", None):
-        raise ValueError(f"method must be 'curve', 'points' or None; got {method!r}")
+    if kind not in PROGRAM_KINDS:
+        raise ValueError(f"kind must be 'exact', 'samples' or None; got {kind!r}")
     if os.environ.get("SOFTPLAN_XLA_OPTIONS", "1") == "0" or jax.default_backend() != "cpu":
         return None
-    wanted = {**XLA_DEFAULT_OPTIONS, **(CPU_COMPILER_OPTIONS if method else {}),
-              **(CURVE_CPU_COMPILER_OPTIONS if method == "curve" else {})}
+    wanted = {**XLA_DEFAULT_OPTIONS, **(CPU_COMPILER_OPTIONS if kind else {}),
+              **(CURVE_CPU_COMPILER_OPTIONS if kind == "exact" else {})}
     known = {name: value for name, value in wanted.items() if _known_option(name, value)}
     return known or None
 
 
 class package_jit:
-    """``jax.jit(fn, **jit_kwargs)`` with :func:`rollout_compiler_options` ``(method)``: how this
-    package jits its programs (the rollouts, the fallback's, the exact closest point, the planner
-    step, the brute-force clearance; with ``method=None`` its plain helpers, at XLA's defaults).
-    Built on the first call (the options depend on the backend, which importing must not start).
+    """``jax.jit(fn, **jit_kwargs)`` with :func:`compiler_options` ``(kind)``: how this package
+    jits its programs. Built on the first call (the options depend on the backend, which importing must not start).
     Inside the user's own jit, where jax takes compiler options on top-level jits only, a plain
     jit of ``fn`` (compiled with the enclosing program's options). ``lower`` and ``_cache_size``
     are the top-level jit's (``jitted()``: the jit itself)."""
 
-    def __init__(self, fn, method: str | None = "curve", **jit_kwargs):
+    def __init__(self, fn, kind: str | None = "exact", **jit_kwargs):
         functools.update_wrapper(self, fn)
-        self._fn, self._method, self._jit_kwargs = fn, method, jit_kwargs
+        self._fn, self._kind, self._jit_kwargs = fn, kind, jit_kwargs
         self._top = self._nested = None
 
     def jitted(self):
@@ -238,7 +210,7 @@ class package_jit:
         if self._top is None:
             import jax
 
-            self._top = jax.jit(self._fn, compiler_options=rollout_compiler_options(self._method), **self._jit_kwargs)
+            self._top = jax.jit(self._fn, compiler_options=compiler_options(self._kind), **self._jit_kwargs)
         return self._top
 
     def __call__(self, *args, **kwargs):
@@ -312,7 +284,7 @@ def load_or_export(fn, leaves, key_parts, compiler_options=None):
         (static options, the caller's pytree structure); the package source,
         jax/jaxlib versions, backend, device kind, x64 and XLA_FLAGS are added.
       compiler_options: XLA options to compile the program with (jax's own
-        cache keys on them), e.g. :func:`rollout_compiler_options`.
+        cache keys on them), e.g. :func:`compiler_options`.
 
     Returns:
       ``(compiled, loaded)``: the compiled program (call it with arrays of the

@@ -7,8 +7,9 @@ by accident."""
 from __future__ import annotations
 
 import os
+import tempfile
 
-__all__ = ["new_file_mode", "publish"]
+__all__ = ["new_file_mode", "publish", "write_text"]
 
 
 def new_file_mode() -> int:
@@ -22,3 +23,31 @@ def publish(tmp: str, path: str) -> None:
     """Give the temporary file ``tmp`` an ordinary file's mode and rename it to ``path`` (atomic on POSIX)."""
     os.chmod(tmp, new_file_mode())
     os.replace(tmp, path)
+
+
+def write_text(path, text: str, overwrite: bool = False, suffix: str = "") -> None:
+    """Write ``text`` to ``path`` whole (a temporary file in the same folder, then a rename) or
+    not at all; an existing file is replaced only with ``overwrite=True``. Every failure (a
+    missing folder, a directory, no permission, the file exists) is a ValueError naming ``path``."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise ValueError(f"cannot write {path}: it is a directory")
+    if not os.path.isdir(folder):
+        raise ValueError(f"cannot write {path}: the folder {folder} does not exist")
+    if os.path.exists(path) and not overwrite:
+        raise ValueError(f"{path} exists; pass overwrite=True to replace it")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".softplan-", suffix=suffix, dir=folder)
+    except OSError as err:
+        raise ValueError(f"cannot write {path}: {err.strerror or err}") from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        publish(tmp, path)
+    except BaseException as err:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        if isinstance(err, OSError):
+            raise ValueError(f"cannot write {path}: {err.strerror or err}") from None
+        raise

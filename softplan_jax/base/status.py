@@ -50,6 +50,14 @@ class Status(enum.IntEnum):
             return "start_in_collision"
         return self.name.lower()
 
+    @classmethod
+    def from_label(cls, label: str) -> Status:
+        """The status of a report name (:attr:`label`); ValueError for an unknown name."""
+        for status in cls:
+            if status.label == label:
+                return status
+        raise ValueError(f"unknown status {label!r}; known: {', '.join(s.label for s in cls)}")
+
 
 STATUS_NAMES = {int(s): s.label for s in Status}
 

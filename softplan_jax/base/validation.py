@@ -26,6 +26,9 @@ __all__ = [
     "max_coordinate",
     "check_scale",
     "MAX_ANGLE",
+    "check_int",
+    "check_bool",
+    "check_number",
 ]
 
 # Largest |theta|, |phi| of a configuration [rad]: beyond it the planner's products of
@@ -51,6 +54,32 @@ def check_scale(x, name: str, dtype, what: str = "coordinates") -> None:
             f"{name} has {what} up to {float(np.max(arr)):.3g}, beyond the {max_coordinate(dtype):.2g} that "
             f"{np.dtype(dtype).name} planning takes (squared distances would overflow); rescale the scene"
         )
+
+
+def check_int(value, name: str, minimum: int | None = None) -> int:
+    """``value`` as an int; a ValueError naming ``name`` for anything but an int (a bool,
+    2.5 and "8" are not) or an int below ``minimum``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or (
+            minimum is not None and value < minimum):
+        raise ValueError(f"{name} must be an int{'' if minimum is None else f' >= {minimum}'}, got {value!r}")
+    return int(value)
+
+
+def check_bool(value, name: str) -> bool:
+    """``value`` as a bool; a ValueError naming ``name`` for anything but True or False."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def check_number(value, name: str, low: float = -np.inf, strict: bool = False) -> float:
+    """``value`` as a finite float ``>= low`` (``> low`` when ``strict``); a ValueError naming
+    ``name`` for a bool, a string, a non-finite number or one out of range."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(value) or value < low or (strict and value == low):
+        bound = "" if low == -np.inf else f" {'>' if strict else '>='} {low:g}"
+        raise ValueError(f"{name} must be a finite number{bound}, got {value!r}")
+    return float(value)
 
 
 def is_concrete(x) -> bool:

@@ -138,7 +138,8 @@ def _plan(args, setup: dict):
     chunk is rescued exactly as ``rescue_batch(suite, ..., seed=seed)`` rescues it."""
     import numpy as np
 
-    from ..sweeps.chunks import STATUS_CODES, ChunkLoop, SuiteSource
+    from ..base.status import Status
+    from ..sweeps.chunks import ChunkLoop, SuiteSource
     from ..sweeps.report import reporter
 
     n, size = args.n, setup["size"]
@@ -159,7 +160,7 @@ def _plan(args, setup: dict):
         a = timing["first"]
         for k, row in enumerate(rows):
             for name, _ in _ARRAYS:
-                arrays[name][a + k] = STATUS_CODES[row["status"]] if name == "status" else row[name]
+                arrays[name][a + k] = int(Status.from_label(row["status"])) if name == "status" else row[name]
         times["run_s"] += timing["seconds"] - timing["fallback_s"]
         times["fallback_s"] += timing["fallback_s"]
         times["local_steps"] += timing["local_steps"]

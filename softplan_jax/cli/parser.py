@@ -91,7 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="FILE",
                      help="save the trajectory (q, tip, clearance per step, status, iterations, metadata) "
                      "as JSON (FILE.json) or NumPy (FILE.npz), chosen by the extension")
-    run.add_argument("--force", action="store_true", help="let --out, --plot and --gif replace existing files")
+    run.add_argument("--force", action="store_true",
+                     help="let --out, --plot, --gif, --export and --plot-actuators replace existing files")
     run.add_argument("--json", action="store_true", help="print the summary as JSON")
     run.add_argument("--float32", action="store_true",
                      help="plan in float32 (default float64)")
@@ -99,6 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="exit with code 3 unless the run succeeded: status 'reached' (a moving goal: "
                      "also 'held', the tip back on the goal at the end); every other status fails, "
                      "'lost', 'max_steps', 'stalled', 'collided', 'unreachable' included")
+    _add_actuator_options(run)
 
     scen = sub.add_parser("scenarios", help="list the paper scenarios",
                           description="List the paper's scenarios (names for 'softplan run').")
@@ -114,6 +116,40 @@ def build_parser() -> argparse.ArgumentParser:
     _add_batch_parser(sub)
     _add_sweep_parser(sub)
     return parser
+
+
+def _add_actuator_options(run) -> None:
+    """The options of ``softplan run`` for actuators and timed trajectories (one argument group)."""
+    g = run.add_argument_group("actuators and timed trajectories (see the documentation's Actuators page)")
+    g.add_argument("--tendons", type=int, default=None, metavar="K",
+                   help="K >= 3 tendons per segment, evenly spaced, each from the base to its segment's tip")
+    g.add_argument("--chambers", type=int, default=None, metavar="K",
+                   help="K >= 3 extensible chambers per segment, evenly spaced (pneumatic or hydraulic)")
+    g.add_argument("--tendon-radius", type=float, default=None, metavar="R",
+                   help="the tendons' distance from the backbone, > 0 (the scene's length unit, m)")
+    g.add_argument("--chamber-radius", type=float, default=None, metavar="R",
+                   help="the chambers' distance from the backbone, > 0")
+    g.add_argument("--min-actuator-length", type=float, default=None, metavar="M",
+                   help="shortest actuator length, > 0 (the planner's segment length limits follow from it)")
+    g.add_argument("--max-actuator-length", type=float, default=None, metavar="M",
+                   help="longest actuator length, > 0 (the planner's segment length limits follow from it)")
+    g.add_argument("--max-actuator-speed", type=float, default=None, metavar="V",
+                   help="largest actuator speed, > 0 m/s: the timed trajectory is as fast as this allows")
+    g.add_argument("--max-actuator-acceleration", type=float, default=None, metavar="A",
+                   help="largest actuator acceleration, > 0 m/s^2 (default: none)")
+    g.add_argument("--max-tip-speed", type=float, default=None, metavar="V",
+                   help="largest tip speed, > 0 m/s (default: none)")
+    g.add_argument("--timing", choices=("smooth", "linear"), default="smooth",
+                   help="smooth: the spline through the plan's steps where the swept check proves it clear, the "
+                   "plan's straight motions elsewhere (default); linear: the straight motions, stopping at every step")
+    g.add_argument("--sample-rate", type=float, default=100.0, metavar="HZ",
+                   help="samples per second of the timed trajectory, > 0 (default 100; every step is a sample too)")
+    g.add_argument("--export", default=None, metavar="FILE.csv",
+                   help="write the timed trajectory as FILE.csv (one row per sample: t, q, actuator lengths and "
+                   "speeds, tip) and FILE.json (the same with units, arm, layout, limits, status); needs a layout "
+                   "and --max-actuator-speed or --max-tip-speed")
+    g.add_argument("--plot-actuators", default=None, metavar="PATH",
+                   help="write a figure of the actuator lengths, speeds and accelerations against time, with the limits")
 
 
 def _add_batch_parser(sub) -> None:
@@ -271,15 +307,15 @@ def check_output_path(path: str, option: str, inputs=()) -> str:
     return path
 
 
-def check_plot_format(path: str) -> None:
-    """``--plot``: the extension names an image format matplotlib can write."""
+def check_plot_format(path: str, option: str = "--plot") -> None:
+    """``--plot`` (or ``option``): the extension names an image format matplotlib can write."""
     from matplotlib.figure import Figure
 
     ext = os.path.splitext(path)[1].lower().lstrip(".")
     supported = Figure().canvas.get_supported_filetypes()
     if ext not in supported:
         raise InputError(
-            f"--plot: cannot tell the image format of {path!r}; use one of the extensions "
+            f"{option}: cannot tell the image format of {path!r}; use one of the extensions "
             f"{', '.join('.' + e for e in sorted(supported))}"
         )
 
@@ -364,8 +400,8 @@ def check_run_args(args, paper_names) -> None:
             )
         if os.path.exists(args.out) and not args.force:
             raise InputError(f"--out: {args.out} exists; pass --force to overwrite it")
-    elif args.force and args.plot is None and args.gif is None:
-        raise InputError("--force only applies to --out, --plot and --gif")
+    elif args.force and all(p is None for p in (args.plot, args.gif, args.export, args.plot_actuators)):
+        raise InputError("--force only applies to --out, --plot, --gif, --export and --plot-actuators")
     # Last, so that a bad argument is one error line, not a warning and an error.
     if n_points_given and args.method == "curve":
         warn("--n-points applies to --method points only; the curve method ignores it")

@@ -21,6 +21,7 @@ import os
 import sys
 import time
 
+from .actuation import check_actuator_args, constrain, summary_rows, time_run, write_outputs
 from .common import (
     InputError,
     fmt_gain_values,
@@ -109,13 +110,9 @@ def cmd_run(args) -> int:
         jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
 
-    from ..planning.planner import make_options, result_from_rollout, unreachable_result
-    from ..planning.programs import prng_key, rollout_jit
-    from ..planning.records import check_rollout_memory
-    from ..scenarios.scenario import unreachable_reason
-
     static_names = paper_names()
     check_run_args(args, static_names + _moving_names())
+    check_actuator_args(args)
     dtype = jnp.float32 if args.float32 else jnp.float64
     if args.scenario in _moving_names() or (args.scenario not in static_names and _is_moving_file(args.scenario)):
         return _cmd_track(args, dtype)
@@ -124,46 +121,106 @@ def cmd_run(args) -> int:
                         ("--barrier-gain", args.barrier_gain)):
         if value is not None:
             warn(f"{flag} applies to moving scenes only; {args.scenario} does not move, it is ignored")
+    return _cmd_plan(args, dtype)
+
+
+def _compiled_run(world, gains, options, max_steps: int, seed) -> tuple:
+    """The rollout of one scene through :data:`~softplan_jax.planning.programs.rollout_jit`'s
+    cached program: ``(rollout, compile_time, run_time, loaded)`` (compiled ahead and timed apart;
+    ``loaded``: the traced program came from the cache)."""
+    import jax
+
+    from ..planning.programs import rollout_jit
+
+    t0 = time.perf_counter()
+    # Traced program and XLA executable both cached on disk: a second run loads them.
+    run, loaded = rollout_jit.cached(world, gains, options, max_steps)
+    compile_time = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rollout = jax.block_until_ready(run(world, gains, seed))
+    return rollout, compile_time, time.perf_counter() - t0, loaded
+
+
+def _compiling_message(what: str = "") -> None:
+    print(f"softplan: preparing the planner{what} (compiled the first time a scene shape and option set is "
+          "planned, loaded from the cache after) ...", file=sys.stderr, flush=True)
+
+
+def _static_inputs(args, dtype, actuator_summary: dict) -> tuple:
+    """``(scenario, label, gains, options, gain_values)`` of a static scene (InputError: bad input);
+    the actuators' segment length limits applied, their rows added to ``actuator_summary``."""
+    from ..planning.options import make_options
+    from ..planning.programs import prng_key
+    from ..planning.records import check_rollout_memory
+
     try:
         scenario, label = _load(args, dtype)
         scenario, gains, extra, gain_values = resolve_gains(args, scenario, args.method, args.n_points)
+        scenario = constrain(args, scenario, actuator_summary)  # the actuators' segment length limits
         options = make_options(args.method, args.n_points, **_plan_extra(args, extra))
-        max_steps = int(args.max_steps)
-        check_rollout_memory(scenario, options, max_steps)  # before anything is allocated
+        check_rollout_memory(scenario, options, int(args.max_steps))  # before anything is allocated
         prng_key(args.seed)  # a seed out of range: bad input before anything compiles
     except ValueError as err:
         raise InputError(str(err)) from None
-    compile_time = run_time = fallback_time = 0.0
-    loaded, escapes, local_steps = False, 0, 0
+    return scenario, label, gains, options, gain_values
+
+
+def _cmd_plan(args, dtype) -> int:
+    """``softplan run`` on a static scene: plan it, rescue it with the global fallback."""
+    from ..planning.planner import result_from_rollout, unreachable_result
+    from ..scenarios.scenario import unreachable_reason
+
+    actuator_summary = {}
+    scenario, label, gains, options, gain_values = _static_inputs(args, dtype, actuator_summary)
+    times = dict(compile_time_s=0.0, run_time_s=0.0, fallback_time_s=0.0, program_from_cache=False)
+    escapes = local_steps = 0
     reason = unreachable_reason(scenario)
     if reason:  # proven on the host: nothing to plan
         print(f"softplan: the goal is proven unreachable ({reason.replace('_', ' ')}); nothing to plan",
               file=sys.stderr, flush=True)
         result = unreachable_result(scenario, options, reason)
     else:
-        # Progress on stderr: the compilation is the long part of a first run.
-        print("softplan: preparing the planner (compiled the first time a scene shape and option set is planned, "
-              "loaded from the cache after) ...", file=sys.stderr, flush=True)
-        t0 = time.perf_counter()
-        # Traced program and XLA executable both cached on disk: a second run loads them.
-        run, loaded = rollout_jit.cached(scenario, gains, options, max_steps)
-        compile_time = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        rollout = jax.block_until_ready(run(scenario, gains, args.seed))
-        run_time = time.perf_counter() - t0
+        _compiling_message()
+        rollout, times["compile_time_s"], times["run_time_s"], times["program_from_cache"] = _compiled_run(
+            scenario, gains, options, int(args.max_steps), args.seed)
         result = result_from_rollout(rollout, scenario)
         escapes, local_steps = int(rollout.escapes), int(rollout.iterations)
-    if not args.no_fallback and result.status in ("stalled", "max_steps"):
-        from ..search.fallback import rescue
+    from ..base.status import Status
+    from ..search.fallback import RESCUED, rescue
 
+    if not args.no_fallback and Status.from_label(result.status) in RESCUED:
         print(f"softplan: the local planner ended {result.status}; deciding reachability and searching globally "
               "(its programs compile once, about a minute; later runs load them from the cache) ...",
               file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         result = rescue(scenario, [result], options, seed=args.seed)[0]
-        fallback_time = time.perf_counter() - t0
+        times["fallback_time_s"] = time.perf_counter() - t0
+    summary = _plan_summary(args, label, scenario, options, gain_values, result, escapes, times)
+    summary["time_per_step_s"] = times["run_time_s"] / max(local_steps, 1)
+    summary.update(actuator_summary)
+    traj = time_run(args, scenario, result, options, summary)  # before any output: nothing written if it fails
+    title = (
+        f"{label} — {args.method} method"
+        + (f" (N = {args.n_points})" if args.method == "points" else "")
+        + f" — {result.status} after {result.iterations} iterations"
+        + (f" (global search from step {result.global_start})" if result.planner == "global" else "")
+        + (f" ({result.reason})" if result.reason else "")
+        + "\n"
+        f"min true clearance {result.min_clearance:.3f}, final tip error {result.final_error:.3f}"
+    )
+    write_figures(args, summary, lambda plotting: plotting.plot_snapshots(scenario, result, title=title),
+                  lambda plotting, path: plotting.animate(scenario, result, path, title=title.split("\n")[0]))
+    if args.out is not None:
+        _write_out(args, summary, trajectory_record(result, scenario, summary))
+    write_outputs(args, traj, scenario, summary)
+    return report(args, summary, lambda: _text_summary(summary), result.reached)
 
-    summary = {
+
+def _plan_summary(args, label, scenario, options, gain_values, result, escapes, times) -> dict:
+    """The summary of a static scene's run (printed as text or JSON, written with ``--out``)."""
+    import jax.numpy as jnp
+
+    return {
         "scenario": label,
         "method": args.method,
         "n_points": args.n_points if args.method == "points" else None,
@@ -178,52 +235,35 @@ def cmd_run(args) -> int:
         "global_start": result.global_start,
         "best_error": result.best_error,
         "fallback": not args.no_fallback,
-        "fallback_time_s": fallback_time,
+        "fallback_time_s": times["fallback_time_s"],
         "iterations": result.iterations,
-        "max_steps": max_steps,
+        "max_steps": int(args.max_steps),
         "reached": result.reached,
         "collided": result.collided,
         "min_clearance": result.min_clearance,
         "final_error": result.final_error,
         "goal_tolerance": options.goal_tolerance,
-        "compile_time_s": compile_time,
-        "program_from_cache": loaded,
-        "run_time_s": run_time,
+        "compile_time_s": times["compile_time_s"],
+        "program_from_cache": times["program_from_cache"],
+        "run_time_s": times["run_time_s"],
         # The engine stops within step_chunk steps of the end: the cost follows the steps taken.
-        "time_per_step_s": run_time / max(local_steps, 1),
+        "time_per_step_s": 0.0,
         "plot": None,
         "gif": None,
         "out": None,
     }
 
-    title = (
-        f"{label} — {args.method} method"
-        + (f" (N = {args.n_points})" if args.method == "points" else "")
-        + f" — {result.status} after {result.iterations} iterations"
-        + (f" (global search from step {result.global_start})" if result.planner == "global" else "")
-        + (f" ({result.reason})" if result.reason else "")
-        + "\n"
-        f"min true clearance {result.min_clearance:.3f}, final tip error {result.final_error:.3f}"
-    )
-    write_figures(args, summary, lambda plotting: plotting.plot_snapshots(scenario, result, title=title),
-                   lambda plotting, path: plotting.animate(scenario, result, path, title=title.split("\n")[0]))
 
-    if args.out is not None:
-        _write_out(args, summary, trajectory_record(result, scenario, summary))
-    return report(args, summary, lambda: _text_summary(summary), result.reached)
-
-
-def _cmd_track(args, dtype) -> int:
-    """``softplan run`` on a moving scene: track its goal among its moving obstacles (softplan_jax.track)."""
-    import jax
-
+def _moving_inputs(args, dtype, actuator_summary: dict) -> tuple:
+    """``(moving, gains, options, preset, extra, gain_values)`` of a moving scene (InputError:
+    bad input): the preset's tracking options, then those given on the command line; the
+    actuators' segment length limits applied, their rows added to ``actuator_summary``."""
+    from ..planning.options import make_track_options
     from ..planning.programs import prng_key
     from ..planning.records import check_rollout_memory
-    from ..planning.tracking import make_track_options, result_from_track, track_program
     from ..scenarios.json_format import load_moving_scenario
     from ..scenarios.moving import MOVING_OPTIONS, moving_scenario
 
-    label = args.scenario
     try:
         if args.scenario in _moving_names():
             moving = moving_scenario(args.scenario, dtype=dtype)
@@ -232,40 +272,34 @@ def _cmd_track(args, dtype) -> int:
             moving = load_moving_scenario(args.scenario, dtype=dtype)
             preset = {}
         scenario, gains, extra, gain_values = resolve_gains(args, moving.scene, args.method, args.n_points)
+        scenario = constrain(args, scenario, actuator_summary)  # the actuators' segment length limits
         moving = moving._replace(scene=scenario)
         extra = _plan_extra(args, extra)
-        if args.anticipation is not None:
-            preset["anticipation"] = args.anticipation
-        if args.hold_tolerance is not None:
-            preset["hold_tolerance"] = args.hold_tolerance
-        if args.no_evasion:
-            preset["evasion"] = False
-        for name in ("evasion_speed", "barrier_gain"):
+        for name in ("anticipation", "hold_tolerance", "evasion_speed", "barrier_gain"):
             if getattr(args, name) is not None:
                 preset[name] = getattr(args, name)
+        if args.no_evasion:
+            preset["evasion"] = False
         options = make_track_options(args.method, args.n_points, **preset, **extra)
-        max_steps = int(args.max_steps)
-        check_rollout_memory(moving, options, max_steps)  # before anything is allocated
-        key = prng_key(args.seed)
+        check_rollout_memory(moving, options, int(args.max_steps))  # before anything is allocated
+        prng_key(args.seed)
     except OSError as err:
         raise InputError(f"cannot read scenario file {args.scenario}: {err.strerror or err}") from None
     except ValueError as err:
         raise InputError(str(err)) from None
-    from ..planning.programs import strong_gains
+    return moving, gains, options, preset, extra, gain_values
 
-    gains = strong_gains(gains, dtype)
-    print("softplan: a moving scene: tracking its goal over "
-          f"{max_steps} steps, {max_steps * float(gains.dt):g} s of the scene's time (not the wait; the program is "
-          "compiled the first time, loaded from the cache after) ...", file=sys.stderr, flush=True)
-    fn = track_program(options, max_steps, False)
-    # Twice: the first call compiles (or finds the program in jit's cache), the second is timed alone.
-    t0 = time.perf_counter()
-    jax.block_until_ready(fn(moving, gains, key))
-    first = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    track = jax.block_until_ready(fn(moving, gains, key))
-    run_time = time.perf_counter() - t0
-    compile_time = max(first - run_time, 0.0)
+
+def _cmd_track(args, dtype) -> int:
+    """``softplan run`` on a moving scene: track its goal among its moving obstacles (softplan_jax.track)."""
+    from ..planning.tracking import result_from_track
+
+    actuator_summary = {}
+    moving, gains, options, preset, extra, gain_values = _moving_inputs(args, dtype, actuator_summary)
+    max_steps = int(args.max_steps)
+    _compiling_message(f" for a moving scene, tracked for {max_steps} steps ({max_steps * float(gains.dt):g} s "
+                       "of the scene's own time, not the wait)")
+    track, compile_time, run_time, loaded = _compiled_run(moving, gains, options, max_steps, args.seed)
     result = result_from_track(track, moving, float(gains.dt))
     if result.status == "max_steps" and not args.no_fallback:
         from ..search.tracking import track_fallback
@@ -273,8 +307,30 @@ def _cmd_track(args, dtype) -> int:
         print("softplan: the goal was never reached: planning the scene at rest with the global search, then "
               "tracking again along its path (--no-fallback: skip) ...", file=sys.stderr, flush=True)
         result = track_fallback(moving, args.method, args.n_points, gains, max_steps, args.seed, **preset, **extra)
-    summary = {
-        "scenario": label,
+    summary = _track_summary(args, options, gain_values, result, float(gains.dt), dtype)
+    summary.update(compile_time_s=compile_time, program_from_cache=loaded, run_time_s=run_time,
+                   time_per_step_s=run_time / max(result.iterations, 1), **actuator_summary)
+    traj = time_run(args, moving.scene, result, options.plan, summary)  # before any output
+    title = (f"{args.scenario} (moving) — {args.method} method"
+             + (f" (N = {args.n_points})" if args.method == "points" else "") + f" — {result.status}")
+    write_figures(args, summary, lambda plotting: plotting.plot_tracking(result, title=title),
+                  lambda plotting, path: plotting.animate_tracking(result, path, title=title))
+    if args.out is not None:
+        _write_out(args, summary, _track_record(result, summary))
+    write_outputs(args, traj, moving.scene, summary)
+    # --require-reached asks for success: the tip on the goal at the end, "reached" (held from the
+    # first reach) or "held" (left and regained); "lost", "max_steps", "collided", ... are not.
+    return report(args, summary, lambda: _track_text(summary, result, options),
+                  result.status in ("reached", "held"))
+
+
+def _track_summary(args, options, gain_values, result, dt: float, dtype) -> dict:
+    """The summary of a moving scene's run (printed as text or JSON, written with ``--out``)."""
+    import jax.numpy as jnp
+
+    max_steps = int(args.max_steps)
+    return {
+        "scenario": args.scenario,
         "moving": True,
         "method": args.method,
         "n_points": args.n_points if args.method == "points" else None,
@@ -287,11 +343,11 @@ def _cmd_track(args, dtype) -> int:
         "planner": result.planner,
         "reason": result.reason,
         "hold_tolerance": options.hold_tolerance,
-        "dtype": str(jax.numpy.dtype(dtype)),
+        "dtype": str(jnp.dtype(dtype)),
         "status": result.status,
         "iterations": result.iterations,
         "max_steps": max_steps,
-        "horizon_s": max_steps * float(gains.dt),
+        "horizon_s": max_steps * dt,
         "reached": result.reached,
         "reached_at_s": None if result.reached_step is None else float(result.time[result.reached_step]),
         "held_s": result.held_time,
@@ -300,53 +356,49 @@ def _cmd_track(args, dtype) -> int:
         "min_clearance": result.min_clearance,
         "final_error": result.final_error,
         "goal_tolerance": options.plan.goal_tolerance,
-        "compile_time_s": compile_time,
-        "run_time_s": run_time,
-        "time_per_step_s": run_time / max(result.iterations, 1),
         "plot": None,
         "gif": None,
         "out": None,
     }
-    title = (f"{label} (moving) — {args.method} method"
-             + (f" (N = {args.n_points})" if args.method == "points" else "") + f" — {result.status}")
-    write_figures(args, summary, lambda plotting: plotting.plot_tracking(result, title=title),
-                   lambda plotting, path: plotting.animate_tracking(result, path, title=title))
-    if args.out is not None:
-        import numpy as np
 
-        record = {"format": TRAJECTORY_FORMAT, "softplan_jax_version": package_version(),
-                  **{k: np.asarray(getattr(result, k)) for k in ("q", "tip", "clearance", "goal", "time", "error")},
-                  **{k: v for k, v in summary.items() if k not in ("plot", "gif", "out", "gain_values")},
-                  "gain_values": {k: (math.inf if v is None else v) for k, v in summary["gain_values"].items()}}
-        _write_out(args, summary, record)
 
-    def text():
-        rows = [
-            ("scenario", f"{label} (moving obstacles; tracked)"),
-            ("method", args.method + (f" (N = {args.n_points})" if args.method == "points" else "")),
-            ("gains", summary["gains"]),
-            ("step", f"{summary['step']}, look-ahead {summary['anticipation_s']:g} s, "
-                     + (f"{result.evasive_steps} evasive step(s)" if options.evasion else "no evasion")),
-            ("dtype", summary["dtype"]),
-            ("status", result.status),
-            ("steps", f"{result.iterations} of {max_steps} ({summary['horizon_s']:g} s horizon)"),
-            ("planner", result.planner + ("" if result.reason is None else f" ({result.reason})")),
-            ("reached", "no" if not result.reached else
-             f"at t = {summary['reached_at_s']:.2f} s; held {result.held_time:.2f} s"
-             + (" (to the end)" if result.held_to_end else f" (hold tolerance {options.hold_tolerance:g})")),
-            ("collided", "yes" if result.collided else "no"),
-            ("min true clearance", f"{result.min_clearance:.4f}"),
-            ("final tip error", f"{result.final_error:.4f} (goal tolerance {options.plan.goal_tolerance:g})"),
-            ("compile time", fmt_seconds(compile_time)),
-            ("run time", f"{fmt_seconds(run_time)} for {result.iterations} steps"),
-        ]
-        rows += [(k, summary[k]) for k in ("plot", "gif", "out") if summary[k]]
-        width = max(len(k) for k, _ in rows)
-        return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+def _track_record(result, summary: dict) -> dict:
+    """The ``--out`` trajectory file of a tracked run."""
+    import numpy as np
 
-    # --require-reached asks for success: the tip on the goal at the end, "reached" (held from the
-    # first reach) or "held" (left and regained); "lost", "max_steps", "collided", ... are not.
-    return report(args, summary, text, result.status in ("reached", "held"))
+    return {"format": TRAJECTORY_FORMAT, "softplan_jax_version": package_version(),
+            **{k: np.asarray(getattr(result, k)) for k in ("q", "tip", "clearance", "goal", "time", "error")},
+            **{k: v for k, v in summary.items() if k not in ("plot", "gif", "out", "gain_values")},
+            "gain_values": {k: (math.inf if v is None else v) for k, v in summary["gain_values"].items()}}
+
+
+def _track_text(summary: dict, result, options) -> str:
+    """The summary of a tracked run as text."""
+    method = summary["method"] + (f" (N = {summary['n_points']})" if summary["method"] == "points" else "")
+    rows = [
+        ("scenario", f"{summary['scenario']} (moving obstacles; tracked)"),
+        ("method", method),
+        ("gains", summary["gains"]),
+        ("step", f"{summary['step']}, look-ahead {summary['anticipation_s']:g} s, "
+                 + (f"{result.evasive_steps} evasive step(s)" if options.evasion else "no evasion")),
+        ("dtype", summary["dtype"]),
+        ("status", result.status),
+        ("steps", f"{result.iterations} of {summary['max_steps']} ({summary['horizon_s']:g} s of simulated time)"),
+        ("planner", result.planner + ("" if result.reason is None else f" ({result.reason})")),
+        ("reached", "no" if not result.reached else
+         f"at t = {summary['reached_at_s']:.2f} s; held {result.held_time:.2f} s"
+         + (" (to the end)" if result.held_to_end else f" (hold tolerance {options.hold_tolerance:g})")),
+        ("collided", "yes" if result.collided else "no"),
+        ("min true clearance", f"{result.min_clearance:.4f}"),
+        ("final tip error", f"{result.final_error:.4f} (goal tolerance {options.plan.goal_tolerance:g})"),
+        ("compile time", fmt_seconds(summary["compile_time_s"])
+         + (" (traced program loaded from the cache)" if summary["program_from_cache"] else "")),
+        ("run time", f"{fmt_seconds(summary['run_time_s'])} for {result.iterations} steps"),
+    ]
+    rows += summary_rows(summary)
+    rows += [(k, summary[k]) for k in ("plot", "gif", "out") if summary[k]]
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
 
 def _text_summary(s: dict) -> str:
@@ -379,6 +431,7 @@ def _text_summary(s: dict) -> str:
         ("time per step", f"{fmt_seconds(s['time_per_step_s'])} "
          "(run time / steps taken: the planner stops within a few steps of the end)"),
     ]
+    rows += summary_rows(s)
     if s["plot"]:
         rows.append(("plot", s["plot"]))
     if s["gif"]:

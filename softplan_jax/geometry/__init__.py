@@ -19,7 +19,7 @@
   between-step search) and the collision checks of a trajectory.
 """
 
-from .clearance import apply_collision_checks, dense_trajectory_clearance
+from .clearance import dense_trajectory_clearance
 from .closest import ClosestPoint, SolverOptions, closest_point
 from .closest_grid import GridSolverOptions
 from .curves import ParametricCurve, PolynomialCurve, curve_points, line_segment, stack_curves
@@ -58,5 +58,4 @@ __all__ = [
     "point_distance",
     "true_closest",
     "dense_trajectory_clearance",
-    "apply_collision_checks",
 ]

@@ -45,7 +45,6 @@ import jax.numpy as jnp
 
 from ..base.compilation_cache import package_jit
 from ..base.numerics import contact_floor, evaluate_where, get_epsilon, safe_norm, solve_small
-from ..base.status import Status
 from .closest import ClosestPoint
 from .kinematics import backbone_points, motion_bound, segment_point
 from .obstacles import map_obstacle_groups, map_obstacles, radius_and_mask, true_closest
@@ -56,7 +55,8 @@ __all__ = [
     "between_steps",
     "swept_clear",
     "contact_tolerance",
-    "apply_collision_checks",
+    "safety_floor",
+    "searched_motions",
     "dense_trajectory_clearance",
 ]
 
@@ -144,7 +144,7 @@ def _slot_motion_distance(q_a, q_b, ta: ClosestPoint, tb: ClosestPoint, curve, i
     return _motion_pair_distance(q_a, dq, seg, x0, curves, iterations)
 
 
-def _searched_motions(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenario, search,
+def searched_motions(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenario, search,
                       iterations: int, chunk: int):
     """The between-step search of T motions q_a[t] -> q_b[t], run only for the
     (motion, slot) entries where ``search`` (T, m) is True: smallest distance found
@@ -209,7 +209,7 @@ def between_steps(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenar
             empty=jnp.zeros((0,), dtype),
         )
     else:
-        found = _searched_motions(q_a[None], q_b[None], *jax.tree_util.tree_map(lambda x: x[None], (truth_a, truth_b)),
+        found = searched_motions(q_a[None], q_b[None], *jax.tree_util.tree_map(lambda x: x[None], (truth_a, truth_b)),
                                   scenario, search[None], iterations, chunk=1)[0]
     D_min = jnp.minimum(found, jnp.minimum(truth_a.distance, truth_b.distance))
     return D_min - radius_sum
@@ -247,84 +247,10 @@ def contact_tolerance(options, dtype) -> float:
     return max(float(options.contact_tolerance), contact_floor(dtype))
 
 
-def apply_collision_checks(r, scenario, options):
-    """Add the true-clearance and between-step checks to a planning-only
-    rollout (``check_collisions=False``), vectorised over time.
-
-    The result equals what the checked rollout gives: the dynamics do not
-    depend on the checks until the first collision, after which the checked
-    rollout freezes, so the trajectory is cut and frozen at the first step
-    whose clearance (at the step, or during the motion to it) is at or below
-    the contact tolerance, or NaN (status non-finite: a NaN clearance never
-    counts as clear). Pure; vmap it over a batch.
-
-    With ``options.swept_proof`` (the default) the between-step search runs,
-    as in the checked rollout, only for the (motion, obstacle) entries that
-    :func:`swept_clear` cannot prove clear, ``POST_HOC_CHUNK`` entries at a
-    time in a while loop; False: every motion of the rollout, vectorised.
-
-    Args:
-      r: an unbatched :class:`~softplan_jax.planning.planner.Rollout` (planning only).
-      scenario: its Scenario.
-      options: its PlanOptions (static: the solver, the contact tolerance,
-        swept_proof).
-
-    Returns:
-      The Rollout with clearance, between-step clearance, status, iterations,
-      converged, between_searched and the derived fields as a checked rollout
-      has them.
-    """
-
-    radius, mask = radius_and_mask(scenario)
-    radius_sum = scenario.arm_radius + radius
-    contact = contact_tolerance(options, scenario.q0.dtype)
-    truths = jax.vmap(lambda q: true_closest(q, scenario, options.solver))(r.q)
-    c = jnp.where(mask, truths.distance - radius_sum, jnp.inf)
-    prev = jax.tree_util.tree_map(lambda x: x[:-1], truths)
-    nxt = jax.tree_util.tree_map(lambda x: x[1:], truths)
-    steps = jnp.arange(r.q.shape[0], dtype=r.iterations.dtype)
-    moved = (steps[1:] <= r.iterations)[:, None] & mask  # (T, m): the motions the rollout made
-    if options.swept_proof:
-        # As the checked rollout: search only the motions the motion bound does not prove clear.
-        q_ng, prev_ng, nxt_ng = jax.lax.stop_gradient((r.q, prev, nxt))
-        proven = jax.vmap(lambda qa, qb, ta, ca: swept_clear(qa, qb, ta, ca, contact))(q_ng[:-1], q_ng[1:], prev_ng,
-                                                                                       c[:-1])
-        search = moved & ~proven
-        found = _searched_motions(q_ng[:-1], q_ng[1:], prev_ng, nxt_ng, scenario, search, SEARCH_ITERATIONS,
-                                  chunk=POST_HOC_CHUNK)
-        cb = jnp.minimum(found, jnp.minimum(prev_ng.distance, nxt_ng.distance)) - radius_sum
-    else:
-        search = moved
-        cb = jax.vmap(lambda qa, qb, ta, tb: between_steps(qa, qb, ta, tb, scenario, radius_sum))(
-            r.q[:-1], r.q[1:], prev, nxt
-        )
-    cb = jnp.concatenate([c[:1], jnp.where(mask, cb, jnp.inf)])
-    searched = jnp.concatenate([jnp.zeros_like(search[:1]), search])
-    nan = jnp.any(jnp.isnan(c), axis=1) | jnp.any(jnp.isnan(cb), axis=1)
-    hit = (jnp.any(c <= contact, axis=1) | jnp.any(cb <= contact, axis=1) | nan) & (steps <= r.iterations)
-    first = jnp.argmax(hit).astype(r.iterations.dtype)
-    collided = jnp.any(hit)
-    end = jnp.where(collided, first, r.iterations)
-    keep = steps <= end
-    q = jnp.where(keep[:, None, None], r.q, r.q[end])
-    tip = jnp.where(keep[:, None], r.tip, r.tip[end])
-    c = jnp.where(keep[:, None], c, c[end])
-    cb = jnp.where(keep[:, None], cb, c[end])
-    searched = searched & keep[:, None]
-    status = jnp.where(collided, jnp.where(nan[first], Status.NONFINITE, Status.COLLIDED), r.status)
-    status = status.astype(r.status.dtype)
-    step_scale = jnp.where(steps < end, r.step_scale, 0.0)
-    converged = r.converged & jnp.all(jnp.where(mask, truths.converged, True), axis=1)
-    converged = jnp.where(keep, converged, converged[end])
-    return r._replace(
-        converged=converged,
-        q=q, tip=tip, clearance=c, between=cb, status=status, iterations=end.astype(r.iterations.dtype),
-        between_searched=searched,
-        step_scale=step_scale,
-        reached=status == Status.REACHED, collided=status == Status.COLLIDED,
-        min_clearance=jnp.minimum(jnp.min(c, initial=jnp.inf), jnp.min(cb, initial=jnp.inf)),
-        final_error=safe_norm(scenario.goal - tip[-1]),
-    )
+def safety_floor(contact: float) -> float:
+    """The clearance a certified motion never reaches: twice the contact tolerance ``contact``
+    (:func:`contact_tolerance`), so that rounding never brings it to the contact tolerance."""
+    return 2.0 * contact
 
 
 @partial(package_jit, static_argnames=("substeps", "arm_samples", "curve_samples"))

@@ -215,6 +215,10 @@ class PolynomialCurve:
         r_pow = _powers(r, K - 2)[1:]  # r^j, j = 1 .. K - 3
         return bound + jnp.sum(weight * jnp.sqrt(jnp.sum(t * t, axis=-2)) * r_pow)
 
+    def with_radius(self, radius):
+        """The same curves with another radius (unvalidated: works on tracers)."""
+        return PolynomialCurve.tree_unflatten(None, [self.coeffs, self.u_range, radius])
+
     def astype(self, dtype):
         return PolynomialCurve.tree_unflatten(
             None, [jnp.asarray(x, dtype) for x in self.tree_flatten()[0]]

@@ -38,6 +38,7 @@ __all__ = [
     "map_obstacles",
     "map_obstacle_groups",
     "radius_and_mask",
+    "clearance_of",
     "empty_closest",
     "placeholder_closest",
     "true_closest",
@@ -163,6 +164,13 @@ def radius_and_mask(scenario):
         ]
     )
     return radius, mask
+
+
+def clearance_of(pairs: ClosestPoint, scenario):
+    """(m,) the clearance of closest pairs (leading axis m): distance minus the arm's radius
+    minus the obstacle's (DESIGN.md: the true clearance), +inf for padding slots."""
+    radius, mask = radius_and_mask(scenario)
+    return jnp.where(mask, pairs.distance - scenario.arm_radius - radius, jnp.inf)
 
 
 def empty_closest(dtype) -> ClosestPoint:

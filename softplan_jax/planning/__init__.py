@@ -15,19 +15,15 @@
 """
 
 from ..base.status import STATUS_NAMES, Status, status_name
+from .checks import apply_collision_checks
 from .gains import GainFunction, Gains, default_gains
-from .planner import PlanResult, make_options, plan, plan_batch, result_from_rollout
+from .options import PAPER_STEP, PlanOptions, TrackOptions, make_options, make_track_options
+from .planner import PlanResult, plan, plan_batch, result_from_rollout
 from .presets import PRESETS, Preset, apply_preset, preset
 from .programs import rollout, rollout_batch, rollout_jit
 from .records import Rollout
-from .step import (
-    PAPER_STEP,
-    PlanOptions,
-    attraction,
-    planner_step,
-    repulsion,
-)
-from .tracking import Track, TrackOptions, TrackResult, make_track_options, track, track_batch
+from .step import attraction, planner_step, repulsion
+from .tracking import Track, TrackResult, track, track_batch
 
 __all__ = [
     "Gains",
@@ -56,6 +52,7 @@ __all__ = [
     "TrackResult",
     "track",
     "track_batch",
+    "apply_collision_checks",
     "Preset",
     "PRESETS",
     "preset",

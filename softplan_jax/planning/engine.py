@@ -1,53 +1,14 @@
 """The rollout engine: one step loop for planning a path and for tracking a moving goal.
 
-A rollout steps from q at time t with the planner of paper eq. (9) and the safe
-step (:mod:`softplan_jax.planning.step`), until it is done. A static scene
-(:class:`~softplan_jax.scenarios.Scenario`) and a moving one
-(:class:`~softplan_jax.scenarios.motion.MovingScenario`) run the same step, carry, escape
-rule, status rule and result type; what differs is read off the scene at trace
-time:
-
-* the scene at step k: a static scene is itself; a moving one is
-  :func:`~softplan_jax.scenarios.motion.scenario_at` at ``t_k = k dt``, its obstacles
-  travel at most ``S_j dt`` during a step (:func:`~softplan_jax.scenarios.motion.speed_bounds`),
-  which the safe step and the between-step proof subtract;
-* the attraction: paper eq. (9)'s F_e, with the goal's velocity fed forward
-  for a moving goal (:func:`~softplan_jax.planning.step.tracking_attraction`);
-* where even standing still is not proven safe among moving obstacles (the rollout used
-  to end ``too_fast``): the evasive step of :mod:`~softplan_jax.planning.evasion`
-  (``TrackOptions.evasion``), run only for the scenes that need it;
-* when to stop, set by the options: with PlanOptions (planning) a rollout
-  ends at the goal or at a stall with no escape left; with TrackOptions
-  (tracking, a static scene or a moving one) it holds the goal to the horizon
-  and ends early only on a collision, a non-finite number or ``too_fast``,
-  recording the goal, the time and the error at every step.
-
-Step k looks at q_k: exact closest pairs to every obstacle (warm-started,
-:mod:`softplan_jax.geometry.warm_start`), the true clearance at q_k and during the
-motion from q_{k-1} (a search only where :func:`~softplan_jax.geometry.clearance.swept_clear`
-does not prove the motion clear), the status, then while running the step to
-q_{k+1}. Escapes: a stall (no progress by ``stall_tolerance`` over
-``stall_window`` steps) starts a random walk of ``escape_steps`` steps (the
-attraction replaced by a tip velocity of speed ``v_max`` in a random direction;
-Barraquand & Latombe 1991); the PRNG key is in the carry.
-
-Paid by the step. :func:`run` has three drivers of the same step:
-
-* ``"scan"``: one ``lax.scan`` of max_steps + 1 steps (reverse-mode differentiable;
-  what the gradient tuner differentiates);
-* ``"chunks"``: ``lax.scan`` over ``step_chunk`` steps inside a ``while_loop`` that
-  stops after the chunk in which the rollout finished;
-* ``"lanes"`` (a batch, :func:`run_lanes`): ``lanes`` scenes step side by side
-  (vmapped); when one finishes, its lane takes the next scene of the batch at the next
-  step, and a scene that has held its lane for ``quantum`` steps while others wait goes
-  back to the queue (round robin), so a batch costs about the sum of its scenes' steps,
-  not batch size x the slowest scene, nor a tail of long scenes in idle lanes.
-
-Every driver returns the same arrays, padded to max_steps + 1 along time:
-after the step where a rollout ended, the records hold its last state
-(q, tip, clearances, goal, error: frozen; in a static scene the between-step
-clearance of the non-motions after the end is the clearance) and no events
-(step scale 0, no solver fallbacks, no between-step search).
+Step k looks at q_k: the exact closest pairs to every obstacle (a closest-point provider,
+:mod:`softplan_jax.geometry.closest_pairs`), the true clearance at q_k and during the motion
+from q_{k-1} (the world's check, :mod:`softplan_jax.planning.world`), the status; then, while
+running, the step to q_{k+1} (paper eq. 9 scaled by the safe step, the world's step). A stall
+starts a random walk of the tip (an escape; Barraquand & Latombe 1991) while escapes are left.
+:func:`run` rolls one scene out (a ``lax.scan``, or chunks of scans that stop after the end);
+:func:`run_lanes` steps a batch's scenes side by side and refills a finished scene's lane, so a
+batch costs about the sum of its scenes' steps. After its end a rollout's records are frozen
+(:func:`~softplan_jax.planning.records.freeze`).
 """
 
 from __future__ import annotations
@@ -57,37 +18,31 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-from ..base.numerics import evaluate_where, safe_norm, tie, when_any
+from ..base.numerics import safe_norm, tie
 from ..base.status import Status
-from ..geometry.clearance import between_steps, contact_tolerance, swept_clear
+from ..base.validation import check_int
+from ..geometry.arm import PCC
 from ..geometry.closest import ClosestPoint, SolverOptions
-from ..geometry.kinematics import tip_position
-from ..geometry.obstacles import placeholder_closest, radius_and_mask, true_closest, warm_cells, warm_closest, warm_state
-from ..scenarios.motion import MovingScenario, goal_velocity, moved_cells, scenario_at, speed_bounds
-from .evasion import evasive_target, slot_clearance
+from ..geometry.closest_pairs import ExactPairs, NoPairs, WarmPairs
+from ..geometry.obstacles import clearance_of, placeholder_closest, radius_and_mask
 from .records import Record, Rollout, finish, record_zeros, setup
-from .step import attraction, goal_scaled, scaled_step, step_target, tracking_attraction
+from .world import make_world, world_data
 
 __all__ = ["Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "TRACK_LANES", "DEFAULT_QUANTUM", "ACCELERATOR_LANES",
-           "default_lanes", "run", "run_lanes", "check_engine_sizes"]
+           "default_lanes", "closest_pairs", "run", "run_lanes", "check_engine_sizes"]
 
 DEFAULT_STEP_CHUNK = 8  # steps between two checks of "done": at most 7 steps computed past the end
-DEFAULT_LANES = 64  # scenes planned side by side in a batch on a CPU (benchmarks/engine.py)
-# ... tracked on a CPU: a tracked scene holds its lane to the horizon, so refills buy nothing and a
-# wider step costs less per scene (1,024 moving scenes: 17.6 / 19.2 / 21.0 s with 1,024 / 256 / 64).
-TRACK_LANES = 1024
-# ... and on an accelerator: every scene of a device's share at once, up to this many (one H200,
-# float64: 1,024 lanes 8x faster than 64; 16,384 lanes 3.7e6 scene-steps/s; benchmarks/gpu.py).
-ACCELERATOR_LANES = 16384
-DEFAULT_QUANTUM = 64  # steps a lane holds a scene while others wait (run_lanes); faster than 32 or 128 here
+DEFAULT_LANES = 64  # scenes planned side by side in a batch on a CPU (docs: Performance)
+TRACK_LANES = 1024  # ... tracked on a CPU: a tracked scene holds its lane to the horizon
+ACCELERATOR_LANES = 16384  # ... on a GPU or TPU: every scene of a device's share, up to this many
+DEFAULT_QUANTUM = 64  # steps a lane holds a scene while others wait (run_lanes)
 
 
 def default_lanes(platform: str | None = None, tracking: bool = False) -> int:
     """The lanes of a batch when none are given (at most the batch): on a CPU
-    :data:`DEFAULT_LANES` (64) when planning, :data:`TRACK_LANES` (1,024) when tracking;
-    :data:`ACCELERATOR_LANES` (16,384) on a GPU or TPU, where a wide vmapped step is nearly
+    :data:`DEFAULT_LANES` when planning, :data:`TRACK_LANES` when tracking;
+    :data:`ACCELERATOR_LANES` on a GPU or TPU, where a wide vmapped step is nearly
     as fast as a narrow one. ``platform``: a jax platform name ("cpu", "gpu", "cuda",
     "rocm", "tpu"); None: ``jax.default_backend()``."""
     platform = jax.default_backend() if platform is None else platform
@@ -110,33 +65,31 @@ class Carry(NamedTuple):
     escapes: jax.Array  # escapes started so far
     walk_left: jax.Array  # steps left in the current random walk (0: following the field)
     walk_velocity: jax.Array  # (3,) tip velocity of the current walk
-    warm: tuple  # the warm start's state (obstacles.warm_state), () without it
+    warm: tuple  # the closest-point provider's state
     certified: jax.Array  # the motion from q_{k-1} to q_k was proven clear by the evasive step
-
-
-def _whole(name, v) -> int:  # v as an int; ValueError for anything but an int >= 1
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
-        raise ValueError(f"{name} must be an int >= 1, got {v!r}")
-    return int(v)
 
 
 def check_engine_sizes(max_steps, step_chunk=DEFAULT_STEP_CHUNK, lanes=None) -> tuple:
     """Validate the engine's sizes on the host, before anything compiles: ``(max_steps, step_chunk,
     lanes)`` as ints (``lanes`` may be None). ValueError for anything but an int >= 1 (a bool, 2.5, "8")."""
-    sizes = _whole("max_steps", max_steps), _whole("step_chunk", step_chunk)
-    return (*sizes, None if lanes is None else _whole("lanes", lanes))
+    sizes = check_int(max_steps, "max_steps", 1), check_int(step_chunk, "step_chunk", 1)
+    return (*sizes, None if lanes is None else check_int(lanes, "lanes", 1))
 
 
-def _moving_cells(cells, moving: MovingScenario, t):
-    if not cells or not moving.scene.curves.coeffs.shape[0]:
-        return cells
-    return (moved_cells(cells[0], moving.motion, t), *cells[1:])
+def closest_pairs(plan):
+    """The closest-point provider of a rollout's PlanOptions: the certified warm start
+    (``warm_start``, the default solver), else the full solve where exact pairs are needed (the
+    curve method, or the collision checks), else none (the N-point model alone)."""
+    exact = plan.check_collisions or plan.method == "curve"
+    if exact and plan.warm_start and isinstance(plan.solver, SolverOptions):
+        return WarmPairs(plan.solver)
+    return ExactPairs(plan.solver) if exact else NoPairs()
 
 
 def init_carry(world, options, key) -> Carry:
     """The carry at step 0 (q_0 = the scene's start)."""
     su = setup(world, options)
-    scene, plan = su.scene, su.plan
+    scene = su.scene
     _, mask = radius_and_mask(scene)
     q0 = scene.q0
     dtype = q0.dtype
@@ -154,213 +107,123 @@ def init_carry(world, options, key) -> Carry:
         escapes=jnp.zeros((), jnp.int32),
         walk_left=jnp.zeros((), jnp.int32),
         walk_velocity=jnp.zeros((3,), dtype),
-        warm=warm_state(scene) if _warm(plan) else (),
+        warm=closest_pairs(su.plan).init(scene),
         certified=jnp.zeros((), bool),
     )
     return tie(carry0, q0)  # under vmap (a batch), the carry is batched from the start (see tie)
 
 
-def _warm(plan) -> bool:
-    exact = plan.check_collisions or plan.method == "curve"
-    return exact and plan.warm_start and isinstance(plan.solver, SolverOptions)
-
-
 def prepare(world, options) -> tuple:
-    """What a rollout computes once per scene, before its first step: the warm start's
-    per-curve data (:func:`~softplan_jax.geometry.obstacles.warm_cells`) and, for a moving scene,
-    its obstacles' speed bounds (:func:`~softplan_jax.scenarios.motion.speed_bounds`)."""
+    """What a rollout computes once per scene, before its first step
+    (:func:`~softplan_jax.planning.world.world_data`)."""
     su = setup(world, options)
-    cells = warm_cells(su.scene, su.plan.solver) if _warm(su.plan) else ()
-    return cells, (speed_bounds(world) if su.moving else ())
+    return world_data(world, su, closest_pairs(su.plan))
 
 
-def make_step(world, gains, options, max_steps: int, prepared=None):
+def _clearances(w, carry, q, truth, running, t, sc):
+    """``(c, cb, searched, nan, hit)`` at step k: the true clearance at q_k, during the motion
+    from q_{k-1}, where the between-step search ran, and whether either is NaN or in contact.
+    Without the checks (``check_collisions=False``): NaN clearances, never a contact."""
+    mask = w.mask
+    if not w.plan.check_collisions:
+        nan = jnp.full(mask.shape, jnp.nan, q.dtype)
+        return nan, nan, jnp.zeros(mask.shape, bool), jnp.zeros((), bool), jnp.zeros((), bool)
+    c = clearance_of(truth, w.scene)
+    cb, searched = w.between(carry, q, truth, c, running, t, sc)
+    cb = jnp.where(carry.first | ~mask, c, cb)
+    nan = jnp.any(jnp.isnan(c)) | jnp.any(jnp.isnan(cb))
+    hit = jnp.any(c <= w.contact) | jnp.any(cb <= w.contact)
+    return c, cb, searched, nan, hit
+
+
+def _stall(carry, err, su):
+    """``(since, stalled, escape)``: steps since the best goal error last improved by
+    ``stall_tolerance``, whether that reached ``stall_window``, and whether an escape is left."""
+    plan = su.plan
+    improved = err < carry.best_error - plan.stall_tolerance
+    settled = improved | carry.first | (carry.walk_left > 0)
+    if not su.stop_at_goal:
+        settled = settled | (err <= su.track.hold_tolerance)  # holding the goal is no stall
+    since = jnp.where(settled, 0, carry.since_best + 1)
+    stalled = since >= plan.stall_window
+    return since, stalled, stalled & (carry.escapes < plan.escapes)
+
+
+def _judge(su, carry, err, stalled, escape, nan, hit):
+    """The status rule: a non-finite clearance, then a contact; planning also ends at the goal
+    and at a stall with no escape left, tracking holds on to the horizon."""
+    judged = Status.RUNNING
+    if su.stop_at_goal:
+        judged = jnp.where(err < su.plan.goal_tolerance, Status.REACHED,
+                           jnp.where(stalled & ~escape, Status.STALLED, Status.RUNNING))
+    judged = jnp.where(nan, Status.NONFINITE, jnp.where(hit, Status.COLLIDED, judged))
+    return jnp.where(carry.status == Status.RUNNING, judged, carry.status)
+
+
+def _walk(carry, start, since, gains, plan, dtype):
+    """An escape: where ``start``, a random walk of the tip at speed ``v_max`` in a random
+    direction for ``escape_steps`` steps. ``(key, walk_velocity, walk_left, escapes, since)``."""
+    key, walk_velocity, walk_left, escapes = carry.key, carry.walk_velocity, carry.walk_left, carry.escapes
+    if plan.escapes > 0:
+        key, sub = jax.random.split(key)
+        direction = jax.random.normal(sub, (3,), dtype)
+        direction = direction / jnp.maximum(safe_norm(direction), jnp.finfo(dtype).tiny)
+        walk_velocity = jnp.where(start, gains.v_max * direction, walk_velocity)
+        walk_left = jnp.where(start, plan.escape_steps, walk_left)
+        escapes = escapes + start.astype(jnp.int32)
+        since = jnp.where(start, 0, since)
+    return key, walk_velocity, walk_left, escapes, since
+
+
+def make_step(world, gains, options, max_steps: int, prepared=None, arm=PCC):
     """The engine's step ``(carry, k) -> (carry, record)`` for this scene (static or
     moving), gains and options (PlanOptions: plan; TrackOptions: track);
-    ``prepared``: :func:`prepare` of the scene (None: computed here)."""
+    ``prepared``: :func:`prepare` of the scene (None: computed here); ``arm``: the arm
+    model (:mod:`softplan_jax.geometry.arm`)."""
     su = setup(world, options)
-    scene, plan, track = su.scene, su.plan, su.track
-    radius, mask = radius_and_mask(scene)
-    q0 = scene.q0
-    dtype = q0.dtype
-    contact = contact_tolerance(plan, dtype)
-    check = plan.check_collisions
-    walks = plan.escapes > 0
-    exact = check or plan.method == "curve"
-    warm = _warm(plan)
-    cells0, speed = prepare(world, options) if prepared is None else prepared
-    n_pairs = q0.shape[0] * (jnp.sum(scene.curve_mask) + len(scene.parametric)).astype(jnp.int32)
-    radius_sum = scene.arm_radius + radius
-    if su.moving:
-        dt = gains.dt
-        travel = speed * dt  # (m,) how far each obstacle can move in one step
-        lead = speed * track.anticipation  # (m,) the field's inflation (TrackOptions.anticipation)
-        m_c = scene.curves.coeffs.shape[0]
-        substeps = jnp.arange(1, track.search_substeps + 1, dtype=dtype) / (track.search_substeps + 1)
-    # The evasive step (TrackOptions.evasion) needs the true clearance (check_collisions) and the safe step.
-    evades = su.moving and track.evasion and check and plan.step == "safe"
-
-    def clearance_of(truth):
-        return jnp.where(mask, truth.distance - scene.arm_radius - radius, jnp.inf)
-
-    def moving_search(q_a, q_b, t_a, w, j):
-        """Slot j's smallest exact clearance at the search instants, arm and curves moving together."""
-
-        def at(tau):
-            return slot_clearance(w, q_a + tau * (q_b - q_a), t_a + tau * dt, j, plan.solver)
-
-        return jnp.min(jax.vmap(at)(substeps))
-
-    def between(carry, q, truth, c, running, t, sc):
-        """(cb, searched): the clearance during the motion from q_{k-1} to q_k (module docstring)."""
-        if su.moving:
-            # Proven clear where the clearance at its start, less the arm's motion bound and the
-            # obstacle's travel, stays above the contact tolerance.
-            proven = swept_clear(carry.q_prev, q, carry.truth_prev, carry.c_prev - travel, contact)
-            proven = proven | carry.certified  # an evasive step's motion: proven in time (planning.evasion)
-            searched = mask & ~carry.first & running & ~proven
-
-            def search(j):
-                # The barrier ties the search to the slot index (a loop variable of evaluate_where):
-                # without it XLA hoists the loop-invariant solves out of the while loop.
-                q_a, q_b, t_a, w, j = jax.lax.optimization_barrier((carry.q_prev, q, t - dt, world, j))
-                return moving_search(*jax.lax.stop_gradient((q_a, q_b, t_a, w)), j)
-
-            found = evaluate_where(searched, search, 1, jnp.full(mask.shape, jnp.inf, dtype))
-            cb = jnp.minimum(jnp.minimum(carry.c_prev, c), jnp.where(searched, found, jnp.inf))
-        elif plan.swept_proof:
-            # The search runs only where the motion bound cannot prove the motion clear.
-            proven = swept_clear(carry.q_prev, q, carry.truth_prev, carry.c_prev, contact)
-            searched = mask & ~carry.first & running & ~proven
-            cb = between_steps(carry.q_prev, q, carry.truth_prev, truth, sc, radius_sum, search=searched)
-        else:
-            searched = mask & ~carry.first & running
-            cb = between_steps(carry.q_prev, q, carry.truth_prev, truth, sc, radius_sum)
-        return cb, searched
+    plan, dtype = su.plan, su.scene.q0.dtype
+    pairs = closest_pairs(plan)
+    w = make_world(world, su, gains, world_data(world, su, pairs) if prepared is None else prepared, arm)
 
     def step(carry: Carry, k):
         q = carry.q
-        t = k.astype(dtype) * gains.dt if track else None
-        if su.moving:
-            sc = scenario_at(world, t)
-            cells = _moving_cells(cells0, world, t)
-        else:
-            sc, cells = scene, cells0
-        warm_next = carry.warm
-        if warm:
-            truth, warm_next, fallbacks = warm_closest(q, sc, plan.solver, cells, carry.warm, carry.first)
-        elif exact:
-            truth = true_closest(q, sc, plan.solver)
-            fallbacks = n_pairs
-        else:
-            truth = placeholder_closest(q, sc)
-            fallbacks = jnp.zeros((), jnp.int32)
+        t = k.astype(dtype) * gains.dt if su.track else None
+        sc, cells = w.at(t)
+        truth, warm_next, fallbacks = pairs.query(arm.shape(q), sc, cells, carry.warm, carry.first)
         running = carry.status == Status.RUNNING
-        if check:
-            c = clearance_of(truth)
-            cb, searched = between(carry, q, truth, c, running, t, sc)
-            cb = jnp.where(carry.first | ~mask, c, cb)
-            nan_clearance = jnp.any(jnp.isnan(c)) | jnp.any(jnp.isnan(cb))
-            hit = jnp.any(c <= contact) | jnp.any(cb <= contact)
-        else:
-            c = cb = jnp.full(mask.shape, jnp.nan, dtype)
-            searched = jnp.zeros(mask.shape, bool)
-            nan_clearance = hit = jnp.zeros((), bool)
-        V_e = sc.goal - tip_position(q)
+        c, cb, searched, nan, hit = _clearances(w, carry, q, truth, running, t, sc)
+        V_e = sc.goal - arm.tip(q)
         err = safe_norm(V_e)
-        improved = err < carry.best_error - plan.stall_tolerance
-        walking = carry.walk_left > 0
-        settled = improved | carry.first | walking
-        if not su.stop_at_goal:
-            settled = settled | (err <= track.hold_tolerance)  # holding the goal is no stall
-        since = jnp.where(settled, 0, carry.since_best + 1)
-        stalled = since >= plan.stall_window
-        # A stall with an escape left starts a random walk instead of ending the rollout.
-        escape = stalled & (carry.escapes < plan.escapes)
-        # The status rule: a non-finite clearance, then a contact; planning also ends at the goal
-        # and at a stall with no escape left, tracking holds on to the horizon.
-        judged = Status.RUNNING
-        if su.stop_at_goal:
-            judged = jnp.where(err < plan.goal_tolerance, Status.REACHED,
-                               jnp.where(stalled & ~escape, Status.STALLED, Status.RUNNING))
-        judged = jnp.where(nan_clearance, Status.NONFINITE, jnp.where(hit, Status.COLLIDED, judged))
-        status = jnp.where(running, judged, carry.status)
+        since, stalled, escape = _stall(carry, err, su)
+        status = _judge(su, carry, err, stalled, escape, nan, hit)
         # The step to q_{k+1}, taken only while running (and not past max_steps).
         stepping = (status == Status.RUNNING) & (k < max_steps)
-        key, walk_velocity, walk_left, escapes = carry.key, carry.walk_velocity, carry.walk_left, carry.escapes
-        if walks:
-            start = stepping & escape
-            key, sub = jax.random.split(key)
-            direction = jax.random.normal(sub, (3,), dtype)
-            direction = direction / jnp.maximum(safe_norm(direction), jnp.finfo(dtype).tiny)
-            walk_velocity = jnp.where(start, gains.v_max * direction, walk_velocity)
-            walk_left = jnp.where(start, plan.escape_steps, walk_left)
-            escapes = escapes + start.astype(jnp.int32)
-            since = jnp.where(start, 0, since)
-        if su.moving:
-            F_e = tracking_attraction(V_e, goal_velocity(world, t), goal_scaled(gains, V_e), track.feedforward)
-            # The field sees each curve inflated by its look-ahead; the safe step gets the true clearance.
-            field = sc._replace(curves=sc.curves.__class__.tree_unflatten(
-                None, [sc.curves.coeffs, sc.curves.u_range, sc.curves.radius + lead[:m_c]]))
-            extra = dict(travel=travel, lead=lead)
-        else:
-            F_e, field, extra = attraction(V_e, goal_scaled(gains, V_e)), sc, {}
+        key, walk_velocity, walk_left, escapes, since = _walk(carry, stepping & escape, since, gains, plan, dtype)
         # An escape's random walk replaces the attraction (paper eq. 9's F_e).
-        F_e = jnp.where(walk_left > 0, walk_velocity, F_e)
-        q_full, field_c = step_target(q, field, gains, truth, plan, (jnp.ones((), bool), F_e), extra.get("lead"))
-        q_next, alpha, too_fast = scaled_step(q, q_full, field_c, plan, extra.get("travel"))
-        evasive = jnp.zeros((), bool)
-        if evades:
-            # Where no scale of the field's step is proven safe: the evasive step (planning.evasion),
-            # computed only for the scenes that need it (under vmap too: base.numerics.when_any).
-            want = stepping & too_fast
-
-            def evade(args):  # every array an operand: under vmap each may be batched
-                w, q_a, q_b, tr, c_a, t_a, s, g, go = args
-                q_ev, proven, _ = evasive_target(w, q_a, q_b, tr, c_a, t_a, s, g, track, go)
-                return q_ev, proven
-
-            # Held (stop_gradient): a rollout stays differentiable, the evasive step itself is not.
-            args = jax.lax.stop_gradient((world, q, q_full, truth, c, t, speed, gains, want))
-            q_ev, proven = when_any(want, evade, lambda args: (args[1], jnp.zeros((), bool)), args, chunk="auto")
-            evasive = want & proven
-            q_next = jnp.where(evasive, q_ev, q_next)
-            alpha = jnp.where(evasive, 1.0, alpha)
-            too_fast = too_fast & ~evasive
+        F_e = jnp.where(walk_left > 0, walk_velocity, w.attraction(V_e, t))
+        q_next, alpha, too_fast, evasive = w.step(q, sc, truth, c, t, F_e, stepping)
         finite = jnp.all(jnp.isfinite(q_next))
         status = jnp.where(stepping & too_fast, Status.TOO_FAST, status)
         status = jnp.where(stepping & ~too_fast & ~finite, Status.NONFINITE, status).astype(jnp.int32)
         moved = stepping & ~too_fast & finite
-        evaded = evasive & moved  # the step just taken was the evasive one
         new = Carry(
-            q=jnp.where(moved, q_next, q),
-            q_prev=q,
-            truth_prev=truth,
-            c_prev=c,
-            first=jnp.zeros((), bool),
-            status=status,
-            iterations=carry.iterations + moved.astype(jnp.int32),
-            best_error=jnp.minimum(err, carry.best_error),
-            since_best=since,
-            key=key,
-            escapes=escapes,
+            q=jnp.where(moved, q_next, q), q_prev=q, truth_prev=truth, c_prev=c, first=jnp.zeros((), bool),
+            status=status, iterations=carry.iterations + moved.astype(jnp.int32),
+            best_error=jnp.minimum(err, carry.best_error), since_best=since, key=key, escapes=escapes,
             walk_left=jnp.where(moved, jnp.maximum(walk_left - 1, 0), walk_left).astype(jnp.int32),
-            walk_velocity=walk_velocity,
-            warm=warm_next,
-            certified=evaded,
-        )
-        converged = jnp.all(jnp.where(mask, truth.converged, True))
+            walk_velocity=walk_velocity, warm=warm_next, certified=evasive & moved)
+        converged = jnp.all(jnp.where(w.mask, truth.converged, True))
         alpha = jnp.where(moved, alpha, 0.0).astype(dtype)
-        record = Record(q, tip_position(q), c, cb, alpha, converged, fallbacks, searched)
-        if track:
-            record = record._replace(goal=sc.goal, time=t, error=err, evasive=evaded)
+        record = Record(q, arm.tip(q), c, cb, alpha, converged, fallbacks, searched)
+        if su.track:
+            record = record._replace(goal=sc.goal, time=t, error=err, evasive=evasive & moved)
         return new, record
 
     return step
 
 
 def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
-        step_chunk: int = DEFAULT_STEP_CHUNK) -> Rollout:
+        step_chunk: int = DEFAULT_STEP_CHUNK, arm=PCC) -> Rollout:
     """One rollout of ``world`` (a Scenario or a MovingScenario; pure, traceable).
 
     Args:
@@ -374,7 +237,7 @@ def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
         the rollout finished) or "scan" (all max_steps + 1 steps; reverse-mode
         differentiable). Both give the same arrays.
     """
-    step = make_step(world, gains, options, max_steps)
+    step = make_step(world, gains, options, max_steps, arm=arm)
     carry0 = init_carry(world, options, key)
     T1 = max_steps + 1
     if driver == "scan":
@@ -403,7 +266,7 @@ def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
 
 
 def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int | None = None,
-              step_chunk: int = DEFAULT_STEP_CHUNK, quantum: int | None = None) -> Rollout:
+              step_chunk: int = DEFAULT_STEP_CHUNK, quantum: int | None = None, arm=PCC) -> Rollout:
     """A batch of rollouts (``worlds``: a stacked Scenario or MovingScenario, leading
     axis B; ``keys`` (B,) keys), ``lanes`` at a time (None: :func:`default_lanes`),
     refilled as they finish.
@@ -424,7 +287,7 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int | None
     one = jax.tree_util.tree_map(lambda x: x[0], worlds)
     planning = setup(one, options).stop_at_goal
     lanes = default_lanes(tracking=not planning) if lanes is None else lanes
-    quantum = _whole("quantum", (DEFAULT_QUANTUM if planning else max_steps + 1) if quantum is None else quantum)
+    quantum = check_int((DEFAULT_QUANTUM if planning else max_steps + 1) if quantum is None else quantum, "quantum", 1)
     B = jax.tree_util.tree_leaves(worlds)[0].shape[0]
     L = min(lanes, B)
     prepared = jax.vmap(lambda w: prepare(w, options))(worlds)  # once per scene
@@ -435,7 +298,7 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int | None
         return (w, p, carry), k_kept[b]
 
     def step_one(world, prep, carry, k):
-        return make_step(world, gains, options, max_steps, prep)(carry, k)
+        return make_step(world, gains, options, max_steps, prep, arm)(carry, k)
 
     # kept: each scene's carry: its first until it starts, its last once suspended (until it resumes)
     # or finished; k_kept: the step it resumes at (0: not started).

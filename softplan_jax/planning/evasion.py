@@ -48,10 +48,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ..geometry.clearance import contact_tolerance
+from ..geometry.clearance import contact_tolerance, safety_floor
 from ..geometry.closest import ClosestPoint, curve_closest
 from ..geometry.kinematics import motion_bound, points_jacobian
-from ..geometry.obstacles import radius_and_mask, true_closest
+from ..geometry.obstacles import clearance_of, radius_and_mask, true_closest
 from ..scenarios.motion import MovingScenario, moved_curves, scenario_at
 from .step import apply_step
 
@@ -109,8 +109,7 @@ def slot_clearance(moving: MovingScenario, q, t, j, solver):
                              jax.tree_util.tree_map(lambda x: x[None], one[1]), t)
         d = curve_closest(q, jax.tree_util.tree_map(lambda x: x[0], curve), solver).distance
         return d - scene.arm_radius - radius[j]
-    d = true_closest(q, scenario_at(moving, t), solver).distance
-    return jnp.where(mask, d - scene.arm_radius - radius, jnp.inf)[j]
+    return clearance_of(true_closest(q, scenario_at(moving, t), solver), scene)[j]
 
 
 def certify_motion(moving: MovingScenario, q_a, q_b, t_a, c_a, speed, dt, floor, fraction, solver, max_pieces: int,
@@ -190,7 +189,7 @@ def evasive_target(moving: MovingScenario, q, q_full, truth: ClosestPoint, c, t,
     plan = track.plan
     dt = gains.dt
     _, mask = radius_and_mask(moving.scene)
-    floor = 2.0 * contact_tolerance(plan, q.dtype)
+    floor = safety_floor(contact_tolerance(plan, q.dtype))
     f = plan.safe_fraction
     a = clearance_gradients(q, truth, mask)  # (m, 3n)
     level = floor + speed * dt / f  # c*_j: where the ordinary safe step is proven again

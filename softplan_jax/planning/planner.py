@@ -14,8 +14,6 @@ only where the motion bound does not prove the motion clear
 from __future__ import annotations
 
 import functools
-import math
-import time
 import warnings
 from typing import NamedTuple
 
@@ -28,17 +26,17 @@ from ..base.status import Status, status_name
 from ..geometry.clearance import contact_tolerance
 from ..geometry.closest import DEFAULT_OPTIONS
 from ..geometry.kinematics import tip_jacobian, tip_position
-from ..geometry.obstacles import radius_and_mask, true_closest
+from ..geometry.obstacles import clearance_of, radius_and_mask, true_closest
 from ..scenarios import Scenario
 from ..scenarios.scenario import check_scenario, unreachable_reason
-from .batching import Progress, batch_mesh, gather, is_global, pad_batch, round_chunk, shard_batch
-from .engine import check_engine_sizes, default_lanes
-from .programs import batch_keys, prng_key, rollout_batch, rollout_jit, start_configuration, strong_gains
-from .records import Rollout, check_rollout_memory, tracks
-from .step import GOAL_GAINS, GainFunction, Gains, PlanOptions, check_options, default_gains
+from .engine import check_engine_sizes
+from .options import PlanOptions, make_options
+from .programs import prng_key, rollout_batch, rollout_jit, strong_gains
+from .records import Rollout
+from .step import GOAL_GAINS, GainFunction, Gains, default_gains
 
 __all__ = ["PlanResult", "make_options", "check_gains", "plan", "plan_device", "unreachable_result",
-           "result_from_rollout", "plan_batch", "run_batch"]
+           "result_from_rollout", "plan_batch"]
 
 
 class PlanResult(NamedTuple):
@@ -82,14 +80,6 @@ class PlanResult(NamedTuple):
     reason: str = ""
     best_error: float | None = None
     global_start: int | None = None
-
-
-def make_options(method="curve", n_points=10, **kwargs) -> PlanOptions:
-    """PlanOptions from keyword arguments, validated."""
-    unknown = set(kwargs) - set(PlanOptions._fields)
-    if unknown:
-        raise ValueError(f"unknown planner option(s) {sorted(unknown)}; known: {list(PlanOptions._fields)}")
-    return check_options(PlanOptions(method=method, n_points=n_points, **kwargs))
 
 
 # Largest k_att * dt of a sound explicit Euler step of the attraction (see check_gains).
@@ -263,9 +253,7 @@ def plan_device(device=None):
 @functools.cache
 def _start_clearance_program(solver):
     def clearance(q, scenario):
-        cp = true_closest(q, scenario, solver)
-        radius, mask = radius_and_mask(scenario)
-        return jnp.where(mask, cp.distance - scenario.arm_radius - radius, jnp.inf)
+        return clearance_of(true_closest(q, scenario, solver), scenario)
 
     return package_jit(clearance)
 
@@ -364,69 +352,5 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
     opts = make_options(method, n_points, **options)
     dtype = scenarios.q0.dtype
     g = strong_gains(check_gains(gains, dtype, scenarios.q0.shape[-2]), dtype)
-    return run_batch(scenarios, g, opts, max_steps, seed, chunk=chunk, devices=devices, progress=progress,
-                     lanes=lanes)
-
-
-def run_batch(worlds, gains, options, max_steps: int, seed=0, *, chunk: int | None = None, devices=None,
-              progress: bool = False, lanes: int | None = None, label: str = "plan_batch") -> Rollout:
-    """The batch loop of :func:`plan_batch` and :func:`~softplan_jax.track_batch`: ``worlds``
-    (a stacked Scenario with PlanOptions, or a stacked MovingScenario with TrackOptions;
-    checked gains) in chunks of one shape, each chunk one call of :data:`rollout_batch`."""
-    T, _, lanes = check_engine_sizes(max_steps, 1, lanes)
-    if chunk is not None and (isinstance(chunk, (bool, np.bool_)) or not isinstance(chunk, (int, np.integer))
-                              or chunk < 1):
-        raise ValueError(f"chunk must be None or an int >= 1, got {chunk!r}")
-    if not isinstance(progress, (bool, np.bool_)):
-        raise ValueError(f"progress must be True or False, got {progress!r}")
-    mesh = batch_mesh(devices)
-    n_dev = 1 if mesh is None else mesh.size
-    batch = start_configuration(worlds).shape[0]
-    size = round_chunk(chunk, batch, n_dev)
-    check_rollout_memory(worlds, options, T, batch, min(size, lanes or default_lanes(tracking=tracks(options))))
-    n_chunks = math.ceil(batch / size)
-    bar = Progress(n_chunks, batch, n_dev, label=label) if progress else None
-    spread = is_global(mesh)  # several processes: results are gathered on every host
-    if n_chunks == 1 and bar is None and not spread:
-        return rollout_batch(worlds, gains, options, T, seed, devices=devices, lanes=lanes)
-
-    keys = batch_keys(seed, batch)
-    host = jax.tree_util.tree_map(np.asarray, worlds)
-    out, done = None, 0
-
-    def call(a):
-        part = pad_batch(jax.tree_util.tree_map(lambda x: x[a : a + size], (host, keys)), size)
-        if mesh is None:
-            (s, k), g_dev = jax.device_put(part), gains  # jax arrays, as rollout_batch's: one jit signature
-        else:
-            (s, k), g_dev = shard_batch(mesh, part, gains)
-        return rollout_batch._call(s, g_dev, options, T, k, mesh, lanes)
-
-    def collect(a, r):
-        nonlocal out, done
-        n = min(size, batch - a)
-        if n_chunks == 1 and not spread:
-            out = jax.tree_util.tree_map(lambda x: x[:n], r) if n < size else r
-        else:
-            r = gather(r)
-            if out is None:
-                out = jax.tree_util.tree_map(lambda x: np.empty((batch, *x.shape[1:]), x.dtype), r)
-            for o, x in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(r), strict=True):
-                o[a : a + n] = x[:n]
-        done += 1
-        if bar is not None:
-            jax.block_until_ready(out)
-            bar.update(done, a + n)
-
-    # Dispatch chunk i + 1 before fetching chunk i: the devices stay busy while the host copies.
-    pending = None
-    for i, a in enumerate(range(0, batch, size)):
-        t0 = time.perf_counter()
-        r = call(a)
-        if i == 0 and bar is not None:
-            bar.compiled(time.perf_counter() - t0)
-        if pending is not None:
-            collect(*pending)
-        pending = (a, r)
-    collect(*pending)
-    return out
+    return rollout_batch.in_chunks(scenarios, g, opts, max_steps, seed, chunk=chunk, devices=devices,
+                                   progress=progress, lanes=lanes)

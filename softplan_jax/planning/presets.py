@@ -32,7 +32,8 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from ..scenarios import Scenario
-from .step import PAPER_STEP, Gains, default_gains
+from .options import PAPER_STEP
+from .step import Gains, default_gains
 
 __all__ = ["Preset", "PRESETS", "preset", "apply_preset"]
 

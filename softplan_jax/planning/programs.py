@@ -1,65 +1,52 @@
-"""The rollout as a pure function and its compiled programs.
-
-:func:`rollout` rolls the planner of paper eq. (9) out on one scene (pure: wrap
-it in jit, vmap or grad). :data:`rollout_jit` is its jitted entry point (the
-"chunks" driver of :func:`~softplan_jax.planning.engine.run`: it stops within a
-chunk of the end), :data:`rollout_batch` the batched one (the "lanes" driver,
-:func:`~softplan_jax.planning.engine.run_lanes`, sharded over devices). Both
-normalise their arguments before the jit boundary (gains as strong arrays of
-the scene's dtype, an int seed as a PRNG key), so that equal shapes hit one
-compilation.
-"""
+"""The rollout as a pure function and as compiled programs. :func:`rollout` rolls the planner
+of paper eq. (9) out on one scene, static or moving (pure: jit, vmap or grad it);
+:data:`rollout_jit` (one scene) and :data:`rollout_batch` (a batch, sharded over devices, in
+chunks of one shape) are :class:`RolloutProgram` objects, the one way the package runs a
+compiled rollout: :func:`~softplan_jax.plan`, :func:`~softplan_jax.track`, the batch entry
+points, the fallback and the command line all call them."""
 
 from __future__ import annotations
+
+import math
+import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.compilation_cache import load_or_export, package_jit, rollout_compiler_options
-from ..scenarios import Scenario
-from .batching import BATCH_AXIS, batch_mesh, pad_batch, round_chunk, shard_batch
+from ..base.compilation_cache import load_or_export, package_jit
+from ..base.validation import check_bool, check_int
+from ..geometry.arm import PCC
+from .batching import BATCH_AXIS, Progress, batch_mesh, gather, is_global, pad_batch, round_chunk, shard_batch
 from .engine import check_engine_sizes, default_lanes, run, run_lanes
-from .records import Rollout, check_rollout_memory, tracks
-from .step import Gains, PlanOptions
+from .options import PROGRAM_KIND, plan_options, rollout_compiler_options, tracks
+from .records import Rollout, check_rollout_memory
 
-__all__ = ["rollout", "strong_gains", "prng_key", "start_configuration", "batch_keys", "CompiledRollout",
-           "rollout_jit", "BatchedRollout", "rollout_batch"]
+__all__ = ["rollout", "strong_gains", "prng_key", "start_configuration", "batch_keys", "RolloutProgram",
+           "rollout_jit", "rollout_batch"]
 
 
-def rollout(scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, key=None, *,
-            driver: str = "scan") -> Rollout:
-    """Roll the planner out for up to ``max_steps`` steps (pure; wrap in jit/vmap/grad
-    as needed; :func:`softplan_jax.plan` is the jitted entry point). The loop is
-    :func:`softplan_jax.planning.engine.run`.
-
-    Step k (k = 0..max_steps) looks at q_k: exact closest pairs to every
-    obstacle (shared by the clearance record and, for the curve method, by the
-    planner), the true clearance at q_k and during the motion from q_{k-1};
-    then the status; then, while running, the step to q_{k+1}
-    (clearance-bounded for ``options.step = "safe"``).
-
-    Status: non-finite (a clearance or a step is NaN/inf: the last finite
-    configuration is kept; a NaN clearance never counts as clear), collided
-    (true clearance <= the contact tolerance at a step or during the motion
-    between two steps; this wins over reached), reached (|V_e| <
-    goal_tolerance), stalled (the best |V_e| did not improve by
-    stall_tolerance over stall_window steps, and no escape is left; while one
-    is, a random walk of ``escape_steps`` steps starts instead), else
-    max_steps. After the end the records are frozen.
+def rollout(world, gains, options, max_steps: int, key=None, *, driver: str = "scan", arm=PCC) -> Rollout:
+    """Roll the planner out for up to ``max_steps`` steps (pure; :func:`softplan_jax.plan` and
+    :func:`softplan_jax.track` are the jitted entry points). The loop is
+    :func:`softplan_jax.planning.engine.run`; the statuses are
+    :class:`~softplan_jax.base.status.Status`'s.
 
     Args:
-      scenario, gains, options, max_steps: as :func:`softplan_jax.plan`.
+      world: a Scenario (with PlanOptions or TrackOptions) or a MovingScenario (TrackOptions).
+      gains, max_steps: as :func:`softplan_jax.plan`.
+      options: PlanOptions (stop at the goal) or TrackOptions (hold the goal to the horizon).
       key: PRNG key of the escapes' random walks (default ``PRNGKey(0)``).
-      driver: "scan" (default: a fixed-length ``lax.scan``, reverse-mode
-        differentiable) or "chunks" (stops within ``options.step_chunk`` steps
-        of the end; what :data:`rollout_jit` runs). The same arrays either way.
+      driver: "scan" (default: a fixed-length ``lax.scan``, reverse-mode differentiable) or
+        "chunks" (stops within ``step_chunk`` steps of the end). The same arrays either way.
+      arm: the arm model (:mod:`softplan_jax.geometry.arm`).
     """
     key = jax.random.PRNGKey(0) if key is None else key
-    return run(scenario, gains, options, max_steps, key, driver=driver, step_chunk=options.step_chunk)
+    return run(world, gains, options, max_steps, key, driver=driver, step_chunk=plan_options(options).step_chunk,
+               arm=arm)
 
 
-def strong_gains(gains: Gains, dtype) -> Gains:
+def strong_gains(gains, dtype):
     """Gains as arrays of the scenario's dtype, never weakly typed: a gain given as
     a Python float or ``jnp.asarray(0.1)`` (weak) would otherwise compile anew."""
     return type(gains)(*(v if v is None else jnp.asarray(v, dtype) for v in gains))
@@ -88,33 +75,6 @@ def start_configuration(world):
     return world.scene.q0 if hasattr(world, "motion") else world.q0
 
 
-def _plan_options(options) -> PlanOptions:
-    """The PlanOptions of a rollout's options (PlanOptions, or TrackOptions' ``plan``)."""
-    return options if isinstance(options, PlanOptions) else options.plan
-
-
-def _rollout_jit(world, gains: Gains, options, max_steps: int, key) -> Rollout:
-    return run(world, gains, options, max_steps, key, driver="chunks", step_chunk=_plan_options(options).step_chunk)
-
-
-def _rollout_batch(worlds, gains: Gains, options, max_steps: int, keys, mesh=None, lanes=None) -> Rollout:
-    platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
-    width = default_lanes(platform, tracking=tracks(options)) if lanes is None else lanes
-
-    def laned(worlds, gains, keys):
-        return run_lanes(worlds, gains, options, max_steps, keys, lanes=width,
-                         step_chunk=_plan_options(options).step_chunk)
-
-    if mesh is None:
-        return laned(worlds, gains, keys)
-    # Every device runs its own lanes on its own shard of the batch: the scenes are
-    # independent, so there is no cross-device communication. check_vma=False: the loop's
-    # carries start from constants (unvarying over the mesh), its outputs vary.
-    batch, shared = jax.sharding.PartitionSpec(BATCH_AXIS), jax.sharding.PartitionSpec()
-    return jax.shard_map(laned, mesh=mesh, in_specs=(batch, shared, batch), out_specs=batch,
-                         check_vma=False)(worlds, gains, keys)
-
-
 def batch_keys(seed, batch: int):
     """One key per scenario: ``jax.random.split(key(seed), batch)``, or ``seed`` itself when it
     already holds one key per scenario (shape (batch, 2) raw keys, or (batch,) typed keys)."""
@@ -127,14 +87,46 @@ def batch_keys(seed, batch: int):
     return jax.random.split(key, batch)
 
 
-class CompiledRollout:
-    """A jitted rollout entry point: normalises its arguments (gains as strong
-    arrays of the scenario's dtype, an int seed as a PRNG key) before the jit
-    boundary, so that equal shapes always hit one compilation.
+def _one(world, gains, options, max_steps: int, key, arm=None) -> Rollout:
+    return run(world, gains, options, max_steps, key, driver="chunks", step_chunk=plan_options(options).step_chunk,
+               arm=PCC if arm is None else arm)
 
-    Call it as ``f(scenario, gains, options, max_steps, seed=0)``; ``f.lower``
-    takes the same arguments and lowers ahead of time (``.compile()`` then
-    compiles without running); ``f.cache_size()`` counts the compilations.
+
+def _batch(worlds, gains, options, max_steps: int, keys, mesh=None, lanes=None, arm=None) -> Rollout:
+    platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
+    width = default_lanes(platform, tracking=tracks(options)) if lanes is None else lanes
+
+    def laned(worlds, gains, keys):
+        return run_lanes(worlds, gains, options, max_steps, keys, lanes=width,
+                         step_chunk=plan_options(options).step_chunk, arm=PCC if arm is None else arm)
+
+    if mesh is None:
+        return laned(worlds, gains, keys)
+    # Every device runs its own lanes on its own shard of the batch: the scenes are
+    # independent, so there is no cross-device communication. check_vma=False: the loop's
+    # carries start from constants (unvarying over the mesh), its outputs vary.
+    batch, shared = jax.sharding.PartitionSpec(BATCH_AXIS), jax.sharding.PartitionSpec()
+    return jax.shard_map(laned, mesh=mesh, in_specs=(batch, shared, batch), out_specs=batch,
+                         check_vma=False)(worlds, gains, keys)
+
+
+def _rollout_structure(options):
+    """The pytree structure of a rollout's result: a planned one leaves the tracking fields None."""
+    n = len(Rollout._fields) if tracks(options) else len(Rollout._fields) - len(Rollout._field_defaults)
+    return jax.tree_util.tree_structure(Rollout(*([0] * n)))
+
+
+class RolloutProgram:
+    """A compiled rollout: ``program(world, gains, options, max_steps, seed=0)`` checks and
+    normalises its arguments (the records fit in memory; gains as strong arrays of the scene's
+    dtype; an int seed as a PRNG key, one per scene of a batch), so equal shapes hit one
+    compilation, and runs the jitted rollout (options and max_steps static). A batch program
+    also takes ``devices`` and ``lanes`` (:data:`rollout_batch`).
+
+    :meth:`args` and :meth:`run` split that call (checks once, runs many);
+    :meth:`lower` lowers ahead of time; :meth:`cached` compiles ahead of time and keeps the
+    traced program on disk; :meth:`cache_size` counts compilations; :meth:`in_chunks` runs a
+    batch in chunks of one shape.
     """
 
     def __init__(self, fn, static_argnames, batched: bool, doc: str):
@@ -144,144 +136,193 @@ class CompiledRollout:
         self._batched = batched
         self.__doc__ = doc
 
-    def _program(self, options: PlanOptions):
-        """The rollout jitted with this package's XLA options for the options' method
-        (:class:`~softplan_jax.base.compilation_cache.package_jit`), one per method."""
-        method = _plan_options(options).method
+    def _program(self, options):
+        """The rollout jitted with the package's XLA options for the options' method."""
+        method = plan_options(options).method
         if method not in self._programs:
-            self._programs[method] = package_jit(self._fn, method, static_argnames=self._static_argnames)
+            self._programs[method] = package_jit(self._fn, PROGRAM_KIND[method], static_argnames=self._static_argnames)
         return self._programs[method]
 
-    def _jitted(self, options: PlanOptions):
-        """The top-level ``jax.jit`` of the rollout for the options' method."""
-        return self._program(options).jitted()
-
-    def _call(self, *args):
-        """The jitted rollout; inside the user's own jit a plain jit of it (package_jit)."""
-        return self._program(args[2])(*args)
-
-    def _args(self, scenario, gains, options, max_steps, seed):
-        q0 = start_configuration(scenario)
+    def args(self, world, gains, options, max_steps, seed=0) -> tuple:
+        """The normalised arguments of :meth:`run`: ``(world, gains, options, max_steps, key)``
+        (one key per scene of a batch). ValueError for a bad max_steps or seed, or records that
+        would not fit in memory."""
+        q0 = start_configuration(world)
         max_steps = check_engine_sizes(max_steps)[0]
         scenes = q0.shape[0] if self._batched else 1
         # Before anything is allocated: the records of max_steps steps must fit in memory.
-        check_rollout_memory(scenario, options, max_steps, scenes, min(scenes, default_lanes(tracking=tracks(options))))
+        check_rollout_memory(world, options, max_steps, scenes, min(scenes, default_lanes(tracking=tracks(options))))
         key = batch_keys(seed, scenes) if self._batched else prng_key(seed)
-        return scenario, strong_gains(gains, q0.dtype), options, max_steps, key
+        return world, strong_gains(gains, q0.dtype), options, max_steps, key
 
-    def __call__(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0) -> Rollout:
-        return self._call(*self._args(scenario, gains, options, max_steps, seed))
+    def run(self, *args, mesh=None, lanes=None) -> Rollout:
+        """The compiled rollout on normalised arguments (:meth:`args`); a batch program also
+        takes its device ``mesh`` (None: one device) and ``lanes``. Inside the user's own jit, a
+        plain jit of the rollout."""
+        extra = (mesh, lanes) if self._batched else ()
+        return self._program(args[2])(*args, *extra)
 
-    def lower(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0):
-        """``jax.jit(...).lower`` of the rollout for these arguments."""
-        return self._jitted(options).lower(*self._args(scenario, gains, options, max_steps, seed))
+    def __call__(self, world, gains, options, max_steps: int, seed=0, devices=None, lanes=None) -> Rollout:
+        if not self._batched:
+            return self.run(*self.args(world, gains, options, max_steps, seed))
+        args, mesh, pad = self._sharded(world, gains, options, max_steps, seed, devices, lanes)
+        r = self.run(*args, mesh=mesh, lanes=lanes)
+        if pad:
+            r = jax.tree_util.tree_map(lambda x: x[: start_configuration(world).shape[0]], r)
+        return r
+
+    def _sharded(self, worlds, gains, options, max_steps, seed, devices, lanes):
+        """``(args, mesh, pad)``: a batch's arguments, padded to a multiple of the device count
+        (``pad`` copies of its last scene) and sharded over the mesh."""
+        w, g, o, T, keys = self.args(worlds, gains, options, max_steps, seed)
+        check_engine_sizes(T, 1, lanes)
+        mesh = batch_mesh(devices)
+        if mesh is None:
+            return (w, g, o, T, keys), None, 0
+        batch = start_configuration(w).shape[0]
+        size = round_chunk(None, batch, mesh.size)
+        (w, keys), g = shard_batch(mesh, pad_batch((w, keys), size), g)
+        return (w, g, o, T, keys), mesh, size - batch
+
+    def lower(self, world, gains, options, max_steps: int, seed=0, devices=None, lanes=None):
+        """``jax.jit(...).lower`` of the rollout for these arguments (a batch padded to a
+        multiple of the device count)."""
+        jitted = self._program(options).jitted()
+        if not self._batched:
+            return jitted.lower(*self.args(world, gains, options, max_steps, seed))
+        args, mesh, _ = self._sharded(world, gains, options, max_steps, seed, devices, lanes)
+        return jitted.lower(*args, mesh, lanes)
 
     def cache_size(self) -> int:
         """Number of compilations so far (one per padded shape, dtype, options, max_steps)."""
         return sum(p._cache_size() for p in self._programs.values())
 
-    def cached(self, scenario: Scenario, gains: Gains, options: PlanOptions, max_steps: int):
-        """Compile ahead of time, keeping the TRACED program on disk for the next process
-        (:func:`softplan_jax.base.compilation_cache.load_or_export`; ``softplan run`` uses it).
+    def cached(self, world, gains, options, max_steps: int):
+        """Compile one scene's rollout ahead of time, keeping the TRACED program on disk for the
+        next process (:func:`softplan_jax.base.compilation_cache.load_or_export`).
 
         Returns:
-          ``(run, loaded)``: ``run(scenario, gains, seed=0) -> Rollout`` for arguments
-          of these shapes (options and max_steps fixed), and whether the traced
-          program came from disk. Without an artifact (cache off, a ParametricCurve
-          in the scenario, jax.export unavailable) ``run`` is :meth:`lower`'s
-          compiled program and ``loaded`` False; the results are the same.
+          ``(run, loaded)``: ``run(world, gains, seed=0) -> Rollout`` for arguments of these
+          shapes (options and max_steps fixed), and whether the traced program came from disk.
+          Without an artifact (cache off, a ParametricCurve in the scene, jax.export
+          unavailable) ``run`` is :meth:`lower`'s compiled program and ``loaded`` False; the
+          results are the same.
         """
-        args = self._args(scenario, gains, options, max_steps, 0)
-        dynamic = (args[0], args[1], args[4])  # scenario, gains, key: options and max_steps are static
-        leaves, treedef = jax.tree_util.tree_flatten(dynamic)
-        # A static scene's Rollout: the tracking fields are None (no tracing needed to know it).
-        required = len(Rollout._fields) - len(Rollout._field_defaults)
-        out_def = jax.tree_util.tree_structure(Rollout(*([0] * required)))
+        if self._batched:
+            raise ValueError("cached compiles one scene's rollout: use rollout_jit.cached")
+        w, g, _, T, key = self.args(world, gains, options, max_steps, 0)
+        leaves, treedef = jax.tree_util.tree_flatten((w, g, key))
+        scene = w.scene if hasattr(w, "motion") else w
 
         def flat(*xs):  # arrays in, arrays out: the artifact needs no pytree registrations
             s, g, k = jax.tree_util.tree_unflatten(treedef, xs)
-            return tuple(jax.tree_util.tree_leaves(self._fn(s, g, options, max_steps, k)))
+            return tuple(jax.tree_util.tree_leaves(self._fn(s, g, options, T, k)))
 
         compiled, loaded = (None, False)
-        if not scenario.parametric and not self._batched:
-            compiled, loaded = load_or_export(flat, leaves, (repr(options), str(int(max_steps)), str(treedef)),
-                                              rollout_compiler_options(options.method))
+        if not scene.parametric:
+            compiled, loaded = load_or_export(flat, leaves, (repr(options), str(T), str(treedef)),
+                                              rollout_compiler_options(plan_options(options).method))
         if compiled is None:
-            plain = self._jitted(options).lower(*self._args(scenario, gains, options, max_steps, 0)).compile()
+            plain = self.lower(world, gains, options, T).compile()
 
-            def run(scenario, gains, seed=0):
-                s, g, _, _, k = self._args(scenario, gains, options, max_steps, seed)
+            def run_plain(world, gains, seed=0):
+                s, g, _, _, k = self.args(world, gains, options, T, seed)
                 return plain(s, g, k)
 
-            return run, False
+            return run_plain, False
+        out_def = _rollout_structure(options)
 
-        def run(scenario, gains, seed=0):
-            s, g, _, _, k = self._args(scenario, gains, options, max_steps, seed)
+        def run_loaded(world, gains, seed=0):
+            s, g, _, _, k = self.args(world, gains, options, T, seed)
             return jax.tree_util.tree_unflatten(out_def, compiled(*jax.tree_util.tree_leaves((s, g, k))))
 
-        return run, loaded
+        return run_loaded, loaded
 
-
-rollout_jit = CompiledRollout(_rollout_jit, ("options", "max_steps"), batched=False, doc="""\
-:func:`rollout` under ``jit`` (options and
-max_steps static): ``rollout_jit(scenario, gains, options, max_steps, seed=0)``. One compilation per
-padded scenario shape, dtype, options and max_steps; new goals, obstacles, gain values or seeds reuse
-it. ``seed``: an int or a PRNG key for the escapes. ``rollout_jit.lower(...)`` lowers ahead of time;
-``rollout_jit.cache_size()`` counts compilations (see :class:`CompiledRollout`).""")
-
-class BatchedRollout(CompiledRollout):
-    """The batched, jitted rollout, sharded over devices (see :data:`rollout_batch`).
-
-    Call it as ``f(scenarios, gains, options, max_steps, seed=0, devices=None)``;
-    ``f.lower`` takes the same arguments; ``f.cache_size()`` counts the
-    compilations (one per batch shape, dtype, options, max_steps and device set).
-    """
-
-    def _sharded_args(self, scenarios, gains, options, max_steps, seed, devices, lanes=None):
-        s, g, o, T, keys = self._args(scenarios, gains, options, max_steps, seed)
-        lanes = check_engine_sizes(T, 1, lanes)[2]
+    def in_chunks(self, worlds, gains, options, max_steps: int, seed=0, *, chunk: int | None = None, devices=None,
+                  progress: bool = False, lanes: int | None = None, label: str = "plan_batch") -> Rollout:
+        """A batch (a stacked Scenario with PlanOptions, or a stacked MovingScenario with
+        TrackOptions; checked gains) in chunks of ``chunk`` scenes of one shape (None: one
+        call), each chunk one call of this batch program; a line per chunk on stderr with
+        ``progress``. Arrays on the host (NumPy) when there are several chunks."""
+        T, _, lanes = check_engine_sizes(max_steps, 1, lanes)
+        if chunk is not None:
+            check_int(chunk, "chunk", 1)
+        check_bool(progress, "progress")
         mesh = batch_mesh(devices)
+        batch = start_configuration(worlds).shape[0]
+        size = round_chunk(chunk, batch, 1 if mesh is None else mesh.size)
+        check_rollout_memory(worlds, options, T, batch, min(size, lanes or default_lanes(tracking=tracks(options))))
+        n_chunks = math.ceil(batch / size)
+        bar = Progress(n_chunks, batch, 1 if mesh is None else mesh.size, label=label) if progress else None
+        if n_chunks == 1 and bar is None and not is_global(mesh):
+            return self(worlds, gains, options, T, seed, devices=devices, lanes=lanes)
+        return _chunked(self, worlds, gains, options, T, batch_keys(seed, batch), mesh, size, lanes, bar)
+
+
+def _chunked(program, worlds, gains, options, T, keys, mesh, size, lanes, bar) -> Rollout:
+    """:meth:`RolloutProgram.in_chunks` for several chunks (or a progress bar, or several
+    processes): chunk i + 1 is dispatched before chunk i is fetched, so the devices stay busy
+    while the host copies."""
+    batch = keys.shape[0]
+    n_chunks = math.ceil(batch / size)
+    spread = is_global(mesh)  # several processes: results are gathered on every host
+    host = jax.tree_util.tree_map(np.asarray, worlds)
+    out, done = None, 0
+
+    def call(a):
+        part = pad_batch(jax.tree_util.tree_map(lambda x: x[a : a + size], (host, keys)), size)
         if mesh is None:
-            return (s, g, o, T, keys, None, lanes), 0
-        batch = start_configuration(s).shape[0]
-        size = round_chunk(None, batch, mesh.size)
-        (s, keys), g = shard_batch(mesh, pad_batch((s, keys), size), g)
-        return (s, g, o, T, keys, mesh, lanes), size - batch
+            (s, k), g_dev = jax.device_put(part), gains  # jax arrays, as rollout_batch's: one jit signature
+        else:
+            (s, k), g_dev = shard_batch(mesh, part, gains)
+        return program.run(s, g_dev, options, T, k, mesh=mesh, lanes=lanes)
 
-    def __call__(self, scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0,
-                 devices=None, lanes=None) -> Rollout:
-        args, pad = self._sharded_args(scenarios, gains, options, max_steps, seed, devices, lanes)
-        r = self._call(*args)
-        if pad:
-            batch = start_configuration(scenarios).shape[0]
-            r = jax.tree_util.tree_map(lambda x: x[:batch], r)
-        return r
+    def collect(a, r):
+        nonlocal out, done
+        n = min(size, batch - a)
+        if n_chunks == 1 and not spread:
+            out = jax.tree_util.tree_map(lambda x: x[:n], r) if n < size else r
+        else:
+            r = gather(r)
+            if out is None:
+                out = jax.tree_util.tree_map(lambda x: np.empty((batch, *x.shape[1:]), x.dtype), r)
+            for o, x in zip(jax.tree_util.tree_leaves(out), jax.tree_util.tree_leaves(r), strict=True):
+                o[a : a + n] = x[:n]
+        done += 1
+        if bar is not None:
+            jax.block_until_ready(out)
+            bar.update(done, a + n)
 
-    def lower(self, scenarios: Scenario, gains: Gains, options: PlanOptions, max_steps: int, seed=0,
-              devices=None, lanes=None):
-        """``jax.jit(...).lower`` of the batched rollout for these arguments (the batch
-        padded to a multiple of the device count)."""
-        args = self._sharded_args(scenarios, gains, options, max_steps, seed, devices, lanes)[0]
-        return self._jitted(options).lower(*args)
+    pending = None
+    for i, a in enumerate(range(0, batch, size)):
+        t0 = time.perf_counter()
+        r = call(a)
+        if i == 0 and bar is not None:
+            bar.compiled(time.perf_counter() - t0)
+        if pending is not None:
+            collect(*pending)
+        pending = (a, r)
+    collect(*pending)
+    return out
 
 
-rollout_batch = BatchedRollout(_rollout_batch, ("options", "max_steps", "mesh", "lanes"), batched=True, doc="""\
-:func:`rollout` over a batch of
-scenarios of one padded shape (every leaf of ``scenarios`` has a leading batch axis; gains shared),
-jitted: ``rollout_batch(scenarios, gains, options, max_steps, seed=0, devices=None, lanes=None)``.
-Scenario b's escapes use ``jax.random.split(key(seed), B)[b]`` (or ``seed[b]`` when ``seed`` holds B
-keys). ``lanes`` scenes step side by side, each lane taking the next scene when its scene finishes
-(:func:`softplan_jax.planning.engine.run_lanes`; None: :func:`~softplan_jax.planning.engine.default_lanes`: on
-a CPU 64 when planning and up to 1,024 when tracking, the whole batch up to 16,384 on an accelerator), so
-the cost follows the steps taken. A stacked MovingScenario with TrackOptions tracks instead
-(:func:`~softplan_jax.track_batch`).
+rollout_jit = RolloutProgram(_one, ("options", "max_steps"), batched=False, doc="""\
+:func:`rollout` of one scene under ``jit`` (options and max_steps static):
+``rollout_jit(world, gains, options, max_steps, seed=0)``. One compilation per padded scene shape,
+dtype, options and max_steps; new goals, obstacles, gain values or seeds reuse it. See
+:class:`RolloutProgram`.""")
 
-With more than one local device the batch is sharded over all of them (``devices``: None = every
-local device, an int k = the first k, 1 = no sharding, a sequence of jax devices, or ``"global"``:
-every process's devices under ``jax.distributed``, the result then a global array; see
-:func:`plan_batch`, which gathers it on every process): padded to a
-multiple of the device count with copies of its last scenario (dropped from the result), each
-device runs the vmapped rollout on its shard (``jax.shard_map``, no cross-device communication).
-The result agrees with the unsharded call to rounding, not bit for bit (XLA optimises a
-partitioned program differently); a rollout that amplifies rounding (a near-tie of the stall or
-contact test) can end differently. ``.lower`` and ``.cache_size()`` as :class:`CompiledRollout`.""")
+rollout_batch = RolloutProgram(_batch, ("options", "max_steps", "mesh", "lanes"), batched=True, doc="""\
+:func:`rollout` over a batch of scenes of one padded shape (every leaf with a leading batch axis;
+gains shared), jitted: ``rollout_batch(worlds, gains, options, max_steps, seed=0, devices=None,
+lanes=None)``. Scene b's escapes use ``jax.random.split(key(seed), B)[b]`` (or ``seed[b]`` when
+``seed`` holds B keys). ``lanes`` scenes step side by side, each lane taking the next scene when its
+scene finishes (:func:`softplan_jax.planning.engine.run_lanes`; None:
+:func:`~softplan_jax.planning.engine.default_lanes`), so the cost follows the steps taken.
+
+With more than one device the batch is sharded over them (``devices``: None = every local device,
+an int k = the first k, 1 = no sharding, a sequence of jax devices, or ``"global"``: every process's
+devices under ``jax.distributed``): padded to a multiple of the device count with copies of its last
+scene (dropped from the result), each device runs its lanes on its shard (``jax.shard_map``). The
+result agrees with the unsharded call to rounding, not bit for bit (XLA optimises a partitioned
+program differently). See :class:`RolloutProgram`.""")

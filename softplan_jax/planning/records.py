@@ -21,8 +21,9 @@ from ..base.numerics import safe_norm
 from ..base.status import Status
 from ..geometry.obstacles import obstacle_count, radius_and_mask
 from ..scenarios.motion import MovingScenario
+from .options import tracks
 
-__all__ = ["Rollout", "Record", "Setup", "setup", "tracks", "record_zeros", "check_rollout_memory", "freeze", "finish",
+__all__ = ["Rollout", "Record", "Setup", "setup", "record_zeros", "check_rollout_memory", "freeze", "finish",
            "hold_statistics"]
 
 
@@ -124,12 +125,6 @@ class Setup(NamedTuple):
     plan: object  # PlanOptions of the step
     track: object  # TrackOptions (hold the goal to the horizon) or None (stop at the goal)
     stop_at_goal: bool
-
-
-def tracks(options) -> bool:
-    """The mode is the options': True for TrackOptions (hold the goal to the horizon), False
-    for PlanOptions (stop at the goal or at a stall)."""
-    return hasattr(options, "plan")
 
 
 def setup(world, options) -> Setup:

@@ -29,21 +29,18 @@ paper's step, unscaled (the paper tables use it).
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from ..base.compilation_cache import package_jit
 from ..base.numerics import damped_pinv, safe_norm
-from ..geometry.clearance import contact_tolerance
-from ..geometry.closest import DEFAULT_OPTIONS, ClosestPoint, SolverOptions
-from ..geometry.closest_grid import GridSolverOptions
-from ..geometry.kinematics import motion_bound, points_jacobian, tip_position
+from ..geometry.arm import PCC
+from ..geometry.clearance import contact_tolerance, safety_floor
+from ..geometry.closest import ClosestPoint
 from ..geometry.obstacles import model_closest, placeholder_closest, radius_and_mask, true_closest
 from ..scenarios import Scenario
 from .gains import GOAL_GAINS, GainFunction, Gains, default_gains, goal_scaled, repulsion_scale
+from .options import PROGRAM_KIND, PlanOptions
 
 __all__ = [
     "Gains",
@@ -55,9 +52,6 @@ __all__ = [
     "repulsion_scale",
     "GOAL_GAINS",
     "goal_scaled",
-    "PlanOptions",
-    "PAPER_STEP",
-    "check_options",
     "field_velocity",
     "apply_step",
     "safe_scale",
@@ -109,162 +103,25 @@ def repulsion(V_s, clearance, gains: Gains, kind: str = "khatib", scale=1.0):
     return mag * V_s / jnp.maximum(safe_norm(V_s), jnp.finfo(V_s.dtype).tiny)
 
 
-class PlanOptions(NamedTuple):
-    """Static planner settings (hashable: changing one recompiles).
-
-    Attributes:
-      method: "curve" (exact closest points) or "points" (N-point model).
-      n_points: N of the N-point model of each curve (method "points").
-      points_per_segment: arm samples per segment for the N-point method (paper: 10).
-      repulsion: "khatib" or "exponential".
-      goal_tolerance: reached when |V_e| < goal_tolerance.
-      stall_window: stalled after this many steps without improving the best
-        |V_e| by more than stall_tolerance (then an escape starts while any
-        is left; else the rollout ends "stalled").
-      stall_tolerance: see stall_window. The defaults (30 steps, 0.02) call
-        creeping along an obstacle at under ~1e-3 per step a stall: it would
-        not reach the goal within the step budget (benchmarks/safe_step.py).
-      check_collisions: compute the true clearance and the between-step
-        check inside the rollout (default). False gives a planning-only
-        rollout (clearance records NaN, never "collided"), for timing the
-        planner alone; :func:`apply_collision_checks` adds the checks after.
-      contact_tolerance: a clearance at or below this counts as a collision
-        (zero-radius curves that cross meet at a single point, which a
-        solver reaches only to rounding). The rollout uses
-        ``max(contact_tolerance, 10 sqrt(eps))``: 1e-6 in float64, 3.5e-3 in float32.
-      solver: the exact closest-point solver: SolverOptions (default) or
-        GridSolverOptions (the paper's 2-D solver).
-      step: "safe" (default): the clearance-bounded step (see the module
-        docstring); "plain": the paper's step ``q + dt qdot`` (paper eq. 9).
-      safe_fraction: the safe step keeps the motion bound of every step below
-        this fraction of ``(clearance - floor)``, in (0, 1]; floor is twice the
-        contact tolerance, so the clearance never falls to the contact tolerance.
-      escapes: random-walk escapes from stalls allowed per rollout (0: none;
-        a stall then ends the rollout, as in the paper).
-      escape_steps: steps of one random walk.
-      warm_start: in a rollout, carry each (segment, curve) pair's closest
-        point from step to step, polish it and certify it the global minimum
-        (:mod:`softplan_jax.geometry.warm_start`); only pairs whose certificate fails
-        take the full solve. Same closest points as the full solver, fewer
-        solves. Applies to the default solver (SolverOptions) only; False:
-        the full solve at every step. :func:`planner_step` and the post-hoc
-        checks always use the full solve.
-      swept_proof: run the between-step search only for the (step, obstacle)
-        motions that the motion bound does not prove clear
-        (:func:`softplan_jax.geometry.clearance.swept_clear`: the clearance at the start
-        of the motion minus :func:`~softplan_jax.geometry.kinematics.motion_bound`
-        stays above the contact tolerance); the statuses are the same, the
-        search is skipped where it cannot find a collision (see
-        ``Rollout.between``). False: search every motion (the earlier
-        behaviour, for comparison).
-      step_chunk: steps between two checks of "done" by the rollout engine
-        (:mod:`softplan_jax.planning.engine`): a rollout stops computing within this many
-        steps after it finished. Changes the cost, never the results.
-    """
-
-    method: str = "curve"
-    n_points: int = 10
-    points_per_segment: int = 10
-    repulsion: str = "khatib"
-    goal_tolerance: float = 1e-2
-    stall_window: int = 30
-    stall_tolerance: float = 0.02
-    check_collisions: bool = True
-    contact_tolerance: float = 1e-6
-    solver: SolverOptions = DEFAULT_OPTIONS
-    step: str = "safe"
-    safe_fraction: float = 0.8
-    escapes: int = 20
-    escape_steps: int = 15
-    warm_start: bool = True
-    swept_proof: bool = True
-    step_chunk: int = 8
-
-
-# The paper's step (eq. 9, unscaled, no escapes) with the stall test of the earlier
-# releases: ``make_options(method, N, **PAPER_STEP)`` plans exactly as before the safe
-# step (bit for bit on the paper scenes); the paper tables and the NumPy baseline use it.
-PAPER_STEP = {"step": "plain", "escapes": 0, "stall_window": 60, "stall_tolerance": 1e-4}
-
-
-
-
-_INT_OPTIONS = ("n_points", "points_per_segment", "stall_window", "escapes", "escape_steps", "step_chunk")
-_FLOAT_OPTIONS = ("goal_tolerance", "stall_tolerance", "contact_tolerance", "safe_fraction")
-_BOOL_OPTIONS = ("check_collisions", "warm_start", "swept_proof")
-
-
-def _check_option_types(options: PlanOptions) -> None:
-    """Each field of the type it must have (a ValueError naming it): options are static
-    arguments of the compiled rollouts, so a float count or a string tolerance must not reach them."""
-    for name in _INT_OPTIONS:
-        v = getattr(options, name)
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
-            raise ValueError(f"{name} must be an int, got {v!r}")
-    for name in _FLOAT_OPTIONS:
-        v = getattr(options, name)
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) \
-                or not np.isfinite(v):
-            raise ValueError(f"{name} must be a finite number, got {v!r}")
-    for name in _BOOL_OPTIONS:
-        if not isinstance(getattr(options, name), (bool, np.bool_)):
-            raise ValueError(f"{name} must be True or False, got {getattr(options, name)!r}")
-    for name in ("method", "repulsion", "step"):
-        if not isinstance(getattr(options, name), str):
-            raise ValueError(f"{name} must be a string, got {getattr(options, name)!r}")
-    if not isinstance(options.solver, (SolverOptions, GridSolverOptions)):
-        raise ValueError(f"solver must be a SolverOptions or a GridSolverOptions, got {options.solver!r}")
-
-
-def check_options(options: PlanOptions) -> PlanOptions:
-    _check_option_types(options)
-    if not options.stall_tolerance >= 0:
-        raise ValueError(f"stall_tolerance must be >= 0, got {options.stall_tolerance}")
-    if options.method not in ("curve", "points"):
-        raise ValueError(f"unknown method {options.method!r}; choose 'curve' or 'points'")
-    if options.repulsion not in ("khatib", "exponential"):
-        raise ValueError(f"unknown repulsion {options.repulsion!r}; choose 'khatib' or 'exponential'")
-    if int(options.n_points) < 1:
-        raise ValueError(f"n_points must be >= 1, got {options.n_points}")
-    if int(options.points_per_segment) < 1:
-        raise ValueError(f"points_per_segment must be >= 1, got {options.points_per_segment}")
-    if not options.goal_tolerance > 0:
-        raise ValueError(f"goal_tolerance must be > 0, got {options.goal_tolerance}")
-    if not options.contact_tolerance >= 0:
-        raise ValueError(f"contact_tolerance must be >= 0, got {options.contact_tolerance}")
-    if int(options.stall_window) < 1:
-        raise ValueError(f"stall_window must be >= 1, got {options.stall_window}")
-    if options.step not in ("safe", "plain"):
-        raise ValueError(f"unknown step {options.step!r}; choose 'safe' (clearance-bounded) or 'plain' (the paper's)")
-    if not 0 < float(options.safe_fraction) <= 1:
-        raise ValueError(f"safe_fraction must be in (0, 1], got {options.safe_fraction}")
-    if int(options.escapes) < 0:
-        raise ValueError(f"escapes must be >= 0, got {options.escapes}")
-    if int(options.escape_steps) < 1:
-        raise ValueError(f"escape_steps must be >= 1, got {options.escape_steps}")
-    if isinstance(options.step_chunk, bool) or not isinstance(options.step_chunk, (int, np.integer)) \
-            or options.step_chunk < 1:
-        raise ValueError(f"step_chunk must be an int >= 1, got {options.step_chunk!r}")
-    return options
-
-
-def field_velocity(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None):
+def field_velocity(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, F_e=None,
+                   arm=PCC):
     """Paper eq. (9): qdot = J_e^+ F_e(V_e) - sum_j J_sj^+ F_sj(V_sj).
 
-    ``walk = (walking () bool, velocity (3,))``, if given: while walking, the
-    velocity replaces F_e (an escape's random walk).
+    ``F_e`` (3,), if given, replaces the attraction :func:`attraction` (a moving goal's
+    :func:`tracking_attraction`, an escape's random walk). ``arm``: the arm model
+    (:mod:`softplan_jax.geometry.arm`; default the PCC arm).
     Returns ``(qdot (n, 3), clearance (m,))``: the clearance of the planner's
     own obstacle model (exact for the curve method), +inf for padding slots.
     """
     n = q.shape[0]
-    V_e = scenario.goal - tip_position(q)
+    V_e = scenario.goal - arm.tip(q)
     gains = goal_scaled(gains, V_e)  # a GainFunction's dependence on the goal distance (else as given)
-    cps = model_closest(q, scenario, truth, options.method, options.n_points, options.points_per_segment)
+    cps = model_closest(arm.shape(q), scenario, truth, options.method, options.n_points, options.points_per_segment)
     radius, mask = radius_and_mask(scenario)
     # J_e (the tip: s = 1 of the last segment) and every J_sj in one pass.
     segments = jnp.concatenate([jnp.array([n - 1], jnp.int32), cps.segment])
     s = jnp.concatenate([jnp.ones((1,), q.dtype), cps.s])
-    J = points_jacobian(q, segments, s)
+    J = arm.jacobians(q, segments, s)
     # Padding slots get a full-rank stand-in Jacobian [I 0] (their force is zero): with
     # damping 0 (the plain pseudo-inverse) their placeholder point's Jacobian is singular
     # and would give NaN * 0 = NaN (double-where: finite values and gradients).
@@ -277,9 +134,8 @@ def field_velocity(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, opt
     scale = repulsion_scale(gains, clearance, cps.segment)
     F_s = jax.vmap(lambda v, d, k: repulsion(v, d, gains, options.repulsion, k))(V_s, clearance, scale)
     F_s = jnp.where(mask[:, None], F_s, 0.0)
-    F_e = attraction(V_e, gains)
-    if walk is not None:
-        F_e = jnp.where(walk[0], walk[1], F_e)
+    if F_e is None:
+        F_e = attraction(V_e, gains)
     # Paper eq. (9).
     qdot = pinvs[0] @ F_e - jnp.einsum("kij,kj->i", pinvs[1:], F_s)
     return qdot.reshape(n, 3), jnp.where(mask, clearance, jnp.inf)
@@ -290,7 +146,7 @@ def apply_step(q, qdot, scenario: Scenario, gains: Gains):
     return q_next.at[:, 0].set(jnp.clip(q_next[:, 0], scenario.L_min, scenario.L_max))
 
 
-def safe_scale(q, q_target, clearance, floor, fraction, travel=None, cap=None):
+def safe_scale(q, q_target, clearance, floor, fraction, travel=None, cap=None, arm=PCC):
     """The safe step's scale alpha in [0, 1] for the straight motion q -> q_target,
     and whether even standing still is unsafe.
 
@@ -314,6 +170,7 @@ def safe_scale(q, q_target, clearance, floor, fraction, travel=None, cap=None):
       fraction: ``f`` in (0, 1], the share of the clearance the motion may use.
       travel: (m,) how far each obstacle can move during the motion (None: static).
       cap: an upper bound on the allowed motion (None: none).
+      arm: the arm model whose motion bound B is (default the PCC arm).
 
     Returns:
       ``(alpha, too_fast)``: too_fast is True where some ``f (c_j - floor) <
@@ -331,44 +188,44 @@ def safe_scale(q, q_target, clearance, floor, fraction, travel=None, cap=None):
     allowed = jnp.maximum(jnp.min(budget, initial=jnp.inf), 0.0)
     if cap is not None:
         allowed = jnp.minimum(allowed, cap)
-    bound = motion_bound(q, q_target)[-1]
+    bound = arm.motion_bound(q, q_target)
     # Double-where: a zero bound (no motion) gives alpha = 1 and no 0/0 in either mode.
     moving = bound > 0
     alpha = jnp.where(moving, jnp.minimum(1.0, allowed / jnp.where(moving, bound, 1.0)), 1.0)
     return jnp.where(jnp.isnan(jnp.min(clearance, initial=jnp.inf)), jnp.nan, alpha), too_fast
 
 
-def step_target(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None,
-                lead=None):
+def step_target(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, F_e=None,
+                lead=None, arm=PCC):
     """The field's full step from q and the clearance the safe step scales it by:
-    ``(q_full, clearance)``. Paper eq. (9) (:func:`field_velocity`, ``walk`` as
-    there), then the Euler step with the length limits (:func:`apply_step`).
+    ``(q_full, clearance)``. Paper eq. (9) (:func:`field_velocity`, ``F_e`` and ``arm``
+    as there), then the Euler step with the length limits (:func:`apply_step`).
     ``lead`` (m,), if given: ``scenario``'s obstacles are inflated by it for the
     field (a look-ahead), and it is added back to the field's clearance."""
-    qdot, clearance = field_velocity(q, scenario, gains, truth, options, walk)
+    qdot, clearance = field_velocity(q, scenario, gains, truth, options, F_e, arm)
     if lead is not None:
         clearance = clearance + lead
     return apply_step(q, qdot, scenario, gains), clearance
 
 
-def scaled_step(q, q_full, clearance, options: PlanOptions, travel=None):
+def scaled_step(q, q_full, clearance, options: PlanOptions, travel=None, arm=PCC):
     """``(q_next, alpha, too_fast)`` of the step q -> q_full: for ``options.step = "safe"``
     scaled by :func:`safe_scale` (``travel``: the obstacles' travel over the step, None
     for a static scene); ``"plain"`` is the paper's step (alpha = 1)."""
     if options.step == "plain":
         return q_full, jnp.ones((), q.dtype), jnp.zeros((), bool)
-    floor = 2.0 * contact_tolerance(options, q.dtype)
-    alpha, too_fast = safe_scale(q, q_full, clearance, floor, options.safe_fraction, travel)
+    floor = safety_floor(contact_tolerance(options, q.dtype))
+    alpha, too_fast = safe_scale(q, q_full, clearance, floor, options.safe_fraction, travel, arm=arm)
     # q and q_full lie in the length box, so every point of the segment between them does too.
     return q + alpha * (q_full - q), alpha, too_fast
 
 
-def next_q(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, walk=None, travel=None,
+def next_q(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, options: PlanOptions, F_e=None, travel=None,
            lead=None):
     """One planner step from q: ``(q_next, alpha, too_fast)``: :func:`step_target`
-    (paper eq. 9; ``walk`` and ``lead`` as there), then :func:`scaled_step`
+    (paper eq. 9; ``F_e`` and ``lead`` as there), then :func:`scaled_step`
     (``travel`` as there)."""
-    q_full, clearance = step_target(q, scenario, gains, truth, options, walk, lead)
+    q_full, clearance = step_target(q, scenario, gains, truth, options, F_e, lead)
     return scaled_step(q, q_full, clearance, options, travel)
 
 
@@ -404,5 +261,6 @@ def planner_step(q, scenario: Scenario, gains: Gains, options: PlanOptions = Pla
     if not isinstance(options, PlanOptions):
         raise ValueError(f"options must be a PlanOptions (see make_options), got {type(options).__name__}")
     if options.method not in _PLANNER_STEP:
-        _PLANNER_STEP[options.method] = package_jit(_planner_step, options.method, static_argnames=("options",))
+        kind = PROGRAM_KIND[options.method]
+        _PLANNER_STEP[options.method] = package_jit(_planner_step, kind, static_argnames=("options",))
     return _PLANNER_STEP[options.method](q, scenario, gains, options)

@@ -52,8 +52,6 @@ plans it with the same step (:func:`~softplan_jax.plan`).
 
 from __future__ import annotations
 
-import functools
-import math
 from typing import NamedTuple
 
 import jax
@@ -63,101 +61,18 @@ import numpy as np
 from ..base.status import status_name
 from ..geometry.obstacles import radius_and_mask
 from ..scenarios.motion import MovingScenario, goal_at
-from .engine import check_engine_sizes, run
-from .planner import check_gains, make_options, run_batch
-from .programs import prng_key, rollout_batch, rollout_jit, strong_gains
-from .records import Rollout, check_rollout_memory
-from .step import Gains, PlanOptions
+from .options import make_track_options
+from .planner import check_gains
+from .programs import rollout_batch, rollout_jit, strong_gains
+from .records import Rollout
+from .step import Gains
 
-__all__ = ["TrackOptions", "make_track_options", "Track", "TrackResult", "track_rollout", "track", "track_batch"]
-
-
-class TrackOptions(NamedTuple):
-    """Static settings of a tracking rollout (hashable: changing one recompiles).
-
-    Attributes:
-      plan: the PlanOptions of the step (method, N, safe step, escapes, goal
-        tolerance, solver, warm start, ...). ``check_collisions`` must be on.
-      hold_tolerance: the goal counts as held while |g(t) - tip| <= this, > 0.
-      feedforward: add dg/dt to the attraction (module docstring).
-      search_substeps: instants of the between-step search, >= 1.
-      anticipation: seconds of look-ahead of the repulsion, >= 0: eq. (9)'s
-        field sees obstacle j inflated by ``S_j * anticipation`` (S_j its
-        speed bound), so the arm gives way to a fast obstacle before the safe
-        step has to stop it. 0: the static field. The safe step always uses
-        the true clearance.
-      evasion: where no scale of the field's step is proven safe (an obstacle
-        could come further in one step than the clearance allows), take the
-        evasive step of :mod:`softplan_jax.planning.evasion` (a barrier filter
-        on the field's step, certified by conservative advancement in time)
-        instead of ending ``too_fast``; it ends ``too_fast`` only where the
-        evasive motion is not proven clear either. False: end there, as before.
-        Acts only where the rollout would otherwise end ``too_fast``.
-      evasion_speed: the actuators' limit for the evasive step [m/s]: the
-        arm's motion bound over a step at most ``evasion_speed * dt``, > 0.
-      barrier_gain: gamma [1/s] of the barrier condition
-        ``dh/dt >= -gamma h`` on the clearance's margin, finite, >= 0.
-      evasion_pieces: the most pieces of the evasive step's proof in time, >= 1.
-    """
-
-    plan: PlanOptions = PlanOptions()
-    hold_tolerance: float = 0.02
-    feedforward: bool = True
-    search_substeps: int = 8
-    anticipation: float = 0.0
-    evasion: bool = True
-    evasion_speed: float = 1.0
-    barrier_gain: float = 5.0
-    evasion_pieces: int = 16
-
-
-def check_track_options(options: TrackOptions) -> TrackOptions:
-    if not options.plan.check_collisions:
-        raise ValueError("tracking needs check_collisions=True (the status depends on the clearance)")
-    if not (math.isfinite(float(options.hold_tolerance)) and float(options.hold_tolerance) > 0):
-        raise ValueError(f"hold_tolerance must be a finite number > 0, got {options.hold_tolerance}")
-    if int(options.search_substeps) < 1:
-        raise ValueError(f"search_substeps must be >= 1, got {options.search_substeps}")
-    if not (math.isfinite(float(options.anticipation)) and float(options.anticipation) >= 0):
-        raise ValueError(f"anticipation must be a finite number >= 0, got {options.anticipation}")
-    if not isinstance(options.evasion, (bool, np.bool_)):
-        raise ValueError(f"evasion must be True or False, got {options.evasion!r}")
-    if not (math.isfinite(float(options.evasion_speed)) and float(options.evasion_speed) > 0):
-        raise ValueError(f"evasion_speed must be a finite number > 0, got {options.evasion_speed}")
-    if not (math.isfinite(float(options.barrier_gain)) and float(options.barrier_gain) >= 0):
-        raise ValueError(f"barrier_gain must be a finite number >= 0, got {options.barrier_gain}")
-    pieces = options.evasion_pieces
-    if isinstance(pieces, (bool, np.bool_)) or not isinstance(pieces, (int, np.integer)) or pieces < 1:
-        raise ValueError(f"evasion_pieces must be an int >= 1, got {pieces!r}")
-    return options
+__all__ = ["Track", "TrackResult", "track", "track_batch", "result_from_track", "goal_trajectory"]
 
 
 # One result type: a tracking rollout is an engine Rollout with its tracking fields
 # (goal, time, error, reached_step, held_steps, held_to_end) filled in.
 Track = Rollout
-
-
-def track_rollout(moving: MovingScenario, gains: Gains, options: TrackOptions, max_steps: int, key=None, *,
-                  driver: str = "scan") -> Rollout:
-    """Roll the tracking planner out for ``max_steps`` steps (pure; :func:`track` is the
-    jitted entry point): :func:`softplan_jax.planning.engine.run` on a moving scene. See the
-    module docstring; ``driver`` as :func:`~softplan_jax.planning.planner.rollout`."""
-    key = jax.random.PRNGKey(0) if key is None else key
-    return run(moving, gains, options, max_steps, key, driver=driver, step_chunk=options.plan.step_chunk)
-
-
-# ----------------------------------------------------------------------------
-# Entry points.
-
-
-@functools.cache
-def track_program(options: TrackOptions, max_steps: int, batched: bool):
-    """The jitted tracking rollout ``(moving, gains, key) -> Rollout`` for these static settings
-    (over a stack of moving scenarios and keys when ``batched``): the programs of
-    :data:`~softplan_jax.planning.planner.rollout_jit` / :data:`~softplan_jax.planning.planner.rollout_batch`."""
-    if batched:
-        return lambda moving, gains, keys: rollout_batch._call(moving, gains, options, max_steps, keys, None, None)
-    return lambda moving, gains, key: rollout_jit._call(moving, gains, options, max_steps, key)
 
 
 class TrackResult(NamedTuple):
@@ -222,19 +137,6 @@ def _check_moving(moving, batched: bool):
         raise ValueError("track takes one MovingScenario; use track_batch for a stack")
 
 
-def make_track_options(method="curve", n_points=10, *, hold_tolerance=0.02, feedforward=True, search_substeps=8,
-                       anticipation=0.0, evasion=True, evasion_speed=1.0, barrier_gain=5.0, evasion_pieces=16,
-                       **plan_options) -> TrackOptions:
-    """TrackOptions from keyword arguments (PlanOptions fields go to ``plan``), validated."""
-    for name, v in (("hold_tolerance", hold_tolerance), ("anticipation", anticipation),
-                    ("evasion_speed", evasion_speed), ("barrier_gain", barrier_gain)):
-        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
-            raise ValueError(f"{name} must be a number, got {v!r}")
-    return check_track_options(TrackOptions(make_options(method, n_points, **plan_options), float(hold_tolerance),
-                                            bool(feedforward), int(search_substeps), float(anticipation),
-                                            evasion, float(evasion_speed), float(barrier_gain), evasion_pieces))
-
-
 def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
           max_steps: int = 600, seed=0, **options) -> TrackResult:
     """Track the goal of one MovingScenario for ``max_steps`` steps (``max_steps dt``
@@ -256,9 +158,7 @@ def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gai
     opts = make_track_options(method, n_points, **options)
     dtype = moving.scene.q0.dtype
     g = strong_gains(check_gains(gains, dtype, moving.n_segments), dtype)
-    T = check_engine_sizes(max_steps)[0]
-    check_rollout_memory(moving, opts, T)
-    r = track_program(opts, T, False)(moving, g, prng_key(seed))
+    r = rollout_jit(moving, g, opts, max_steps, seed)
     return result_from_track(r, moving, float(g.dt))
 
 
@@ -308,8 +208,8 @@ def track_batch(movings: MovingScenario, method: str = "curve", n_points: int = 
     opts = make_track_options(method, n_points, **options)
     dtype = movings.scene.q0.dtype
     g = strong_gains(check_gains(gains, dtype, movings.n_segments), dtype)
-    r = run_batch(movings, g, opts, max_steps, seed, chunk=chunk, progress=progress, lanes=lanes, devices=1,
-                  label="track_batch")
+    r = rollout_batch.in_chunks(movings, g, opts, max_steps, seed, chunk=chunk, progress=progress, lanes=lanes,
+                                devices=1, label="track_batch")
     return jax.device_get(r)
 
 

@@ -3,8 +3,10 @@
 (the arm at a few iterations, the paper's Figs. 3-5, with a top view and the clearance),
 :mod:`.tracking` (a run among moving obstacles), :mod:`.animation` (GIFs of both),
 :mod:`.clouds` (a point cloud with its fitted curves), :mod:`.benchmark` (collision rate against
-cost per step) and :mod:`.scene` (what they share)."""
+cost per step), :mod:`.actuators` (a timed trajectory's actuator lengths, speeds and
+accelerations against time, with their limits) and :mod:`.scene` (what they share)."""
 
+from .actuators import plot_actuators
 from .animation import animate, animate_tracking
 from .benchmark import plot_benchmark
 from .clouds import plot_cloud_fit
@@ -21,4 +23,5 @@ __all__ = [
     "animate_tracking",
     "plot_cloud_fit",
     "plot_benchmark",
+    "plot_actuators",
 ]

@@ -10,12 +10,11 @@ import json
 import math
 import os
 import re
-import tempfile
 
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.files import publish
+from ..base.files import write_text
 from ..base.memory import check_memory
 from ..base.validation import check_scale
 from ..geometry.curves import PolynomialCurve, line_segment
@@ -458,27 +457,4 @@ def write_json_file(path, data: dict, overwrite: bool = False) -> None:
     same directory, then a rename) or not at all; an existing file is replaced
     only with ``overwrite=True`` (ValueError otherwise). A path that cannot be written
     (a missing folder, a directory, no permission) is a ValueError naming ``path``."""
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    if os.path.isdir(path):
-        raise ValueError(f"cannot write {path}: it is a directory")
-    if not os.path.isdir(folder):
-        raise ValueError(f"cannot write {path}: the folder {folder} does not exist")
-    if os.path.exists(path) and not overwrite:
-        raise ValueError(f"{path} exists; pass overwrite=True to replace it")
-    text = json.dumps(data, indent=2)
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=".softplan-", suffix=".json", dir=folder)
-    except OSError as err:
-        raise ValueError(f"cannot write {path}: {err.strerror or err}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text + "\n")
-        publish(tmp, path)
-    except BaseException as err:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        if isinstance(err, OSError):
-            raise ValueError(f"cannot write {path}: {err.strerror or err}") from None
-        raise
-
+    write_text(path, json.dumps(data, indent=2) + "\n", overwrite, ".json")

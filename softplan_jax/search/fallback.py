@@ -46,12 +46,16 @@ from ..geometry.clearance import contact_tolerance
 from ..geometry.closest import DEFAULT_OPTIONS
 from ..geometry.kinematics import tip_position
 from ..planning.batching import pad_batch
-from ..planning.planner import PlanResult, make_options, plan, plan_batch
+from ..planning.options import make_options
+from ..planning.planner import PlanResult, plan, plan_batch
 from ..scenarios import Scenario, stack_scenarios
 from .reach import ReachOptions, check_reach_options, scene_of, unreachable_proof
 from .tree import reach_and_search_batch
 
 __all__ = ["plan_fallback", "rescue", "rescue_batch"]
+
+# The local planner's endings the global fallback rescues (the others stand: reached, collided, ...).
+RESCUED = (Status.STALLED, Status.MAX_STEPS)
 
 
 @functools.cache
@@ -137,7 +141,7 @@ def rescue(scenarios: Scenario, results: list, options, *, reach: ReachOptions =
     dtype = batch.q0.dtype
     contact = contact_tolerance(options, dtype)
     solver = options.solver if options.method == "curve" else DEFAULT_OPTIONS
-    todo = [b for b in range(len(results)) if results[b].status in ("stalled", "max_steps")]
+    todo = [b for b in range(len(results)) if Status.from_label(results[b].status) in RESCUED]
     if not todo:
         return results
     _reach_and_search(batch, results, todo, reach, solver, contact, options.goal_tolerance, seed, chunk, progress)
@@ -261,7 +265,7 @@ def _with_path(local: PlanResult, q: np.ndarray, k_root: int, scenario: Scenario
         iterations=q.shape[0] - 1,
         q=q,
         tip=tips,
-        status=status_name(Status.REACHED if reached else Status(int(_status_code(local.status)))),
+        status=status_name(Status.REACHED if reached else Status.from_label(local.status)),
         clearance=clearance,
         final_error=err,
         min_clearance=clear,
@@ -270,8 +274,3 @@ def _with_path(local: PlanResult, q: np.ndarray, k_root: int, scenario: Scenario
         global_start=k_root,
     )
 
-
-def _status_code(name: str) -> int:
-    from ..base.status import STATUS_NAMES
-
-    return {v: k for k, v in STATUS_NAMES.items()}[name]

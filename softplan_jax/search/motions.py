@@ -17,6 +17,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ..geometry.clearance import safety_floor
 from ..geometry.closest import SolverOptions
 from ..geometry.kinematics import motion_bound
 from ..planning.step import safe_scale
@@ -55,7 +56,7 @@ def substep(q_a, dq, q_e, t, scenario: Scenario, options: ReachOptions, solver: 
 def advance_fraction(q, q_e, t, c, ok, options: ReachOptions, contact: float, cap=None):
     """The rest of :func:`substep` once the exact clearances ``c`` at ``q`` (``ok``: every
     solve converged) are known: ``(t_new, good)`` (for a caller that solves at q itself)."""
-    alpha = safe_scale(q, q_e, c, 2.0 * contact, options.safe_fraction, cap=cap)[0]
+    alpha = safe_scale(q, q_e, c, safety_floor(contact), options.safe_fraction, cap=cap)[0]
     good = ok & jnp.isfinite(alpha) & (alpha > 0)
     alpha = jnp.where(good, alpha, 0.0)
     return jnp.where(alpha >= 1.0, 1.0, t + alpha * (1.0 - t)).astype(q.dtype), good

@@ -46,7 +46,7 @@ from ..base.compilation_cache import package_jit
 from ..base.numerics import damped_pinv, safe_norm, solve_small
 from ..geometry.closest import DEFAULT_OPTIONS, SolverOptions
 from ..geometry.kinematics import points_jacobian, tip_position
-from ..geometry.obstacles import placeholder_closest, radius_and_mask, true_closest
+from ..geometry.obstacles import clearance_of, placeholder_closest, radius_and_mask, true_closest
 from ..planning.batching import lanes_map
 from ..scenarios import Scenario
 from ..scenarios.scenario import unreachable_reason
@@ -206,8 +206,8 @@ def clearances(q, scenario: Scenario, solver: SolverOptions = DEFAULT_OPTIONS):
     """Exact clearance of every obstacle slot (+inf: padding), the closest pairs, and
     whether every real slot's solve converged."""
     truth = true_closest(q, scenario, solver)
-    radius, mask = radius_and_mask(scenario)
-    c = jnp.where(mask, truth.distance - scenario.arm_radius - radius, jnp.inf)
+    _, mask = radius_and_mask(scenario)
+    c = clearance_of(truth, scenario)
     ok = jnp.all(truth.converged | ~mask) & jnp.all(~jnp.isnan(c))
     return c, truth, ok
 

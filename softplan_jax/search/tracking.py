@@ -37,10 +37,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.status import STATUS_NAMES, Status, status_name
+from ..base.status import Status, status_name
+from ..planning.gains import default_gains
+from ..planning.options import PlanOptions, make_track_options
 from ..planning.records import hold_statistics
-from ..planning.step import PlanOptions, default_gains
-from ..planning.tracking import TrackResult, goal_trajectory, make_track_options, result_from_track, track, track_batch
+from ..planning.tracking import TrackResult, goal_trajectory, result_from_track, track, track_batch
 from ..scenarios import stack_scenarios
 from ..scenarios.motion import GoalPath, MovingScenario, stack_moving_scenarios
 from .fallback import plan_fallback
@@ -48,8 +49,8 @@ from .reach import ReachOptions
 
 __all__ = ["track_fallback", "waypoint_path"]
 
-# The statuses of a run that held on to its horizon (the engine's RUNNING at the end).
-_HORIZON = ("reached", "held", "lost", "max_steps")
+# The statuses of a tracked run that held on to the horizon (the engine's RUNNING at its end).
+_HORIZON = (Status.REACHED, Status.HELD, Status.LOST, Status.MAX_STEPS)
 
 
 def waypoint_path(tips, count: int, speed: float, attach, dtype) -> GoalPath:
@@ -104,7 +105,7 @@ def track_fallback(moving: MovingScenario, method: str = "curve", n_points: int 
     scenes = [moving] if single else [jax.tree_util.tree_map(lambda x, b=b: x[b], moving)
                                       for b in range(moving.scene.q0.shape[0])]
     results = [track(moving, **kw)] if single else _results(track_batch(moving, **kw), scenes, dt)
-    todo = [b for b, r in enumerate(results) if r.status == "max_steps"]
+    todo = [b for b, r in enumerate(results) if Status.from_label(r.status) == Status.MAX_STEPS]
     if moving.goal_path.times.shape[-1] != 1:  # a goal with a path of its own: not guided
         return _out([r._replace(reason="moving_goal_path") if b in todo else r for b, r in enumerate(results)],
                     single)
@@ -168,8 +169,8 @@ def _judge(first: TrackResult, guided: TrackResult, moving: MovingScenario, opts
     """The guided run judged against the TRUE goal g(t): kept where it reaches it."""
     goal = np.asarray(goal_trajectory(moving, guided.time))
     error = np.linalg.norm(goal - guided.tip, axis=1)
-    codes = {name: code for code, name in STATUS_NAMES.items()}
-    engine = int(Status.RUNNING) if guided.status in _HORIZON else codes[guided.status]
+    engine = Status.from_label(guided.status)
+    engine = int(Status.RUNNING if engine in _HORIZON else engine)
     status, reached, reached_step, held_steps, held_to_end = (np.asarray(x) for x in hold_statistics(
         jnp.asarray(error), guided.iterations, engine, opts.plan.goal_tolerance, opts.hold_tolerance))
     if not bool(reached):

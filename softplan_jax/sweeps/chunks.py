@@ -13,15 +13,12 @@ import time
 import jax
 import numpy as np
 
-from ..base.status import STATUS_NAMES, Status
+from ..base.status import STATUS_NAMES
 from ..planning.batching import pad_batch
 from ..planning.planner import plan_batch
 from ..search.fallback import rescue_batch
 
-__all__ = ["ChunkLoop", "STATUS_CODES", "SuiteSource"]
-
-# Status label -> code (a row holds the label, the arrays of ``softplan batch --out`` the code).
-STATUS_CODES = {s.label: int(s) for s in Status}
+__all__ = ["ChunkLoop", "SuiteSource"]
 
 
 class SuiteSource:

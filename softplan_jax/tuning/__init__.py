@@ -9,13 +9,11 @@
   (:data:`RECIPE_SPACE`, :data:`RECIPE_WEIGHTS`, :func:`recipe_start`, :func:`recipe_sigma`);
 * :mod:`.gains_file` -- tuned gains as JSON, with the obstacle model they were
   tuned for;
-* :mod:`.pathwise` -- the earlier pathwise-gradient tuner (``tune_gains``),
-  deprecated: it differentiates through the rollout, whose score is piecewise
-  constant in the gains (reached or not), so its gradient sees none of what the
-  smoothed tuner optimises.
+* :mod:`.pathwise` -- the pathwise-gradient tuner (``tune_gains``), kept as the
+  baseline of the tuning comparisons: it differentiates through the rollout, whose
+  score is piecewise constant in the gains, so its gradient sees little of what
+  the smoothed tuner optimises.
 """
-
-import warnings as _warnings
 
 from . import pathwise as pathwise
 from .gains_file import gains_from_dict, gains_to_dict, load_gains, save_gains
@@ -53,17 +51,3 @@ __all__ = [
     "gains_to_dict",
     "gains_from_dict",
 ]
-
-_PATHWISE = ("tune_gains", "TuningResult", "LossWeights", "rollout_loss", "batch_loss")
-
-
-def __getattr__(name):
-    if name in _PATHWISE:
-        _warnings.warn(
-            f"softplan_jax.tuning.{name} is deprecated (the pathwise-gradient tuner); use "
-            f"softplan_jax.tuning.tune_smoothed, or import softplan_jax.tuning.pathwise.{name} to keep it",
-            DeprecationWarning, stacklevel=2)
-        from . import pathwise
-
-        return getattr(pathwise, name)
-    raise AttributeError(f"module 'softplan_jax.tuning' has no attribute {name!r}")

@@ -64,10 +64,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base.compilation_cache import package_jit, rollout_compiler_options
-from ..planning.planner import make_options
+from ..base.compilation_cache import package_jit
+from ..planning.options import PlanOptions, make_options, rollout_compiler_options
 from ..planning.programs import rollout
-from ..planning.step import PlanOptions
 from ..scenarios import Scenario
 from .space import GainSpace
 

@@ -26,10 +26,10 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ..base.compilation_cache import rollout_compiler_options
-from ..planning.planner import check_gains, make_options
+from ..planning.options import PlanOptions, make_options, rollout_compiler_options
+from ..planning.planner import check_gains
 from ..planning.programs import rollout
-from ..planning.step import Gains, PlanOptions
+from ..planning.step import Gains
 from ..scenarios import Scenario
 
 __all__ = ["LossWeights", "rollout_loss", "batch_loss", "tune_gains", "TuningResult"]
