@@ -266,3 +266,45 @@ def json_float(x):
     """A float for JSON (inf/nan as None)."""
     x = float(x)
     return x if np.isfinite(x) else None
+
+
+def bar_figure(values: dict, path: str, xlabel: str, title: str) -> None:
+    """A horizontal bar chart on a log axis: ``values`` {case: {version: seconds}}, one bar per
+    version and case, written to ``path`` (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(values)
+    versions = list(dict.fromkeys(v for n in names for v in values[n]))
+    fig, ax = plt.subplots(figsize=(8, 0.6 * len(names) + 1.5))
+    y = np.arange(len(names))
+    for i, v in enumerate(versions):
+        ax.barh(y + 0.4 * i, [values[n].get(v, np.nan) for n in names], height=0.38, label=v)
+    ax.set_yticks(y + 0.2 * (len(versions) - 1), names, fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlabel(xlabel)
+    ax.legend()
+    ax.set_title(title)
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def held_out_parser(doc: str, train_steps: str, max_steps: str):
+    """The argument parser of a train-then-hold-out comparison (science.py, tuning.py and its
+    ``--tuners`` part), with their common flags: --quick, the training and held-out seeds and
+    sizes, and the rollout steps of each (``train_steps``, ``max_steps``: their help texts)."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="smoke run (small sizes) into results/quick/")
+    ap.add_argument("--train-seed", type=int, default=0)
+    ap.add_argument("--eval-seed", type=int, default=1)
+    ap.add_argument("--n-train", type=int, default=None, help="training scenes (default 64; quick 8)")
+    ap.add_argument("--n-eval", type=int, default=None, help="held-out scenes (default 1024; quick 16)")
+    ap.add_argument("--train-steps", type=int, default=None, help=train_steps)
+    ap.add_argument("--max-steps", type=int, default=None, help=max_steps)
+    return ap

@@ -1,7 +1,7 @@
 """One accelerator in one call: the single plan's latency against the CPU, the batched
 rollout's throughput against the batch size, and a kernel profile of the batched step.
 
-Made for the short GPU loans of this project (issue 41): everything is prepared
+Made for short loans of a GPU machine: everything is prepared
 here and run in one process (plus one child process for an XLA-flag variant),
 the results written after each part, so a run stopped at its time limit still
 leaves what it measured.
@@ -236,7 +236,7 @@ def part_defaults(args, rep):
 
 
 def part_tracking(args, rep):
-    """Tracking among moving curves with and without the evasive step (issue 38) on the
+    """Tracking among moving curves with and without the evasive step on the
     accelerator: ``track_batch``'s program (default lanes) on ``random_moving_scenarios(1, B)``
     at the benchmark's default motion and at twice the brisk one (sway 0.12 rad, shift 0.08 m,
     1-4 rad/s), ``--tracking-steps`` steps; first call (compile) apart, warm calls interleaved;

@@ -2,9 +2,9 @@
 
 The same planner as :mod:`softplan_jax.planning.planner` (paper eq. 9), written from the
 paper with NumPy and SciPy only (``softplan_jax`` is used to READ scenarios and
-default gains and, in :func:`compare` and :func:`main`, to run the JAX side).
+default gains and, in :func:`jax_trajectory`, to run the JAX side).
 The speed benchmarks (``speed_targets.py``, ``paper_tables.py``,
-``paper_presets.py``) compare the library against it, so it is written to be
+``paper_tables.py --presets``) compare the library against it, so it is written to be
 fast in NumPy's own terms:
 
 * Kinematics, paper §2.1-2.2, vectorised: ``R_i = Rz(phi) Ry(theta)`` (or
@@ -48,36 +48,16 @@ fast in NumPy's own terms:
   Every obstacle's exact closest point is computed at every step, as the JAX
   step does.
 
-Measured step time (tree scenario, default gains, the earlier script
-``numpy_peer_timing.py``, in git history: ``git show
-b850131:benchmarks/numpy_peer_timing.py``; 26 states x 5 interleaved rounds,
-2 shared cores at load ~3): curve method 12.0 ms min /
-19.5 ms median per step (the previous version, with finite-difference
-Jacobians and 21 bounded trf solves per segment-curve pair: 379 / 607 ms);
-10 points 0.34 / 0.34 ms (previously 0.80 / 0.81 ms). Trajectories agree with
-the JAX planner to <= 5e-16 over whole runs, except 1-3e-10 on the curve
-method's stress-gain runs of sim2 and the tree.
-
-Run ``python benchmarks/numpy_baseline.py`` (full, < 10 min) or ``--quick``
-(< 1 min on an idle machine): it checks NumPy-vs-JAX trajectory agreement on
-the paper's scenarios and times both planners on the tree scenario, writing
-``benchmarks/results/numpy_baseline.md`` and ``.json`` (quick:
-``results/quick/``).
-
-Importing this module changes no jax setting: :func:`main` switches float64
-on (``jax_enable_x64``); an in-process caller (the tests, ``paper_tables``)
-does so itself before creating arrays, as both sides must run in float64 to
-agree.
+Its per-step time against the library's is measured by ``speed_targets.py``; its
+agreement with the library over whole runs is tested in ``tests/test_numpy_baseline.py``.
+Importing this module changes no jax setting: a caller (the tests, ``paper_tables``)
+switches float64 on before creating arrays, as both sides must run in float64 to agree.
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
-import json
 import math
-import os
-import platform
 import sys
 import time
 from typing import NamedTuple
@@ -85,13 +65,11 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy
 from scipy import optimize, spatial
 
 import softplan_jax as sp
 from softplan_jax.planning import PAPER_STEP, planner_step
 from softplan_jax.planning.planner import make_options
-from softplan_jax.planning.programs import rollout_jit
 
 __all__ = [
     "NumpyScenario",
@@ -111,14 +89,9 @@ __all__ = [
     "numpy_plan",
     "rotation_convention",
     "jax_trajectory",
-    "compare",
-    "closest_point_check",
-    "speed",
-    "main",
 ]
 
 EPS = np.finfo(np.float64).eps
-RESULTS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 
 
 def _log(msg: str) -> None:
@@ -254,7 +227,7 @@ def _arc_local(L, theta, phi, s):
 
 # The rotation convention of the segment frames: "paper" (R_i = Rz(phi) Ry(theta), paper §2.1, as
 # softplan_jax) or "webster_jones" (R_i = Rz(phi) Ry(theta) Rz(-phi), Webster & Jones 2010, eq. 3).
-# Switch it with ``with rotation_convention("webster_jones"): ...`` (benchmarks/paper_presets.py).
+# Switch it with ``with rotation_convention("webster_jones"): ...`` (benchmarks/paper_tables.py --presets).
 _CONVENTION = ["paper"]
 
 
@@ -940,12 +913,6 @@ def numpy_plan(scenario, method: str = "curve", n_points: int = 10, max_steps: i
 # The JAX side, agreement and timing.
 
 
-def _common_shape(name: str):
-    """A paper scenario padded to the tree's shape (5 curve slots, degree 2):
-    all three then share one compilation per method (padding is masked out)."""
-    return sp.paper_scenario(name, curve_slots=5, degree=2)
-
-
 def jax_trajectory(scenario, method: str, n_points: int, steps: int, gains=None,
                    goal_tolerance: float = 1e-2):
     """The JAX planner stepped with the jitted ``planner_step`` on the host, with the
@@ -982,148 +949,6 @@ def _planner_step_timed_first(q, scenario, gains, opts):
     return out
 
 
-def _diagnose(q, sc_np: NumpyScenario, scenario, method: str, n_points: int, g: dict):
-    """Closest points of both implementations at the same configuration q."""
-    out = []
-    prep = _prepare(sc_np, method, n_points, "kdtree")
-    _, cps_np = numpy_step(q, prep, g)
-    qj = jnp.asarray(q)
-    m = len(sc_np.curves)
-    if method == "curve":
-        curves = sp.PolynomialCurve(scenario.curves.coeffs[:m], scenario.curves.u_range[:m])
-        cj = sp.closest_point(qj, curves)
-    else:
-        curves = [sp.PolynomialCurve(scenario.curves.coeffs[k], scenario.curves.u_range[k]) for k in range(m)]
-        cj = [sp.geometry.closest_point_to_points(qj, sp.geometry.curve_points(c, n_points)) for c in curves]
-    for k in range(m):
-        jk = jax.tree_util.tree_map(lambda x, k=k: np.asarray(x)[k], cj) if method == "curve" else cj[k]
-        out.append(dict(
-            obstacle=k,
-            numpy=dict(distance=cps_np[k].distance, segment=cps_np[k].segment, s=cps_np[k].s, u=cps_np[k].u),
-            jax=dict(distance=float(jk.distance), segment=int(jk.segment), s=float(jk.s), u=float(jk.u)),
-            d_distance=float(jk.distance) - cps_np[k].distance,
-            repulsion_active=bool(cps_np[k].distance - sc_np.arm_radius - sc_np.curves[k][2] < g["d0"]),
-        ))
-    return out
-
-
-def compare(name, method: str = "curve", n_points: int = 10, steps: int = 50, common_shape: bool = True,
-            one_step: bool = True, threshold: float = 1e-6, gains=None) -> dict:
-    """Run the NumPy baseline and the JAX planner and report max |q_numpy - q_jax|.
-
-    Both stop at the goal (|V_e| < 1e-2); the trajectories are compared over
-    the steps both took (at most ``steps``). With ``one_step``, the NumPy step
-    is also applied to ~25 JAX states (and the 5 before the first divergence)
-    and compared with the JAX step from them (the local, non-accumulated
-    disagreement). At the first step where the
-    trajectories differ by more than ``threshold``, the closest points of both
-    implementations at the JAX state before it are recorded.
-
-    Args:
-      name: "sim1", "sim2" or "tree".
-      common_shape: pad the JAX scenario to the tree's shape (shares compiles).
-      gains: Gains or dict for both planners; None = softplan_jax.default_gains.
-
-    Returns:
-      A dict (JSON-ready) of the agreement figures.
-    """
-    return _compare(name, method, n_points, steps, common_shape, one_step, threshold, gains)[0]
-
-
-def _compare(name, method, n_points, steps, common_shape=True, one_step=True, threshold=1e-6, gains=None,
-             one_step_states=25, gains_label="default"):
-    """:func:`compare`, also returning the NumPy run (NumpyPlanResult)."""
-    scenario = _common_shape(name) if common_shape else sp.paper_scenario(name)
-    sc_np = to_numpy_scenario(sp.paper_scenario(name))
-    g = numpy_gains(gains)
-    label = f"{name}/{method}" + (f"/N={n_points}" if method == "points" else "") + f" ({gains_label} gains)"
-    _log(f"compare {label}: NumPy ...")
-    npr = numpy_plan(sc_np, method, n_points, steps, gains=g, progress=label)
-    _log(f"compare {label}: JAX ...")
-    t0 = time.perf_counter()
-    qj = jax_trajectory(scenario, method, n_points, steps, gains=g)
-    t_jax = time.perf_counter() - t0
-    T = min(len(qj), len(npr.q))
-    diff = np.max(np.abs(npr.q[:T] - qj[:T]), axis=(1, 2))
-
-    def upto(k):
-        return float(np.max(diff[: min(k, T - 1) + 1]))
-
-    over = np.nonzero(diff > threshold)[0]
-    out = dict(
-        scenario=name, method=method, n_points=n_points if method == "points" else None,
-        gains=gains_label, gains_values=g, steps_compared=int(T - 1),
-        numpy_iterations=npr.iterations, numpy_reached=npr.reached,
-        jax_iterations=int(len(qj) - 1),
-        jax_reached=bool(np.linalg.norm(np.asarray(sc_np.goal) - tip_position(qj[-1])) < 1e-2),
-        max_diff=float(np.max(diff)), max_diff_10=upto(10), max_diff_50=upto(50), max_diff_100=upto(100),
-        first_step_over_threshold=int(over[0]) if over.size else None, threshold=threshold,
-        diff_per_step=[float(x) for x in diff], jax_host_loop_s=t_jax,
-        repulsion_active_steps=int(np.sum(npr.active[:T - 1] > 0)),
-        first_repulsion_step=int(np.argmax(npr.active > 0)) if np.any(npr.active > 0) else None,
-    )
-    if one_step and T > 1:
-        # The NumPy step from JAX states: about one_step_states states evenly
-        # spread, plus the 5 before the first step over the threshold.
-        prep = _prepare(sc_np, method, n_points, "kdtree")
-        ks = set(np.linspace(0, T - 2, min(one_step_states, T - 1)).round().astype(int).tolist())
-        if over.size:
-            ks |= set(range(max(int(over[0]) - 5, 0), int(over[0])))
-        ks = sorted(ks)
-        local = [float(np.max(np.abs(numpy_step(qj[k], prep, g)[0] - qj[k + 1]))) for k in ks]
-        out["one_step_max_diff"] = max(local)
-        out["one_step_states"] = ks
-        out["one_step_diff"] = local
-        out["one_step_worst_step"] = ks[int(np.argmax(local))]
-    if over.size:
-        k = max(int(over[0]) - 1, 0)
-        out["diagnosis_step"] = k
-        out["diagnosis"] = _diagnose(qj[k], sc_np, scenario, method, n_points, g)
-    _log(f"compare {label}: {T - 1} steps, max |dq| = {out['max_diff']:.2e} "
-         f"(first 50: {out['max_diff_50']:.2e}); "
-         f"one-step max {out.get('one_step_max_diff', float('nan')):.2e}")
-    return out, npr
-
-
-# A configuration found by a random sweep (JAX closest_point vs this module,
-# ~840 random arm/curve pairs of the paper's scenarios) where the JAX solver
-# misses the global minimum: sim2's parabola vs segment 2.
-SIM2_MISS_Q = [
-    [1.416323934973403, -0.0, -2.3679210749741486],
-    [0.7465755300736387, -2.250561706934006, -2.0338396178180433],
-    [0.894110254724968, -2.8018564520055858, 2.264935499046887],
-]
-
-
-def closest_point_check(name: str = "sim2", q=None, n_s: int = 1001, n_u: int = 8001) -> list:
-    """The closest point arm <-> each curve of a paper scenario at q by the JAX
-    solver, this module's least_squares solver and a dense (s, u) grid."""
-    q = np.asarray(SIM2_MISS_Q if q is None else q, np.float64)
-    scenario = sp.paper_scenario(name)
-    m = int(np.sum(np.asarray(scenario.curve_mask)))
-    cj = sp.closest_point(jnp.asarray(q), sp.PolynomialCurve(scenario.curves.coeffs[:m],
-                                                             scenario.curves.u_range[:m]))
-    out = []
-    for k, (coeffs, u_range, _) in enumerate(to_numpy_scenario(scenario).curves):
-        cn = closest_point_curve(q, coeffs, u_range)
-        curve = _Curve(coeffs, u_range)
-        C = curve.sample(n_u)
-        s = np.linspace(0.0, 1.0, n_s)
-        dense = np.inf
-        for i in range(q.shape[0]):
-            A = segment_point(np.broadcast_to(q, (n_s,) + q.shape), i, s)
-            d2 = np.sum(A * A, 1)[:, None] + np.sum(C * C, 1)[None, :] - 2.0 * A @ C.T
-            a, c = np.unravel_index(int(np.argmin(d2)), d2.shape)
-            dense = min(dense, float(np.linalg.norm(A[a] - C[c])))
-        out.append(dict(
-            scenario=name, curve=k, q=q.tolist(), dense_grid=dense,
-            numpy=dict(distance=cn.distance, segment=cn.segment, s=cn.s, u=cn.u),
-            jax=dict(distance=float(cj.distance[k]), segment=int(cj.segment[k]), s=float(cj.s[k]),
-                     u=float(cj.u[k]), converged=bool(cj.converged[k])),
-        ))
-    return out
-
-
 def _time_jax_step(scenario, method, n_points, states, repeats: int):
     """Median wall time of the jitted planner_step over the given states (compile excluded)."""
     opts = make_options(method, n_points, **PAPER_STEP)  # the paper's step, as the NumPy peer
@@ -1139,270 +964,3 @@ def _time_jax_step(scenario, method, n_points, states, repeats: int):
             planner_step(q, scenario, gains, opts).block_until_ready()
             times.append(time.perf_counter() - t0)
     return float(np.median(times)), compile_s, len(times)
-
-
-def _time_rollout(scenario, method, n_points, max_steps: int, repeats: int):
-    opts = make_options(method, n_points, **PAPER_STEP)  # the paper's step, as the NumPy peer
-    gains = sp.default_gains(jnp.float64)
-    t0 = time.perf_counter()
-    r = rollout_jit(scenario, gains, opts, max_steps)
-    jax.block_until_ready(r)
-    compile_s = time.perf_counter() - t0
-    totals = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(rollout_jit(scenario, gains, opts, max_steps))
-        totals.append(time.perf_counter() - t0)
-    total = float(np.median(totals))
-    return total / max_steps, total, compile_s, r
-
-
-def speed(name: str, method: str, n_points: int, max_steps: int, jax_repeats: int = 5,
-          rollout_repeats: int = 3, do_rollout: bool = True,
-          numpy_run: NumpyPlanResult | None = None, numpy_repeats: int = 1) -> dict:
-    """Per-step time of the NumPy baseline vs the JAX planner on one scenario.
-
-    ``numpy_run``: a NumPy run of this scenario/method to reuse (else one of
-    ``max_steps`` steps is made), plus ``numpy_repeats - 1`` further runs whose
-    step times are pooled. The JAX step is timed on the NumPy run's states.
-    """
-    label = f"{name}/{method}" + (f"/N={n_points}" if method == "points" else "")
-    scenario = sp.paper_scenario(name)
-    npr = numpy_run
-    if npr is None:
-        _log(f"speed {label}: NumPy, up to {max_steps} steps ...")
-        npr = numpy_plan(scenario, method, n_points, max_steps, progress=label)
-    step_times = [npr.step_times]
-    for _ in range(numpy_repeats - 1):  # further runs (cheap methods): more samples under machine noise
-        step_times.append(numpy_plan(scenario, method, n_points, max_steps).step_times)
-    step_times = np.concatenate(step_times)
-    states = [jnp.asarray(q) for q in npr.q[:-1]] or [scenario.q0]
-    _log(f"speed {label}: JAX planner_step over {len(states)} states x {jax_repeats} ...")
-    jax_step, step_compile, n_calls = _time_jax_step(scenario, method, n_points, states, jax_repeats)
-    numpy_med = float(np.median(step_times))
-    row = dict(
-        scenario=name, method=method, n_points=n_points if method == "points" else None,
-        numpy_steps=npr.iterations, numpy_reached=npr.reached,
-        numpy_step_median_s=numpy_med, numpy_step_mean_s=float(np.mean(step_times)),
-        numpy_step_p10_s=float(np.percentile(step_times, 10)),
-        numpy_step_p90_s=float(np.percentile(step_times, 90)), numpy_step_samples=int(step_times.size),
-        jax_step_median_s=jax_step, jax_step_calls=n_calls, jax_step_compile_s=step_compile,
-        ratio_step=numpy_med / jax_step,
-    )
-    if do_rollout:
-        _log(f"speed {label}: JAX rollout_jit, {max_steps} steps (compile + {rollout_repeats} runs) ...")
-        per, total, compile_s, r = _time_rollout(scenario, method, n_points, max_steps, rollout_repeats)
-        it = int(r.iterations)
-        T = min(it, npr.iterations) + 1
-        row.update(
-            rollout_max_steps=max_steps, rollout_total_s=total, rollout_per_step_s=per,
-            rollout_compile_s=compile_s, ratio_rollout=numpy_med / per,
-            rollout_iterations=it, rollout_status=sp.planning.status_name(r.status),
-            rollout_vs_numpy_max_diff=float(np.max(np.abs(np.asarray(r.q[:T]) - npr.q[:T]))),
-            rollout_vs_numpy_steps=T - 1,
-        )
-    return row
-
-
-# ----------------------------------------------------------------------------
-# Report.
-
-
-def _machine() -> dict:
-    cpu = platform.processor() or ""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return dict(
-        platform=platform.platform(), cpu=cpu, cpu_count=os.cpu_count(), python=platform.python_version(),
-        numpy=np.__version__, scipy=scipy.__version__, jax=jax.__version__,
-        jax_backend=jax.default_backend(), softplan_jax=sp.__version__, dtype="float64",
-        loadavg_start=list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
-    )
-
-
-def _fmt_s(x):
-    if x is None:
-        return "—"
-    return f"{x * 1e3:.2f} ms" if x >= 1e-3 else f"{x * 1e6:.0f} µs"
-
-
-def _fmt_e(x):
-    return "—" if x is None else f"{x:.1e}"
-
-
-def _fmt_opt(x):
-    return "—" if x is None else str(x)
-
-
-def _markdown(report: dict) -> str:
-    m = report["machine"]
-    lines = [
-        "# NumPy/SciPy peer vs softplan_jax",
-        "",
-        f"- mode: {report['mode']}; generated by `benchmarks/numpy_baseline.py`"
-        + (" --quick" if report["mode"] == "quick" else ""),
-        f"- machine: {m['platform']}, {m['cpu']}, {m['cpu_count']} CPUs; load average "
-        f"{m['loadavg_start']} at start, {m.get('loadavg_end')} at end",
-        f"- python {m['python']}, numpy {m['numpy']}, scipy {m['scipy']}, jax {m['jax']} "
-        f"({m['jax_backend']}), softplan_jax {m['softplan_jax']}; dtype {m['dtype']} on both sides",
-        f"- default gains (softplan_jax.default_gains): {report['gains']['default']}; "
-        f"stress gains: {report['gains']['stress']}",
-        "- NumPy peer (what a competent NumPy user would write): vectorised kinematics, analytic Jacobians, "
-        "damped pinv via numpy.linalg.solve, exact closest points by scipy.optimize.least_squares with "
-        "analytic Jacobians (seeded from a vectorised (s, u) grid: a dogbox descent in the box, then MINPACK "
-        "Levenberg-Marquardt on the stationarity equations, eqs. 13-18), N-point by scipy.spatial.cKDTree. "
-        "Its step time is in the speed table below (tree, default gains).",
-        "",
-        "## Trajectory agreement (max over steps of max |q_numpy - q_jax|)",
-        "",
-        "JAX: the jitted `planner_step` iterated on the host (scenarios padded to the tree's shape; "
-        "padding is masked). Both stop when |V_e| < 1e-2. *one-step*: the NumPy step applied to each "
-        "JAX state vs the JAX step from that state (local error, no accumulation).",
-        "",
-        "| scenario | method | N | gains | steps | repulsion active (from step) | first 10 | first 50 | all "
-        "| one-step | first step > 1e-6 | NumPy its (reached) | JAX its (reached) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for c in report["agreement"]:
-        lines.append(
-            f"| {c['scenario']} | {c['method']} | {c['n_points'] or '—'} | {c['gains']} "
-            f"| {c['steps_compared']} "
-            f"| {c['repulsion_active_steps']} ({_fmt_opt(c['first_repulsion_step'])}) "
-            f"| {c['max_diff_10']:.1e} | {c['max_diff_50']:.1e} | {c['max_diff']:.1e} "
-            f"| {_fmt_e(c.get('one_step_max_diff'))} | {_fmt_opt(c['first_step_over_threshold'])} "
-            f"| {c['numpy_iterations']} ({'yes' if c['numpy_reached'] else 'no'}) "
-            f"| {c['jax_iterations']} ({'yes' if c['jax_reached'] else 'no'}) |"
-        )
-    lines += [
-        "",
-        "## Per-step time, tree scenario",
-        "",
-        "NumPy: median wall time of one planner step over the NumPy run. JAX step: the jitted "
-        "`planner_step(q, scenario, gains, options)` on the same states, after warm-up, "
-        "`block_until_ready`, median over all calls (host dispatch included). JAX rollout: "
-        "`rollout_jit` total / max_steps (compile excluded; the scan also computes the true clearance "
-        "and the between-step collision check every step). Compile times are reported separately.",
-        "",
-        "| method | N | NumPy steps | NumPy / step | JAX step | ratio | JAX rollout / step | ratio "
-        "| step compile | rollout compile | rollout its (status) | max |dq| rollout vs NumPy |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in report["speed"]:
-        if "rollout_per_step_s" in r:
-            ro_ratio = f"{r['ratio_rollout']:.3g}x"
-            ro_compile = f"{r['rollout_compile_s']:.1f} s"
-            ro_its = f"{r['rollout_iterations']} ({r['rollout_status']})"
-            ro_diff = f"{r['rollout_vs_numpy_max_diff']:.1e} over {r['rollout_vs_numpy_steps']}"
-        else:
-            ro_ratio = ro_compile = ro_its = ro_diff = "—"
-        lines.append(
-            f"| {r['method']} | {r['n_points'] or '—'} | {r['numpy_steps']} "
-            f"| {_fmt_s(r['numpy_step_median_s'])} "
-            f"| {_fmt_s(r['jax_step_median_s'])} | {r['ratio_step']:.3g}x "
-            f"| {_fmt_s(r.get('rollout_per_step_s'))} | {ro_ratio} "
-            f"| {r['jax_step_compile_s']:.1f} s | {ro_compile} | {ro_its} | {ro_diff} |"
-        )
-    diags = [c for c in report["agreement"] if "diagnosis" in c]
-    if diags:
-        lines += ["", "## Closest points where trajectories first part (> 1e-6)", ""]
-        for c in diags:
-            label = f"{c['scenario']}/{c['method']}" + (f"/N={c['n_points']}" if c["n_points"] else "")
-            lines.append(f"- {label} ({c['gains']} gains), at step {c['diagnosis_step']}:")
-            for d in c["diagnosis"]:
-                lines.append(
-                    f"  - obstacle {d['obstacle']}: NumPy d={d['numpy']['distance']:.9f} "
-                    f"seg {d['numpy']['segment']} s={d['numpy']['s']:.6f} u={d['numpy']['u']:.6f}; "
-                    f"JAX d={d['jax']['distance']:.9f} "
-                    f"seg {d['jax']['segment']} s={d['jax']['s']:.6f} u={d['jax']['u']:.6f}; "
-                    f"d_JAX - d_NumPy = {d['d_distance']:.2e}"
-                )
-    if report.get("closest_point_check"):
-        lines += ["", "## Closest point at a configuration where an earlier JAX solver missed (sim2)", "",
-                  "A regression check: this configuration was found by a random sweep of an earlier version "
-                  "of JAX `closest_point` against this module (that version missed the minimum here); "
-                  "dense grid: 1001 x 8001 (s, u) per segment.", ""]
-        for c in report["closest_point_check"]:
-            j, n = c["jax"], c["numpy"]
-            lines.append(
-                f"- q = {c['q']}, curve {c['curve']}: dense grid d = {c['dense_grid']:.6f}; "
-                f"NumPy d = {n['distance']:.6f} (seg {n['segment']}, s = {n['s']:.4f}, u = {n['u']:.4f}); "
-                f"JAX d = {j['distance']:.6f} (seg {j['segment']}, s = {j['s']:.4f}, u = {j['u']:.4f}, "
-                f"converged = {j['converged']}); JAX - NumPy = {j['distance'] - n['distance']:.2e}"
-            )
-    if report.get("notes"):
-        lines += ["", "## Notes", ""] + [f"- {n}" for n in report["notes"]]
-    return "\n".join(lines) + "\n"
-
-
-def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="few steps, no rollout timing, N=10 only (< 1 min)")
-    ap.add_argument("--out", default=None, help="output path prefix (.md and .json are appended; default "
-                    "benchmarks/results/numpy_baseline, quick: results/quick/numpy_baseline)")
-    args = ap.parse_args(argv)
-    jax.config.update("jax_enable_x64", True)  # both planners in float64
-    quick = args.quick
-    if args.out is None:
-        args.out = os.path.join(RESULTS_DIR, "quick" if quick else "", "numpy_baseline")
-    t_start = time.perf_counter()
-    report = dict(mode="quick" if quick else "full", machine=_machine(), agreement=[], speed=[], notes=[],
-                  gains=dict(default=numpy_gains(), stress=stress_gains()))
-    max_steps = 10 if quick else 125
-    runs = {}
-    for name in ("sim1", "sim2", "tree"):
-        for method in ("curve", "points"):
-            row, runs[name, method, 10] = _compare(name, method, 10, max_steps, one_step=not quick,
-                                                   one_step_states=10)
-            report["agreement"].append(row)
-    # Stress gains, 60 steps (quick: the cheap points method only).
-    for name in ("sim1", "sim2", "tree"):
-        for method in ("points",) if quick else ("curve", "points"):
-            row, _ = _compare(name, method, 10, 60, gains=stress_gains(), gains_label="stress",
-                              one_step_states=8)
-            report["agreement"].append(row)
-    cases = [("curve", 10), ("points", 10)] + ([] if quick else [("points", 50), ("points", 100)])
-    for method, N in cases:
-        report["speed"].append(speed("tree", method, N, max_steps, 3 if quick else 5, 5, do_rollout=not quick,
-                                     numpy_run=runs.get(("tree", method, N)),
-                                     numpy_repeats=1 if quick or method == "curve" else 5))
-    if not quick:
-        _log("closest-point check at the sim2 configuration where an earlier JAX solver missed ...")
-        report["closest_point_check"] = closest_point_check()
-    report["notes"] += [
-        "With the default gains the arm is within the repulsion's range (clearance < d0) on only a few "
-        "steps of each paper scenario (column 'repulsion active'), so those rows mainly test kinematics, "
-        "Jacobians, pseudo-inverse and attraction; the stress-gain rows (d0 = 0.25) exercise the closest "
-        "points and the repulsion on most steps.",
-        "Timings are wall-clock on the machine in the header, which may be shared (see the load average); "
-        "ratios move by ~2x with load. The NumPy curve method's cost is its ~30-40 scipy least_squares "
-        "solves per tree step (5 curves x 3 segments, seeded from one vectorised grid per curve).",
-        "The JAX rollout also solves the exact true clearance to every obstacle at every step (for the "
-        "points method too) and checks the motion between steps, so its per-step time exceeds "
-        "planner_step's, most visibly for the points method.",
-    ]
-    if quick:
-        report["notes"].append(
-            "quick mode: default gains 10 steps per run (the repulsion is not yet active), stress "
-            "gains for the points method only, no rollout timing, N = 10 only; run without --quick "
-            "for the full table."
-        )
-    report["machine"]["loadavg_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
-    report["wall_time_s"] = time.perf_counter() - t_start
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out + ".json", "w", encoding="utf-8") as fh:
-        json.dump(report, fh, indent=1)
-    with open(args.out + ".md", "w", encoding="utf-8") as fh:
-        fh.write(_markdown(report))
-    _log(f"wrote {args.out}.md and .json in {report['wall_time_s']:.0f} s")
-    print(_markdown(report))
-    return report
-
-
-if __name__ == "__main__":
-    main()

@@ -1,5 +1,8 @@
-"""The paper's Tables 2-4 side by side with ours: the curve method vs 1, 10, 50
-and 100 obstacle points on the paper's three scenarios (sim1, sim2, tree).
+"""Does the library reproduce the paper's Tables 2-4? The curve method vs 1, 10, 50 and 100
+obstacle points on the paper's three scenarios (sim1, sim2, tree), side by side with the
+paper's figures; ``--presets`` runs the second part instead (``_paper_presets.py``: the
+paper's gain preset, the library's defaults, and the independent NumPy port under both R_i
+conventions; ``results/paper_presets``).
 
 For every scenario and obstacle model:
 
@@ -372,7 +375,7 @@ def differences(report: dict) -> list[str]:
             f"{report['gains']['d0']} of an obstacle and our paths pass it at about that distance, so a "
             "coarse point model still keeps the arm off the curve here. The paper's collision finding is "
             "therefore not reproduced on these three scenes; the batched sweep over random scenes with "
-            "obstacles across the path (batch_sweep.py) is where the N-point models' collisions show."
+            "obstacles across the path (safe_step.py) is where the N-point models' collisions show."
         )
     curve_rows = {r["scenario"]: r for r in rows if r["method"] == "curve"}
     ratios = []
@@ -416,7 +419,7 @@ def differences(report: dict) -> list[str]:
             "against the arm's 30 samples, plus per-call overhead). In JAX each model is one fused XLA "
             "program: N x 30 distances are cheap, while the exact solver does fixed work every step (a grid "
             "of starts, multi-start Newton for the interior, boundary and endpoint cases of every segment "
-            "and curve), so the break-even N is far higher than in MATLAB; see batch_sweep for N up to 200 "
+            "and curve), so the break-even N is far higher than in MATLAB; see science.py for N up to 100 "
             "over many scenarios."
         )
     out += [
@@ -441,7 +444,16 @@ def differences(report: dict) -> list[str]:
 
 
 def main(argv=None) -> dict:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--presets" in argv:  # the second part: the paper's gain preset, and the NumPy port under both R_i
+        import _paper_presets
+
+        argv.remove("--presets")
+        return _paper_presets.main(argv)
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--presets", action="store_true",
+                    help="the second part instead: the paper's 'paper' gain preset, the library's defaults and the "
+                    "NumPy port under both R_i conventions (writes results/paper_presets; see its --help)")
     ap.add_argument(
         "--quick",
         action="store_true",

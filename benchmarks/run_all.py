@@ -3,9 +3,9 @@ other, each in its own process (so that each sets jax's precision and devices it
 
     python benchmarks/run_all.py                       # everything, as in benchmarks/README.md (hours)
     python benchmarks/run_all.py --quick               # every script's --quick, into benchmarks/results/quick/
-    python benchmarks/run_all.py --only closest,moving
-    python benchmarks/run_all.py --skip devices,throughput --sweep-n 256
-    python benchmarks/run_all.py --only engine --with "engine:--base /tmp/previous/softplan_jax"
+    python benchmarks/run_all.py --only closest,evasion
+    python benchmarks/run_all.py --skip gpu,throughput
+    python benchmarks/run_all.py --only ab --with "ab:--base /tmp/previous/softplan_jax"
 
 A script that fails does not stop the others; the exit code is non-zero if any
 failed. At the end, the wall time of every script (compile included) is printed
@@ -28,43 +28,33 @@ RESULTS = os.path.join(HERE, "results")
 _HELD_OUT = ["--seed", "1", "--n", "1000", "--chunk", "64", "--max-steps", "600"]
 
 # Every script, in the order run_all runs them (the quick ones first), with its full runs: a list
-# of argument lists (one process each). Its quick run is always `NAME.py --quick`.
+# of argument lists (one process each). Its quick runs: QUICK's, else `NAME.py --quick`.
 SCRIPTS = {
     "closest": [[]],
-    "numpy_baseline": [[]],
-    "paper_tables": [[]],
-    "paper_presets": [[]],
+    "paper_tables": [[], ["--presets"]],
     "speed_targets": [[]],
-    "warm_start": [[]],
-    "batch_sweep": [[]],
     "safe_step": [
         _HELD_OUT + ["--variants", "default", "--methods", "curve,10,50"],
         _HELD_OUT + ["--variants", "default", "--float32"],
         _HELD_OUT + ["--variants", "plain,safe", "--out", os.path.join(RESULTS, "safe_step_float64_seed1_n1000_before")],
     ],
     "science": [[]],
-    "tuning": [[]],
-    "tuners": [[]],
+    "tuning": [[], ["--tuners"]],
     "reach": [[]],
-    "moving": [[]],
     "evasion": [[]],
     "timing": [[]],
-    "engine": [[]],
-    "step_profile": [[]],
-    "fallback_chunk": [[]],
     "throughput": [[]],
-    "devices": [[]],
+    # this version alone; against another: --with "ab:--base OTHER/softplan_jax" (its docstring)
+    "ab": [[]],
     "baselines": [["save", "--fallback"]],
-    "sweep_scale": [[]],
-    "compile_by_degree": [[]],
-    "fallback_compile": [[]],
-    "plan_loop": [[]],
-    "package_programs": [[]],
+    "sweep_scale": [["--only", "sweep"], ["--only", "batch", "--out", os.path.join(RESULTS, "sweep_scale_batch")]],
     # made for one GPU (its docstring); here the single plan and plan_batch's defaults on this machine
     "gpu": [["--parts", "plan,defaults", "--out", os.path.join(RESULTS, "gpu_this_machine")]],
-    # this version alone; against another: --against PATH (its docstring)
-    "suite_speed": [[]],
 }
+
+# Scripts with more than one part: each part's quick run.
+QUICK = {"paper_tables": [["--quick"], ["--presets", "--quick"]], "tuning": [["--quick"], ["--tuners", "--quick"]],
+         "sweep_scale": [["--quick"]]}
 
 
 def _names(text: str, ap) -> list:
@@ -81,11 +71,8 @@ def plan_runs(args) -> list:
     for name, full in SCRIPTS.items():
         if (args.only and name not in args.only) or name in args.skip:
             continue
-        for argv in [["--quick"]] if args.quick else full:
-            argv = list(argv)
-            if name == "batch_sweep" and args.sweep_n and not args.quick:
-                argv += ["--n", str(args.sweep_n)]
-            runs.append((name, argv + args.extra.get(name, [])))
+        for argv in QUICK.get(name, [["--quick"]]) if args.quick else full:
+            runs.append((name, list(argv) + args.extra.get(name, [])))
     return runs
 
 
@@ -94,8 +81,6 @@ def parse_args(argv=None):
     ap.add_argument("--quick", action="store_true", help="every script's --quick, into results/quick/")
     ap.add_argument("--only", default="", help=f"comma list of scripts to run (default all: {', '.join(SCRIPTS)})")
     ap.add_argument("--skip", default="", help="comma list of scripts to skip")
-    ap.add_argument("--sweep-n", type=int, default=None,
-                    help="scenarios of batch_sweep.py's full run (its default, 10,000, takes hours on 2 CPUs)")
     ap.add_argument("--with", dest="extra_args", action="append", default=[], metavar="NAME:ARGS",
                     help="further arguments for one script's runs, e.g. 'engine:--base /tmp/prev/softplan_jax'")
     ap.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")

@@ -63,7 +63,6 @@ rollout counts are both in the report.
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -82,14 +81,10 @@ SETTING_NAMES = {"default": "default gains", "grid": "grid-search gains", "grad"
 
 
 def parse_args(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="smoke run (small sizes) into results/quick/")
-    ap.add_argument("--train-seed", type=int, default=0)
-    ap.add_argument("--eval-seed", type=int, default=1)
-    ap.add_argument("--n-train", type=int, default=None, help="training scenes (default 64; quick 8)")
-    ap.add_argument("--n-eval", type=int, default=None, help="held-out scenes (default 1024; quick 16)")
-    ap.add_argument("--train-steps", type=int, default=None, help="rollout steps on the training seed (default 100)")
-    ap.add_argument("--max-steps", type=int, default=None, help="rollout steps on the held-out seed (default 150)")
+    from _common import held_out_parser
+
+    ap = held_out_parser(__doc__, "rollout steps on the training seed (default 100)",
+                         "rollout steps on the held-out seed (default 150)")
     ap.add_argument("--methods", default=None, help="comma list of curve and point counts N (default "
                     "curve,1,10,50,100; quick curve,10)")
     ap.add_argument("--grid-d0", default=None, help="default 0.07,0.1,0.15,0.2,0.3,0.4 (quick 0.07,0.3)")

@@ -1,10 +1,13 @@
-"""Gradient tuning against grid, random and CMA-ES search at equal budgets, on
-held-out scenes.
+"""Does the gradient tuner beat the other tuners at equal budgets, on held-out scenes? Two parts:
+gradient tuning of constant gains against grid, random and CMA-ES search (this module), and
+``--tuners``: the recipe's gain function against Optuna's TPE and CMA-ES over several tuner
+seeds (``_tuners.py``, its own options and report, ``results/tuners``).
 
-One command regenerates the whole comparison, in one process (progress on stderr)::
+One command regenerates each part, in one process (progress on stderr)::
 
     python benchmarks/tuning.py            # train seed 0 (64 scenes), held-out seed 1 (1,024 scenes)
     python benchmarks/tuning.py --quick    # smoke run, written to benchmarks/results/quick/
+    python benchmarks/tuning.py --tuners [--quick]
 
 Every rollout is the library's default planner (safe step, escapes, collision
 checks in the scan). Per obstacle model (curve, N = 10, N = 50):
@@ -46,9 +49,9 @@ checks in the scan). Per obstacle model (curve, N = 10, N = 50):
 
 The tuners' settings (start, optimiser, step size, pairs, averaging) were
 chosen on a validation seed (``random_scenarios(2, 256)``), never on the
-held-out one; the validation scripts and logs, and the rerun of the gradient
-and random search with tuner seeds 0-4 (``tuning_seeds.py``), are in git
-history (``git show b850131:benchmarks/tuning_validation/README.md``).
+held-out one; the validation scripts and logs (``benchmarks/tuning_validation/``),
+and the rerun of the gradient and random search with tuner seeds 0-4
+(``tuning_seeds.py``), left the folder; git keeps them.
 
 Held-out: every choice (and the default gains) on ``random_scenarios(eval
 seed, n_eval)``, ``--max-steps`` steps; success = reached without collision;
@@ -79,14 +82,10 @@ SETTINGS = ("default", "grid", "random", "cma", "cma-g", "gradient", "gradient+"
 
 
 def parse_args(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="smoke run (small sizes) into results/quick/")
-    ap.add_argument("--train-seed", type=int, default=0)
-    ap.add_argument("--eval-seed", type=int, default=1)
-    ap.add_argument("--n-train", type=int, default=None, help="training scenes (default 64; quick 8)")
-    ap.add_argument("--n-eval", type=int, default=None, help="held-out scenes (default 1024; quick 16)")
-    ap.add_argument("--train-steps", type=int, default=None, help="rollout steps when tuning (default 100)")
-    ap.add_argument("--max-steps", type=int, default=None, help="rollout steps held out (default 150)")
+    from _common import held_out_parser
+
+    ap = held_out_parser(__doc__, "rollout steps when tuning (default 100)",
+                         "rollout steps held out (default 150)")
     ap.add_argument("--methods", default=None, help="comma list of curve and point counts N (default curve,10,50)")
     ap.add_argument("--grid-d0", default="0.07,0.1,0.15,0.2,0.3,0.4")
     ap.add_argument("--grid-dt", default="0.1,0.2,0.4,0.6,0.8")
@@ -223,6 +222,12 @@ def choice_key(reached, collided) -> tuple:
 
 
 def main(argv=None) -> dict:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--tuners" in argv:  # the second part: the recipe against Optuna's TPE and CMA-ES, several tuner seeds
+        import _tuners
+
+        argv.remove("--tuners")
+        return _tuners.main(argv)
     args = parse_args(argv)
     import jax
 
@@ -584,7 +589,7 @@ def figures(results: dict, args, fig_dir: str, sp) -> None:
             if name == "default":
                 g = base
             elif name == "function":
-                g = GainFunction(**{k: jnp.asarray(v, jnp.float64) for k, v in ch.items()})
+                g = GainFunction(**{k: None if v is None else jnp.asarray(v, jnp.float64) for k, v in ch.items()})
             else:
                 g = base._replace(**{k: jnp.asarray(ch[k], jnp.float64) for k in TUNED})
             d = np.linspace(1e-3, float(g.d0) * 1.05, 200)

@@ -1,15 +1,16 @@
 """Keep the notebooks' Colab install source and "Open in Colab" links in step with pyproject.toml.
 
-The repository that the notebooks install softplan_jax from on Colab is the project's
-own metadata, ``[project.urls] Repository`` in pyproject.toml. This script writes it
-into each notebook:
+The location the notebooks install softplan_jax from on Colab is the project's own
+metadata, ``[project.urls] Repository`` in pyproject.toml; today it names none (the
+repository is not published), so the notebooks ask the user for one. This script writes
+it into each notebook:
 
 * the install cell (the first code cell) starts with ``REPO_URL = "<Repository>"``, or
   ``REPO_URL = ""`` when pyproject.toml names none (the cell then stops on Colab with
-  a message saying so, and installs nothing);
+  a message asking for a location pip can install from, and installs nothing);
 * the title cell (the first cell, markdown) has an "Open in Colab" badge linking to
   ``https://colab.research.google.com/github/<owner>/<repo>/blob/main/notebooks/<name>``
-  (a GitHub repository only: Colab opens notebooks from GitHub).
+  when the Repository is on GitHub (Colab opens notebooks from GitHub), and none otherwise.
 
 Only those two lines change; outputs are kept. Needs nbformat (the ``dev`` extra)::
 
@@ -82,7 +83,8 @@ def main(argv=None) -> int:
     repo_url = repository_url()
     if not repo_url:
         print("colab_links: pyproject.toml has no [project.urls] Repository: the notebooks' REPO_URL is left "
-              "empty and they cannot install softplan_jax on Colab", file=sys.stderr)
+              "empty (on Colab their install cell asks for a location to install softplan_jax from) and they "
+              "have no Open in Colab link", file=sys.stderr)
     stale = []
     for name in NOTEBOOKS:
         path = HERE / name

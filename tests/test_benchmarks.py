@@ -119,78 +119,41 @@ def test_paper_tables_quick(paper_run):
     assert all(os.path.exists(p) for p in report["figures"])
 
 
-@pytest.mark.bench
-def test_batch_sweep_quick(tmp_path):
-    d = tmp_path
-    cmd = [sys.executable, os.path.join(BENCH, "batch_sweep.py"), "--quick", "--out", str(d / "sweep1"), "--figure",
-           str(d / "sweep1.png")]
-    _ok(_run(cmd, devices=1))
-    report = json.loads((d / "sweep1.json").read_text())
-    md = (d / "sweep1.md").read_text()
-    assert report["quick"] is True and report["devices"] == 1
-    assert report["n"] == 30 and report["chunks"] * report["chunk"] - report["padding"] == 30
-    assert [r["label"] for r in report["rows"]] == ["curve", "N=10"]
-    for r in report["rows"]:
-        rates = [r[k] for k in ("success_rate", "collision_rate", "stalled_rate", "max_steps_rate", "nonfinite_rate")]
-        assert all(0.0 <= x <= 1.0 for x in rates) and abs(sum(rates) - 1.0) < 1e-9, r
-        assert r["plan_per_step_s"] > 0 and r["check_per_step_s"] > 0 and r["compile_plan_s"] > 0
-    assert report["check_compile_s"] and all(v > 0 for v in report["check_compile_s"].values())
-    for key in ("| method | success | collided", "CPUs", f"jax {jax.__version__}", "float64", "QUICK MODE"):
-        assert key in md, key
-    assert (d / "sweep1.png").stat().st_size > 10_000
-
-
 # ----------------------------------------------------------------------------
 # run_all.py and every script's quick run
 
-HELPERS = {"_common", "lane_schedule", "stats", "run_all"}  # modules of benchmarks/ that are not benchmark scripts
+# Modules of benchmarks/ that are not benchmark scripts: the runner, shared helpers, the NumPy peer, and
+# the parts of a script (named with a leading underscore).
+HELPERS = {"stats", "run_all", "numpy_baseline"}
+MOST_SCRIPTS = 16  # one per question, at most 16 in all (the curation's budget)
 
 
 def _scripts():
-    return sorted(f[:-3] for f in os.listdir(BENCH) if f.endswith(".py") and f[:-3] not in HELPERS)
+    return sorted(f[:-3] for f in os.listdir(BENCH)
+                  if f.endswith(".py") and f[:-3] not in HELPERS and not f.startswith("_"))
 
 
 def test_run_all_runs_every_script_and_each_has_a_quick_mode():
     import run_all
 
-    assert sorted(run_all.SCRIPTS) == _scripts()
+    assert sorted(run_all.SCRIPTS) == _scripts() and len(_scripts()) <= MOST_SCRIPTS
     for name in _scripts():
         with open(os.path.join(BENCH, f"{name}.py"), encoding="utf-8") as fh:
-            assert '"--quick"' in fh.read(), f"{name}.py has no --quick"
+            text = fh.read()
+            assert '"--quick"' in text or "held_out_parser(" in text, f"{name}.py has no --quick"  # _common's has
 
     def planned(*argv):
         return run_all.plan_runs(run_all.parse_args(list(argv)))
 
-    assert planned("--quick") == [(name, ["--quick"]) for name in run_all.SCRIPTS]
-    assert [n for n, _ in planned("--quick", "--only", "moving,closest")] == ["closest", "moving"]
-    assert "devices" not in [n for n, _ in planned("--skip", "devices")]
+    quick = planned("--quick")
+    assert [n for n, _ in quick] == [n for n in run_all.SCRIPTS for _ in run_all.QUICK.get(n, [0])]
+    assert all("--quick" in argv for _, argv in quick)
+    assert ("paper_tables", ["--presets", "--quick"]) in quick and ("tuning", ["--tuners", "--quick"]) in quick
+    assert [n for n, _ in planned("--quick", "--only", "evasion,closest")] == ["closest", "evasion"]
+    assert "gpu" not in [n for n, _ in planned("--skip", "gpu")]
     assert [n for n, _ in planned("--only", "safe_step")] == ["safe_step"] * 3  # the three committed held-out runs
-    assert planned("--only", "batch_sweep", "--sweep-n", "256", "--with", "batch_sweep:--chunk 64") == [
-        ("batch_sweep", ["--n", "256", "--chunk", "64"])]
-
-
-def test_lane_schedule_replays_run_lanes():
-    """lane_schedule.replay, the Python replay of run_lanes' schedule (step_profile.py's
-    prediction), on cases worked by hand. (Imported here: it imports nothing of the
-    package; a benchmark script imports _common, which turns the compilation cache off.)"""
-    import importlib
-
-    import lane_schedule
-
-    from softplan_jax.base.compilation_cache import compilation_cache_dir
-
-    before = compilation_cache_dir()
-    importlib.reload(lane_schedule)
-    assert compilation_cache_dir() == before  # importing it leaves this process's cache alone
-
-    # 2 lanes, scenes of 3, 1 and 2 steps: scene 1 ends at loop step 1, its lane takes scene 2;
-    # scenes 0 and 2 end at loop step 3.
-    assert lane_schedule.replay([3, 1, 2], lanes=2, quantum=100, chunk=1) == 3
-    assert lane_schedule.replay([3, 1, 2], lanes=2, quantum=100, chunk=8) == 8  # the loop ends at a chunk's end
-    # One lane, quantum 1: the scenes take turns, one step each; 2 + 2 steps in all.
-    assert lane_schedule.replay([2, 2], lanes=1, quantum=1, chunk=1) == 4
-    # More lanes than scenes: the slowest scene sets the loop.
-    assert lane_schedule.replay([5, 1], lanes=8, quantum=2, chunk=1) == 5
+    assert planned("--only", "ab", "--with", "ab:--base /tmp/x/softplan_jax") == [
+        ("ab", ["--base", "/tmp/x/softplan_jax"])]
 
 
 def test_run_all_rejects_unknown_scripts(capsys):
@@ -203,22 +166,23 @@ def test_run_all_rejects_unknown_scripts(capsys):
     assert "closest.py --quick --candidates default" in capsys.readouterr().err
 
 
-# Scripts whose quick run no other test below runs: `NAME.py --quick --out DIR/NAME` in a subprocess.
-QUICK_ONLY = ["baselines", "closest", "compile_by_degree", "devices", "engine", "evasion", "fallback_chunk",
-              "fallback_compile", "gpu", "numpy_baseline", "package_programs", "paper_presets", "plan_loop",
-              "speed_targets", "step_profile", "suite_speed", "sweep_scale", "throughput", "timing", "tuners",
-              "warm_start"]
+# Quick runs no other test below runs: (report name, script, its arguments before --quick --out DIR/NAME),
+# in a subprocess.
+QUICK_ONLY = [("ab", "ab", []), ("baselines", "baselines", []), ("closest", "closest", []),
+              ("evasion", "evasion", []), ("gpu", "gpu", []), ("paper_presets", "paper_tables", ["--presets"]),
+              ("speed_targets", "speed_targets", []), ("sweep_scale", "sweep_scale", []),
+              ("throughput", "throughput", []), ("timing", "timing", []), ("tuners", "tuning", ["--tuners"])]
 
 
 @pytest.mark.bench
-@pytest.mark.parametrize("name", QUICK_ONLY)
-def test_quick_run_writes_its_report(tmp_path, name):
+@pytest.mark.parametrize("name, script, extra", QUICK_ONLY, ids=[q[0] for q in QUICK_ONLY])
+def test_quick_run_writes_its_report(tmp_path, name, script, extra):
     prefix = tmp_path / name
-    args = ["save", f"{prefix}.npz", "--quick"] if name == "baselines" else ["--quick", "--out", str(prefix)]
-    _ok(_run([sys.executable, os.path.join(BENCH, f"{name}.py"), *args]))
+    args = ["save", f"{prefix}.npz", "--quick"] if name == "baselines" else [*extra, "--quick", "--out", str(prefix)]
+    _ok(_run([sys.executable, os.path.join(BENCH, f"{script}.py"), *args]))
     report = json.loads((tmp_path / f"{name}.json").read_text())
     assert report and (tmp_path / f"{name}.md").read_text().startswith("#")
-    if name in ("engine", "throughput", "fallback_compile", "tuners", "step_profile", "plan_loop", "package_programs"):
+    if name in ("ab", "throughput", "tuners"):
         assert (tmp_path / "figures" / f"{name}.png").stat().st_size > 10_000
     if name == "baselines":
         assert (tmp_path / "baselines.npz").exists() and report["arrays"] > 0
@@ -235,12 +199,11 @@ def baselines_compare(a, b) -> str:
 
 def test_every_script_is_tested_by_a_quick_run():
     """Every script's quick run is run by one of the tests of this file."""
-    own = {"paper_tables": "test_paper_tables_quick", "batch_sweep": "test_batch_sweep_quick",
-           "safe_step": "test_safe_step_quick_run_writes_its_report", "science": "test_science_quick_run",
-           "tuning": "test_tuning_benchmark_quick_run", "reach": "test_reach_benchmark_quick_run",
-           "moving": "test_moving_benchmark_quick_run"}
+    own = {"paper_tables": "test_paper_tables_quick", "safe_step": "test_safe_step_quick_run_writes_its_report",
+           "science": "test_science_quick_run", "tuning": "test_tuning_benchmark_quick_run",
+           "reach": "test_reach_benchmark_quick_run"}
     assert all(callable(globals().get(test)) for test in own.values())
-    assert set(QUICK_ONLY) | set(own) == set(_scripts())
+    assert {script for _, script, _ in QUICK_ONLY} | set(own) == set(_scripts())
 
 
 # ----------------------------------------------------------------------------
@@ -412,30 +375,6 @@ def test_plot_benchmark_rejects_bad_input():
     plt.close(fig)
 
 
-def test_sweep_check_groups_cover_every_scenario_once():
-    """batch_sweep's grouping of rollouts for the (time-cut) collision checks: every
-    scenario exactly once, each group long enough for its longest rollout, and the
-    shortest such length."""
-    import batch_sweep as bs  # benchmarks/ is on sys.path (conftest)
-
-    assert bs.check_lengths(61, 2) == [31, 61]
-    assert bs.check_lengths(201, 4) == [51, 101, 151, 201]
-    assert bs.check_lengths(201, 1) == [201]
-    assert bs.check_lengths(3, 10) == [1, 2, 3]
-    rng = np.random.default_rng(0)
-    its = rng.integers(0, 201, 48)
-    lengths = bs.check_lengths(201, 4)
-    groups = bs.check_groups(its, 8, lengths)
-    idx = np.concatenate([g for g, _ in groups])
-    assert sorted(idx.tolist()) == list(range(48))
-    for g, length in groups:
-        assert g.size == 8 and length in lengths
-        need = its[g].max() + 1
-        assert length >= need and all(L < need for L in lengths if L < length)
-    with pytest.raises(ValueError):
-        bs.check_groups(its[:7], 8, lengths)
-
-
 # ----------------------------------------------------------------------------
 # safe_step.py
 
@@ -584,38 +523,6 @@ def test_reach_benchmark_quick_run(tmp_path):
     assert all(v["identical"] for v in rep["paper"].values())
     assert "95 % interval" in (tmp_path / "reach.md").read_text()
     assert (tmp_path / "figures" / "reach_time.png").exists()
-
-
-# ----------------------------------------------------------------------------
-# moving.py
-
-
-def test_moving_benchmark_rejects_bad_arguments():
-    import moving as moving_bench
-
-    for argv, match in ((["--n", "0"], "--n"), (["--chunk", "0"], "--chunk"), (["--brute", "-1"], "--brute"),
-                        (["--seed", "-1"], "--seed"), (["--max-steps", "0"], "--max-steps")):
-        with pytest.raises(ValueError, match=match):
-            moving_bench.parse_args(argv)
-
-
-@pytest.mark.bench
-def test_moving_benchmark_quick_run(tmp_path):
-    """The whole benchmark at toy sizes: the table, the independent checks, the timing, the figures."""
-    import json
-
-    import moving as moving_bench
-
-    rep = moving_bench.main(["--quick", "--n", "4", "--max-steps", "60", "--brute", "2", "--exact", "2",
-                             "--oracle", "2", "--rounds", "1", "--batch", "2", "--out", str(tmp_path / "moving")])
-    saved = json.loads((tmp_path / "moving.json").read_text())
-    assert saved["n"] == 4 and set(saved["table"]) == {"curve", "10 points", "50 points"}
-    assert sum(saved["table"]["curve"]["counts"].values()) == 4
-    assert rep["table"]["curve"]["counts"]["collided"] == 0 and rep["brute_force"]["contacts"] == 0
-    assert rep["warm_start_exactness"]["misses_gt_1e-9"] == 0 and rep["oracle"]["misses_gt_1e-9"] == 0
-    assert rep["ratio_single_min"] > 0 and rep["ratio_batch_min"] > 0
-    assert "| model | reached and held |" in (tmp_path / "moving.md").read_text()
-    assert (tmp_path / "figures" / "moving_outcomes.png").exists()
 
 
 def test_throughput_rejects_bad_arguments():

@@ -60,6 +60,11 @@ def test_run_sim1_with_plot(tmp_path, capsys):
     assert code == 0, err
     assert png.exists() and png.stat().st_size > 10_000
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "overwrote" not in err
+    png.write_bytes(b"replaced below")  # an existing figure: replaced with --force, and said so
+    code, _, err = run_main(capsys, "run", "sim1", "--max-steps", STEPS, "--plot", png, "--force")
+    assert code == 0, err
+    assert f"softplan: overwrote {png} (--force)" in err and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     for label in ("scenario", "method", "status", "iterations", "reached", "collided",
                   "min true clearance", "final tip error", "compile time", "time per step"):
         assert label in out, f"{label!r} missing from the summary:\n{out}"
@@ -197,13 +202,19 @@ def test_run_out_json_and_npz_round_trip(tmp_path, capsys):
     assert json.loads(path_json.read_text())["q"] == data["q"]
 
 
-def test_scenarios_lists_paper_scenarios(capsys):
+def test_scenarios_lists_paper_and_moving_scenarios(capsys):
     code, out, err = run_main(capsys, "scenarios")
     assert code == 0, err
     for name in ("sim1", "sim2", "tree"):
         assert name in out
+    assert "tree_fruit" in out and "wire_sweep" in out  # the moving presets the README runs, too
     code, out, _ = run_main(capsys, "scenarios", "--json")
-    assert [r["name"] for r in json.loads(out)] == ["sim1", "sim2", "tree"]
+    rows = json.loads(out)
+    assert [r["name"] for r in rows] == ["sim1", "sim2", "tree", "tree_sway", "tree_fruit", "wire_sweep"]
+    assert [r["kind"] for r in rows] == ["paper"] * 3 + ["moving"] * 3
+    assert rows[2]["goal"] == [1.0, 0.7, 1.45] and rows[3]["goal"] == rows[2]["goal"]  # tree_sway: the tree's goal
+    assert [r["goal_moves"] for r in rows[3:]] == [False, True, False]  # the fruit moves with its branch
+    assert [r["obstacles"] for r in rows] == [1, 1, 5, 5, 5, 1]
 
 
 @pytest.mark.parametrize("name", ["sim1", "sim2", "tree"])
@@ -271,6 +282,8 @@ def _bad_cases(tmp: str, scenario_file: str):
         ("gif not .gif", ["run", "sim1", "--gif", j(tmp, "anim.png")]),
         ("gif in missing directory", ["run", "sim1", "--gif", j(tmp, "no", "anim.gif")]),
         ("plot and gif the same", ["run", "sim1", "--plot", j(tmp, "a.gif"), "--gif", j(tmp, "a.gif")]),
+        ("plot existing file", ["run", "sim1", "--plot", j(tmp, "figure.png")]),
+        ("gif existing file", ["run", "sim1", "--gif", j(tmp, "motion.gif")]),
         ("out unknown extension", ["run", "sim1", "--out", j(tmp, "trajectory.txt")]),
         ("out without extension", ["run", "sim1", "--out", j(tmp, "trajectory")]),
         ("out existing file", ["run", "sim1", "--out", scenario_file]),
@@ -317,6 +330,8 @@ def test_bad_input_exits_2(tmp_path, capsys, case_id):
     (tmp_path / "unknown_key.json").write_text(json.dumps({**good, "colour": "red"}), encoding="utf-8")
     scenario_file = tmp_path / "scenario.json"
     scenario_file.write_text(json.dumps(good), encoding="utf-8")
+    (tmp_path / "figure.png").write_bytes(b"a figure of mine")
+    (tmp_path / "motion.gif").write_bytes(b"an animation of mine")
     files = sorted(tmp_path.iterdir())
     contents = {p: p.read_bytes() for p in files}
 
@@ -351,7 +366,7 @@ def test_batch_command(tmp_path, capsys):
     s = json.loads(stdout)
     assert (s["scenarios"], s["devices"], s["chunk"], s["max_steps"]) == (3, 1, 3, 200)
     assert sum(s["status_counts"].values()) == 3 and s["steps_per_s"] > 0 and s["scenes_per_s"] > 0
-    assert "plan_batch: 1/1 chunks, 3/3 scenarios on 1 device" in err
+    assert "batch: 1/1 chunks, 3/3 scenes, reached" in err and "(compile " in err
     saved = np.load(out)
     ref = sp.plan_batch(sp.random_scenarios(3, 3, obstacles=(1, 5), curve_slots=5), max_steps=200, seed=3)
     np.testing.assert_array_equal(saved["status"], np.asarray(ref.status))

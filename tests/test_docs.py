@@ -126,8 +126,15 @@ def test_api_reference_covers_every_public_name():
         assert f"api/{page.name}" in nav, f"docs/api/{page.name} is not in mkdocs.yml's nav"
 
 
-def test_docs_extra_and_project_urls():
-    """`pip install -e ".[docs]"` brings the site's tools; the project names its repository and docs."""
+# Where the repository and the documentation site would be published: not yet, so no page,
+# metadata or notebook may send a reader there.
+UNPUBLISHED = ("softplan-jax.github.io", "github.com/softplan-jax", "colab.research.google.com/github")
+
+
+def test_docs_extra_and_no_link_to_an_unpublished_location():
+    """`pip install -e ".[docs]"` brings the site's tools; pyproject.toml, mkdocs.yml, the README,
+    the docs pages and the notebooks name no repository or site that is not published (the
+    README says how to build the site instead)."""
     import tomllib
 
     with open(ROOT / "pyproject.toml", "rb") as fh:
@@ -135,10 +142,16 @@ def test_docs_extra_and_project_urls():
     docs = " ".join(project["optional-dependencies"]["docs"])
     for tool in ("mkdocs>=", "mkdocs-material>=", "mkdocstrings[python]>=", "mkdocs-jupyter>="):
         assert tool in docs, tool
-    urls = project["urls"]
-    assert urls["Repository"].startswith("https://github.com/") and urls["Documentation"].startswith("https://")
+    assert "urls" not in project, "pyproject.toml names [project.urls]: are they published?"
     mkdocs_yml = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
-    assert f"repo_url: {urls['Repository']}" in mkdocs_yml and f"site_url: {urls['Documentation']}" in mkdocs_yml
+    assert not re.search(r"^(site_url|repo_url):", mkdocs_yml, re.M)
+    files = [ROOT / "README.md", ROOT / "CITATION.cff", *sorted((ROOT / "docs").glob("*.md")),
+             *sorted((ROOT / "notebooks").glob("*.ipynb"))]
+    for path in files:
+        text = path.read_text(encoding="utf-8")
+        for where in UNPUBLISHED:
+            assert where not in text, f"{path.name} links to {where}, which is not published"
+    assert "mkdocs serve" in (ROOT / "README.md").read_text(encoding="utf-8")
 
 
 def test_readme_is_a_front_door():
@@ -221,3 +234,25 @@ def test_docs_scenario_reaches_its_goal_with_the_defaults(tmp_path, capsys):
     assert code == 0, out
     summary = json.loads(out)
     assert summary["status"] == "reached" and not summary["collided"], summary
+
+
+@pytest.mark.slow  # compiles the quick start's rollouts (the curve and N-point plans, the fallback)
+def test_readme_python_block_runs_as_a_script(tmp_path):
+    """The README's Python quick start, copied into a file and run by this interpreter as a
+    new user would (this checkout's package), ends without error and prints its last line."""
+    import subprocess
+    import sys
+
+    from session import subprocess_env
+
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    assert len(blocks) == 1, "expected one Python block in the README"
+    script = tmp_path / "quickstart.py"
+    script.write_text(blocks[0], encoding="utf-8")
+    proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=subprocess_env(), capture_output=True,
+                          text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    status, iterations, clearance, planner = proc.stdout.split()[-4:]
+    assert status in sp.planning.STATUS_NAMES.values() and int(iterations) > 0 and float(clearance) > 0
+    assert planner in ("local", "global")

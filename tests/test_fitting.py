@@ -247,7 +247,15 @@ def test_load_cloud_formats_and_errors(tmp_path):
     (tmp_path / "text.csv").write_text("1,2,3\n4,five,6\n")
     (tmp_path / "nan.xyz").write_text("1 2 3\nnan 2 3\n4 5 6\n")
     np.save(tmp_path / "flat.npy", np.arange(6.0))
-    (tmp_path / "c.ply").write_text("ply\n")
+    (tmp_path / "c.obj").write_text("v 1 2 3\n")
+    (tmp_path / "truncated.ply").write_text("ply\n")
+    (tmp_path / "faces.ply").write_text("ply\nformat ascii 1.0\nelement face 0\nproperty list uchar int vertex_indices\n"
+                                        "end_header\n")
+    (tmp_path / "no_z.pcd").write_text("VERSION 0.7\nFIELDS x y\nSIZE 4 4\nTYPE F F\nCOUNT 1 1\nWIDTH 1\nHEIGHT 1\n"
+                                       "POINTS 1\nDATA ascii\n1 2\n")
+    (tmp_path / "short.pcd").write_text("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 3\nHEIGHT 1\n"
+                                        "POINTS 3\nDATA ascii\n1 2 3\n")
+    (tmp_path / "bad_header.pcd").write_text("VERSION 0.7\nCOLOUR red\n")
     cases = {
         "empty.csv": "empty",
         "wide.xyz": r"shape \(N, 3\)",
@@ -255,12 +263,94 @@ def test_load_cloud_formats_and_errors(tmp_path):
         "text.csv": "line 2: not numbers",
         "nan.xyz": "NaN",
         "flat.npy": r"shape \(N, 3\)",
-        "c.ply": "unknown extension",
+        "c.obj": "unknown extension",
+        "truncated.ply": "not a valid PLY file",
+        "faces.ply": "no 'vertex' element",
+        "no_z.pcd": "no z field",
+        "short.pcd": "holds 1 points, the header says 3",
+        "bad_header.pcd": "line 2: unknown PCD header entry 'COLOUR'",
         "missing.npy": "not found",
     }
     for name, match in cases.items():
         with pytest.raises(ValueError, match=match):
             sp.clouds.load_cloud(tmp_path / name)
+
+
+def test_load_cloud_reads_ply_and_pcd_written_by_other_tools(tmp_path):
+    """PLY written by plyfile (ASCII and binary, with a colour property and a face element
+    beside the vertices) and PCD written by pypcd4 (ascii, binary and binary_compressed, with
+    rgb and intensity fields beside x, y, z): load_cloud gives the points the tools were given.
+    pypcd4 writes a binary_compressed file only when LZF shrinks the data, so the cloud is a
+    trunk sampled on a regular grid (compressible)."""
+    import plyfile  # a core dependency
+    import pypcd4  # the dev extra's PCD writer
+
+    pts, _ = cloud([(quadratic, -1, 1, 300)])
+    vertex = np.zeros(len(pts), dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("red", "u1")])
+    vertex["x"], vertex["y"], vertex["z"] = pts.T
+    face = np.array([([0, 1, 2],)], dtype=[("vertex_indices", "i4", (3,))])
+    for text in (True, False):
+        path = tmp_path / f"scan_{'ascii' if text else 'binary'}.ply"
+        plyfile.PlyData([plyfile.PlyElement.describe(vertex, "vertex"), plyfile.PlyElement.describe(face, "face")],
+                        text=text).write(str(path))
+        np.testing.assert_array_equal(sp.clouds.load_cloud(path), pts)
+
+    z = np.linspace(0.0, 3.0, 2000)
+    trunk = np.stack([np.ones_like(z), np.ones_like(z), z], axis=1).astype(np.float32)
+    fields = ("x", "y", "z", "rgb", "intensity")
+    types = (np.float32, np.float32, np.float32, np.uint32, np.uint8)
+    pc = pypcd4.PointCloud.from_points(np.column_stack([trunk, np.full(2000, 123456), np.full(2000, 7)]), fields,
+                                       types)
+    for encoding in ("ascii", "binary", "binary_compressed"):
+        path = tmp_path / f"scan_{encoding}.pcd"
+        pc.save(str(path), encoding=pypcd4.Encoding(encoding))
+        assert f"DATA {encoding}\n".encode() in path.read_bytes()[:400]
+        got = sp.clouds.load_cloud(path)
+        if encoding == "ascii":  # written as text with 10 decimals
+            np.testing.assert_allclose(got, trunk, rtol=0, atol=1e-9)
+        else:
+            np.testing.assert_array_equal(got, trunk.astype(np.float64))
+
+
+def test_load_cloud_drops_the_empty_pixels_of_an_organized_pcd(tmp_path):
+    """An organized cloud (WIDTH x HEIGHT) marks pixels without a measurement with NaN x, y, z:
+    they are dropped with a warning that counts them; a partly NaN point is still an error.
+    The file is written here byte for byte as the PCL format documents DATA binary."""
+    pts = np.array([[0.1, 0.2, 1.0], [np.nan, np.nan, np.nan], [0.3, 0.1, 1.2], [0.5, 0.0, 1.4]], np.float32)
+    header = ("# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\n"
+              "COUNT 1 1 1\nWIDTH 2\nHEIGHT 2\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 4\nDATA binary\n")
+    path = tmp_path / "organized.pcd"
+    path.write_bytes(header.encode() + pts.astype("<f4").tobytes())
+    with pytest.warns(UserWarning, match="dropped 1 of 4 points"):
+        got = sp.clouds.load_cloud(path)
+    np.testing.assert_array_equal(got, pts[[0, 2, 3]].astype(np.float64))
+    pts[1] = [0.2, np.nan, 1.0]
+    path.write_bytes(header.encode() + pts.astype("<f4").tobytes())
+    with pytest.raises(ValueError, match="NaN"):
+        sp.clouds.load_cloud(path)
+
+
+def test_cli_fit_reads_a_ply_scan(tmp_path, capsys):
+    """``softplan fit scan.ply``: the curves of the cloud that plyfile wrote; an existing --plot
+    is refused without --force, and replaced with it (said on stderr)."""
+    import plyfile
+
+    pts, _ = cloud(CLOUDS["crossing wires"][0])
+    vertex = np.zeros(len(pts), dtype=[("x", "f4"), ("y", "f4"), ("z", "f4")])
+    vertex["x"], vertex["y"], vertex["z"] = pts.T
+    src = tmp_path / "scan.ply"
+    plyfile.PlyData([plyfile.PlyElement.describe(vertex, "vertex")], text=False).write(str(src))
+    fig = tmp_path / "scan.png"
+    fig.write_bytes(b"mine")
+    assert cli_main(["fit", str(src), "--plot", str(fig)]) == 2
+    assert "--plot" in capsys.readouterr().err and fig.read_bytes() == b"mine"
+    assert not (tmp_path / "scan.json").exists()
+    assert cli_main(["fit", str(src), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["points"] == len(pts) and len(summary["curves"]) == 2
+    assert cli_main(["fit", str(src), "--plot", str(fig), "--force"]) == 0
+    err = capsys.readouterr().err
+    assert f"overwrote {fig}" in err and fig.stat().st_size > 10_000
 
 
 # ----------------------------------------------------------------------------

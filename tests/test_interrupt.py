@@ -30,8 +30,8 @@ def _interrupted_run(tmp_path, delay: float, after_output: bool = False):
     p = subprocess.Popen([sys.executable, "-m", "softplan_jax.cli", "run", "sim1", "--out", str(out)], cwd=tmp_path,
                          env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        first = p.stderr.readline()  # "softplan: compiling the planner ..."
-        assert first.startswith("softplan: compiling"), first + p.stderr.read()
+        first = p.stderr.readline()  # "softplan: preparing the planner ..."
+        assert first.startswith("softplan: preparing the planner"), first + p.stderr.read()
         while after_output and not out.exists() and p.poll() is None:
             time.sleep(0.001)
         time.sleep(delay)
@@ -54,6 +54,29 @@ def test_ctrl_c_exits_130_with_one_line_and_no_output(tmp_path, delay):
     assert stdout == ""
     assert not out.exists() and sorted(os.listdir(tmp_path)) == []  # no output, no temporary file
     assert elapsed < 10.0  # ends at once, not after the compilation
+
+
+def test_ctrl_c_in_a_sweep_says_the_same_command_resumes(tmp_path):
+    """``softplan sweep`` interrupted once its folder holds the sweep's header (planning under
+    way): exit 130, "interrupted", then the line that says the same command resumes."""
+    out = tmp_path / "sweep1"
+    p = subprocess.Popen([sys.executable, "-m", "softplan_jax.cli", "sweep", "--n", "6", "--chunk", "3", "--out",
+                          str(out)], cwd=tmp_path, env=subprocess_env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        t0 = time.perf_counter()
+        while not (out / "sweep.json").exists() and p.poll() is None and time.perf_counter() - t0 < 120:
+            time.sleep(0.01)
+        p.send_signal(signal.SIGINT)
+        stdout, stderr = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode == 130, stderr
+    assert stderr.splitlines()[-2:] == [
+        "softplan: interrupted",
+        f"softplan: the same command again resumes the sweep in {out} after its last complete chunk"], stderr
 
 
 @pytest.mark.slow

@@ -1,8 +1,9 @@
 """The notebooks run top to bottom in a fresh Jupyter kernel. Their first cell
-is the title with an "Open in Colab" link; the next is the Colab install
-cell, harmless anywhere else: on Colab it installs
-from the repository that pyproject.toml names (``[project.urls] Repository``,
-written into the notebooks, with the Colab links, by ``notebooks/colab_links.py``).
+is the title; the next is the Colab install cell, harmless anywhere else: on
+Colab it installs from ``REPO_URL``, the repository that pyproject.toml names
+(``[project.urls] Repository``, written into the notebooks, with an "Open in
+Colab" link, by ``notebooks/colab_links.py``), or, since the repository is not
+published and pyproject.toml names none, from the location the user writes there.
 
 The kernel is this interpreter (``sys.executable -m ipykernel_launcher``),
 described by a kernel spec written to a temporary directory, so that a user's
@@ -227,25 +228,30 @@ def test_install_cell_is_harmless_outside_colab(name, tmp_path):
 
 
 def _pyproject_repository():
-    """``[project.urls] Repository`` of pyproject.toml (read here independently of notebooks/colab_links.py)."""
+    """``[project.urls] Repository`` of pyproject.toml, "" when it names none (read here
+    independently of notebooks/colab_links.py)."""
     import tomllib
 
     with open(NOTEBOOK_DIR.parent / "pyproject.toml", "rb") as fh:
-        return tomllib.load(fh)["project"]["urls"]["Repository"]
+        return tomllib.load(fh)["project"].get("urls", {}).get("Repository", "")
 
 
 @pytest.mark.parametrize("name", NOTEBOOKS)
 def test_install_source_and_colab_link_follow_pyproject(name):
-    """REPO_URL is the project's Repository URL, and the title cell links to the notebook on Colab."""
+    """REPO_URL is the project's Repository URL, and the title cell links to the notebook on Colab
+    when that is a GitHub repository; with none (not published), REPO_URL is empty and no link
+    leads to a repository that does not exist."""
     repo = _pyproject_repository()
-    assert repo.startswith("https://github.com/"), repo
     src = _install_cell(name)
     assert src.splitlines()[0].startswith(f'REPO_URL = "{repo}"'), (
-        f"{name}: REPO_URL is not pyproject.toml's Repository {repo}: run python notebooks/colab_links.py")
-    owner_repo = repo.removeprefix("https://github.com/").removesuffix(".git").strip("/")
-    link = f"https://colab.research.google.com/github/{owner_repo}/blob/main/notebooks/{name}"
+        f"{name}: REPO_URL is not pyproject.toml's Repository {repo!r}: run python notebooks/colab_links.py")
     title = _read(name).cells[0]
     assert title.cell_type == "markdown" and title.source.startswith("# "), f"{name}: cell 0 must be the title"
+    if not repo:
+        assert "colab.research.google.com" not in title.source, f"{name}: a Colab link to an unpublished repository"
+        return
+    owner_repo = repo.removeprefix("https://github.com/").removesuffix(".git").strip("/")
+    link = f"https://colab.research.google.com/github/{owner_repo}/blob/main/notebooks/{name}"
     assert f"[![Open In Colab](https://colab.research.google.com/assets/colab-badge.svg)]({link})" in title.source, (
         f"{name}: no Open in Colab link to {link}: run python notebooks/colab_links.py")
 
@@ -260,24 +266,25 @@ def test_colab_links_tool_agrees():
 @pytest.mark.parametrize("name", NOTEBOOKS)
 def test_install_cell_installs_from_repo_url_on_colab(name, tmp_path):
     src = _install_cell(name)
-    # As committed, no edit: pip install of exactly the project's repository, with this interpreter.
+    repo = _pyproject_repository()
+    # As committed, no edit: pip install of exactly the project's repository, with this interpreter;
+    # with none in the metadata (REPO_URL empty, not published), a clear error, nothing installed.
     result = _run_cell(src, "colab", tmp_path / "committed")
-    assert len(result["launched"]) == 1, result
-    cmd = result["launched"][0]
-    assert cmd.startswith(f"{sys.executable} -m pip install"), cmd
-    assert cmd.endswith(f"git+{_pyproject_repository()}"), cmd
-    assert result["error"] and result["error"].startswith("Refused"), result
-    # No repository in the metadata (REPO_URL empty): a clear error, nothing installed.
-    emptied = src.replace(src.splitlines()[0], 'REPO_URL = ""', 1)
-    result = _run_cell(emptied, "colab", tmp_path / "empty")
-    assert result["launched"] == [], result
-    assert result["error"] and "REPO_URL" in result["error"] and "[project.urls]" in result["error"], result
-    # Another URL written in: pip install of exactly that URL.
-    url = "https://example.org/someone/softplan_jax"
-    edited = src.replace(src.splitlines()[0], f'REPO_URL = "{url}"', 1)
-    result = _run_cell(edited, "colab", tmp_path / "edited")
-    assert len(result["launched"]) == 1, result
-    cmd = result["launched"][0]
-    assert cmd.startswith(f"{sys.executable} -m pip install"), cmd
-    assert cmd.endswith(f"git+{url}"), cmd
-    assert result["error"] and result["error"].startswith("Refused"), result
+    if repo:
+        assert len(result["launched"]) == 1, result
+        assert result["launched"][0].endswith(f"git+{repo}"), result
+    else:
+        assert result["launched"] == [], result
+        assert result["error"] and "REPO_URL" in result["error"] and "not published" in result["error"], result
+    # A location written in: pip install of exactly that location (git for a URL, as it is for an upload).
+    for k, (where, installed) in enumerate([("https://example.org/someone/softplan_jax",
+                                             "git+https://example.org/someone/softplan_jax"),
+                                            ("/content/softplan_jax-0.1.0-py3-none-any.whl",
+                                             "/content/softplan_jax-0.1.0-py3-none-any.whl")]):
+        edited = src.replace(src.splitlines()[0], f'REPO_URL = "{where}"', 1)
+        result = _run_cell(edited, "colab", tmp_path / f"edited{k}")
+        assert len(result["launched"]) == 1, result
+        cmd = result["launched"][0]
+        assert cmd.startswith(f"{sys.executable} -m pip install"), cmd
+        assert cmd.endswith(f" {installed}"), cmd
+        assert result["error"] and result["error"].startswith("Refused"), result

@@ -207,8 +207,8 @@ def test_fallback_programs_compile_with_the_package_xla_options(decided):
     exact solves (planning.options.rollout_compiler_options("curve")): no YNN fusions, which
     XLA's defaults put in an exact solve's program (test_compilation_cache's rollout test
     shows it on a plain jit). Checked on the IK, with the shapes the fixture compiled (its
-    program comes from the persistent cache); benchmarks/fallback_compile.py measures what
-    the options buy."""
+    program comes from the persistent cache); an earlier version of
+    benchmarks/fallback_compile.py measured what the options buy (docs/performance.md)."""
     from softplan_jax.base.compilation_cache import package_jit
 
     batch, _ = decided

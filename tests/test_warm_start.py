@@ -87,7 +87,8 @@ def test_certified_answer_is_the_sampled_global_minimum():
     # Near starts: u* off by about what one default planner step moves it (0.01 of a range
     # of 2, i.e. 0.01-0.03 along these curves); the polish then converges in its
     # POLISH_ITERATIONS. Larger offsets are the random starts (which must not be
-    # certified wrongly) and the planner's fallbacks (benchmarks/warm_start.py).
+    # certified wrongly) and the planner's fallbacks (docs/conventions.md, measured by an earlier
+    # version of benchmarks/warm_start.py).
     noise = rng.normal(0.0, 0.01, (qs.shape[0], 3))
     noise[::2] = rng.uniform(-2.0, 2.0, noise[::2].shape)  # every other case: a random start
 

@@ -1,8 +1,10 @@
 """``softplan batch``: plan a seeded suite of random scenarios
-(:func:`~softplan_jax.scenarios.random_scenarios`) with
-:func:`~softplan_jax.planning.planner.plan_batch`, in chunks of one padded shape
-split over the local devices (or over the devices of several processes with
-``--coordinator``), and print the outcome counts and the speed.
+(:func:`~softplan_jax.scenarios.random_scenarios`) chunk by chunk on the sweep's chunk loop
+(:class:`~softplan_jax.sweeps.chunks.ChunkLoop`: each chunk planned by
+:func:`~softplan_jax.planning.planner.plan_batch`, reduced to one summary row per scene and
+dropped, the global fallback per chunk with ``--fallback``), split over the local devices (or
+the devices of several processes with ``--coordinator``), and print the outcome counts and the
+speed.
 """
 
 from __future__ import annotations
@@ -13,20 +15,72 @@ import os
 import sys
 import time
 
-from .common import EXIT_OK, InputError, check_points_args, fmt_gain_values, fmt_seconds, gains_report, resolve_gains
+from .common import (
+    EXIT_OK,
+    InputError,
+    check_points_args,
+    fmt_gain_values,
+    fmt_seconds,
+    gains_report,
+    resolve_gains,
+    return_freed_chunks,
+)
 from .parser import check_distributed_args, check_gains_arg, check_output_path, initialize_distributed
 
 __all__ = ["cmd_batch"]
 
+# The per-scene arrays of --out: (name, dtype; "float": the suite's float dtype).
+_ARRAYS = (("status", "int32"), ("iterations", "int32"), ("min_clearance", "float"), ("final_error", "float"),
+           ("escapes", "int32"), ("reached", "bool"), ("collided", "bool"), ("planner", "<U6"))
+
 
 def cmd_batch(args) -> int:
     """``softplan batch``: plan the random suite and print its summary; the exit code."""
-    if args.n < 1:
-        raise InputError(f"--n must be >= 1, got {args.n}")
-    if args.max_steps < 1:
-        raise InputError(f"--max-steps must be >= 1, got {args.max_steps}")
-    if args.chunk < 1:
-        raise InputError(f"--chunk must be >= 1, got {args.chunk}")
+    distributed = _check_args(args)
+    return_freed_chunks()
+    import jax
+
+    from ..base.compilation_cache import enable_compilation_cache
+
+    if distributed:
+        initialize_distributed(args)
+        args.devices = "global"
+        args.no_progress = args.no_progress or args.process_id != 0
+    enable_compilation_cache()
+    if not args.float32:
+        jax.config.update("jax_enable_x64", True)
+    args.gains_file = check_gains_arg(args.gains)
+    try:
+        setup = _prepare(args)
+        arrays, times = _plan(args, setup)
+    except ValueError as err:
+        raise InputError(str(err)) from None
+    summary = _summary(args, setup, arrays, times, distributed)
+    import numpy as np
+
+    if distributed and args.process_id != 0:  # every process holds the whole result; process 0 reports it
+        jax.distributed.shutdown()
+        return EXIT_OK
+    if args.out is not None:
+        try:
+            np.savez_compressed(args.out, **arrays)
+        except OSError as err:
+            raise InputError(f"cannot write output: {err}") from None
+        summary["out"] = os.path.abspath(args.out)
+    if args.json:
+        clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()}
+        print(json.dumps(clean, indent=2))
+    else:
+        print(_text(summary))
+    return EXIT_OK
+
+
+def _check_args(args) -> bool:
+    """Check the flags (InputError) and set XLA_FLAGS for ``--host-devices``; whether this is a
+    --coordinator run."""
+    for flag, value in (("--n", args.n), ("--max-steps", args.max_steps), ("--chunk", args.chunk)):
+        if value < 1:
+            raise InputError(f"{flag} must be >= 1, got {value}")
     distributed = check_distributed_args(args)
     if distributed and args.fallback:
         raise InputError("--fallback does not combine with --coordinator; use 'softplan sweep --fallback "
@@ -52,139 +106,131 @@ def cmd_batch(args) -> int:
         if os.path.exists(args.out) and not args.force:
             raise InputError(f"--out: {args.out} exists (use --force to replace it)")
         check_output_path(args.out, "--out")
-    import jax
+    return distributed
 
-    from ..base.compilation_cache import enable_compilation_cache
 
-    if distributed:
-        initialize_distributed(args)
-        args.devices = "global"
-        args.no_progress = args.no_progress or args.process_id != 0
-    enable_compilation_cache()
-    if not args.float32:
-        jax.config.update("jax_enable_x64", True)
+def _prepare(args) -> dict:
+    """The suite, its escape keys, the gains and options, the device count and the chunk size."""
     import jax.numpy as jnp
     import numpy as np
 
-    from ..base.status import STATUS_NAMES, Status
-    from ..planning.batching import pad_batch, round_chunk
-    from ..planning.planner import make_options, plan_batch
-    from ..planning.programs import rollout_batch
+    from ..planning.batching import batch_mesh, round_chunk
+    from ..planning.planner import make_options
+    from ..planning.programs import batch_keys
     from ..scenarios import random_scenarios
-    from ..sweeps.store import wilson_interval
 
     dtype = jnp.float32 if args.float32 else jnp.float64
-    args.gains_file = check_gains_arg(args.gains)
-    try:
-        n_dev = (len(jax.local_devices()) if args.devices is None else len(jax.devices())
-                 if args.devices == "global" else int(args.devices))
-        t0 = time.perf_counter()
-        suite = random_scenarios(args.seed, args.n, obstacles=tuple(args.obstacles), curve_slots=args.slots,
-                                 dtype=dtype)
-        generation_time = time.perf_counter() - t0
-        suite, gains, extra, gain_values = resolve_gains(args, suite, args.method, args.n_points or 10)
-        options = make_options(args.method, args.n_points or 10, **extra)
-        size = round_chunk(args.chunk, args.n, max(n_dev, 1))
-        first = pad_batch(jax.tree_util.tree_map(lambda x: x[:size], suite), size)
-        t0 = time.perf_counter()
-        rollout_batch.lower(first, gains, options, args.max_steps, args.seed, devices=args.devices).compile()
-        compile_time = time.perf_counter() - t0
-    except ValueError as err:
-        raise InputError(str(err)) from None
+    mesh = batch_mesh(args.devices)
+    n_dev = 1 if mesh is None else mesh.size
     t0 = time.perf_counter()
-    r = plan_batch(suite, gains=gains, max_steps=args.max_steps, seed=args.seed, chunk=args.chunk,
-                   devices=args.devices, progress=not args.no_progress, **options._asdict())
-    r = jax.tree_util.tree_map(np.asarray, r)
-    run_time = time.perf_counter() - t0
-    out = {k: np.array(getattr(r, k)) for k in ("status", "iterations", "min_clearance", "final_error", "escapes",
-                                                 "reached", "collided")}  # writable copies: the fallback updates
-    out["planner"] = np.where(r.reached, "local", "none").astype("<U6")
-    fallback_time = _fallback(args, suite, r, options, out) if args.fallback else 0.0
-    status = out["status"]
+    suite = random_scenarios(args.seed, args.n, obstacles=tuple(args.obstacles), curve_slots=args.slots, dtype=dtype)
+    generation_s = time.perf_counter() - t0
+    suite, gains, extra, gain_values = resolve_gains(args, suite, args.method, args.n_points or 10)
+    keys = np.asarray(batch_keys(args.seed, args.n))  # raw keys: scene b's escapes, as plan_batch of the suite
+    return dict(suite=suite, keys=keys, gains=gains, gain_values=gain_values, dtype=dtype, devices=n_dev,
+                options=make_options(args.method, args.n_points or 10, **extra), generation_s=generation_s,
+                size=round_chunk(args.chunk, args.n, n_dev))
+
+
+def _plan(args, setup: dict):
+    """Plan the suite chunk by chunk; ``(per-scene arrays, times)``. The fallback of chunk c is
+    seeded ``seed + 2 c`` (its IK from that seed, its search from the next), so a suite of one
+    chunk is rescued exactly as ``rescue_batch(suite, ..., seed=seed)`` rescues it."""
+    import numpy as np
+
+    from ..base.status import Status
+    from ..sweeps.chunks import ChunkLoop, SuiteSource
+    from ..sweeps.report import reporter
+
+    n, size = args.n, setup["size"]
+    reach = None
+    if args.fallback:
+        from ..search.reach import ReachOptions
+
+        reach = ReachOptions()
+    loop = ChunkLoop(SuiteSource(setup["suite"], setup["keys"]).take, n, size, setup["options"], setup["gains"],
+                     args.max_steps, args.devices, reach=reach, fallback_seed=lambda c: args.seed + 2 * c)
+    float_dtype = np.dtype(setup["dtype"])
+    arrays = {k: np.zeros(n, float_dtype if t == "float" else t) for k, t in _ARRAYS}
+    times = dict(run_s=0.0, fallback_s=0.0, local_steps=0)
+    n_chunks = math.ceil(n / size)
+    say = reporter(not args.no_progress, n, n_chunks, None, 0, args.fallback, "batch", resumable=False)
+
+    def commit(rows, timing, paths, elapsed):
+        a = timing["first"]
+        for k, row in enumerate(rows):
+            for name, _ in _ARRAYS:
+                arrays[name][a + k] = int(Status.from_label(row["status"])) if name == "status" else row[name]
+        times["run_s"] += timing["seconds"] - timing["fallback_s"]
+        times["fallback_s"] += timing["fallback_s"]
+        times["local_steps"] += timing["local_steps"]
+        say(rows, timing, elapsed, loop.compile_s or 0.0)
+
+    loop.run(list(range(n_chunks)), commit)
+    times["compile_s"] = loop.compile_s
+    return arrays, times
+
+
+def _summary(args, setup: dict, arrays: dict, times: dict, distributed: bool) -> dict:
+    """The summary (``--json``'s keys)."""
+    import numpy as np
+
+    from ..base.status import STATUS_NAMES, Status
+    from ..sweeps.store import wilson_interval
+
+    status = arrays["status"]
     reached = status == Status.REACHED
-    summary = {
-        "scenarios": args.n,
-        "seed": args.seed,
-        "method": args.method,
-        "n_points": args.n_points if args.method == "points" else None,
-        "max_steps": args.max_steps,
-        **gains_report(args, gain_values),
-        "devices": n_dev,
-        "chunk": size,
-        "dtype": str(jnp.dtype(dtype)),
+    run_s, fallback_s = times["run_s"], times["fallback_s"]
+    return {
+        "scenarios": args.n, "seed": args.seed, "method": args.method,
+        "n_points": args.n_points if args.method == "points" else None, "max_steps": args.max_steps,
+        **gains_report(args, setup["gain_values"]),
+        "devices": setup["devices"], "chunk": setup["size"], "dtype": str(np.dtype(setup["dtype"])),
         "status_counts": {STATUS_NAMES[int(k)]: int((status == k).sum()) for k in np.unique(status)},
         "success_rate": float(reached.mean()),
         "success_ci95": list(wilson_interval(int(reached.sum()), args.n)),
         "fallback": bool(args.fallback),
-        "reached_local": int((out["planner"] == "local").sum()),
-        "reached_global": int((out["planner"] == "global").sum()),
+        "reached_local": int((arrays["planner"] == "local").sum()),
+        "reached_global": int((arrays["planner"] == "global").sum()),
         "collision_rate": float(np.isin(status, (Status.COLLIDED, Status.START_COLLIDED)).mean()),
-        "mean_iterations_reached": float(out["iterations"][reached].mean()) if reached.any() else None,
-        "min_clearance": float(np.min(out["min_clearance"])),
-        "generation_time_s": generation_time,
-        "compile_time_s": compile_time,
-        "run_time_s": run_time,  # the local planner's
-        "fallback_time_s": fallback_time,  # the fallback's (its compilation included)
+        "mean_iterations_reached": float(arrays["iterations"][reached].mean()) if reached.any() else None,
+        "min_clearance": float(np.min(arrays["min_clearance"])),
+        "generation_time_s": setup["generation_s"],
+        "compile_time_s": times["compile_s"],  # the first chunk's call: tracing and compiling
+        "run_time_s": run_s,  # the local planner's, compile excluded
+        "fallback_time_s": fallback_s,  # the fallback's (its compilation included)
+        "scenes_per_s": args.n / (run_s + fallback_s),
         # Steps taken: the engine's lanes stop computing a scene when it finishes.
-        "scenes_per_s": args.n / (run_time + fallback_time),
-        "steps_per_s": float(np.sum(r.iterations)) / run_time,
+        "steps_per_s": times["local_steps"] / run_s,
         "processes": args.num_processes if distributed else 1,
         "out": None,
     }
-    if distributed and args.process_id != 0:  # every process holds the whole result; process 0 reports it
-        jax.distributed.shutdown()
-        return EXIT_OK
-    if args.out is not None:
-        try:
-            np.savez_compressed(args.out, **out)
-        except OSError as err:
-            raise InputError(f"cannot write output: {err}") from None
-        summary["out"] = os.path.abspath(args.out)
-    if args.json:
-        clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in summary.items()}
-        print(json.dumps(clean, indent=2))
-    else:
-        s = summary
-        method = s["method"] + (f" (N = {s['n_points']} points per curve)" if s["method"] == "points" else "")
-        rows = [
-            ("scenarios", f"{s['scenarios']:,} (random_scenarios(seed={s['seed']}), {s['dtype']})"),
-            ("method", method),
-            ("gains", s["gains"] + (" (gains file)" if s["gains_file"] else " (preset)")),
-            ("gain values", fmt_gain_values(s["gain_values"])),
-            ("devices", f"{s['devices']}" + (f" on {s['processes']} processes" if s["processes"] > 1 else "")
-             + f", chunks of {s['chunk']}"),
-            ("outcomes", ", ".join(f"{k} {v:,}" for k, v in s["status_counts"].items())),
-            ("success [95 % CI]", f"{100 * s['success_rate']:.1f} % [{100 * s['success_ci95'][0]:.1f}, "
-             f"{100 * s['success_ci95'][1]:.1f}]" + (f": local {s['reached_local']:,}, global fallback "
-                                                      f"{s['reached_global']:,}" if s["fallback"] else "")),
-            ("collided", f"{100 * s['collision_rate']:.1f} %"),
-            ("mean iterations (reached)", "-" if s["mean_iterations_reached"] is None
-             else f"{s['mean_iterations_reached']:.1f} (max steps {s['max_steps']})"),
-            ("min true clearance", f"{s['min_clearance']:.4f}"),
-            ("compile time", fmt_seconds(s["compile_time_s"])),
-            ("run time", f"{fmt_seconds(s['run_time_s'])}: {s['steps_per_s']:,.0f} steps taken/s"
-             + (f"; fallback {fmt_seconds(s['fallback_time_s'])}" if s["fallback"] else "")
-             + f"; {s['scenes_per_s']:,.1f} scenes/s"),
-        ]
-        if s["out"]:
-            rows.append(("results", s["out"]))
-        width = max(len(k) for k, _ in rows)
-        print("\n".join(f"{k:<{width}}  {v}" for k, v in rows))
-    return EXIT_OK
 
 
-def _fallback(args, suite, r, options, out) -> float:
-    """The global fallback on the scenes the local planner left stalled or at max steps
-    (:func:`~softplan_jax.search.fallback.rescue_batch`): ``out``'s per-scene arrays updated
-    in place, ``planner`` "global" where the search reached; returns its seconds."""
-    from ..base.status import Status
-    from ..search.fallback import rescue_batch
-
-    t0 = time.perf_counter()
-    idx, results = rescue_batch(suite, r, options, seed=args.seed, progress=not args.no_progress)
-    for k, res in zip(idx, results, strict=True):
-        out["status"][k], out["reached"][k] = int(Status.from_label(res.status)), res.reached
-        out["iterations"][k] = res.iterations
-        out["min_clearance"][k], out["final_error"][k] = res.min_clearance, res.final_error
-        out["planner"][k] = ("global" if res.planner == "global" else "local") if res.reached else "none"
-    return time.perf_counter() - t0
+def _text(s: dict) -> str:
+    """The summary as the command's text table."""
+    method = s["method"] + (f" (N = {s['n_points']} points per curve)" if s["method"] == "points" else "")
+    lo, hi = s["success_ci95"]
+    rows = [
+        ("scenarios", f"{s['scenarios']:,} (random_scenarios(seed={s['seed']}), {s['dtype']})"),
+        ("method", method),
+        ("gains", s["gains"] + (" (gains file)" if s["gains_file"] else " (preset)")),
+        ("gain values", fmt_gain_values(s["gain_values"])),
+        ("devices", f"{s['devices']}" + (f" on {s['processes']} processes" if s["processes"] > 1 else "")
+         + f", chunks of {s['chunk']}"),
+        ("outcomes", ", ".join(f"{k} {v:,}" for k, v in s["status_counts"].items())),
+        ("success [95 % CI]", f"{100 * s['success_rate']:.1f} % [{100 * lo:.1f}, {100 * hi:.1f}]"
+         + (f": local {s['reached_local']:,}, global fallback {s['reached_global']:,}" if s["fallback"] else "")),
+        ("collided", f"{100 * s['collision_rate']:.1f} %"),
+        ("mean iterations (reached)", "-" if s["mean_iterations_reached"] is None
+         else f"{s['mean_iterations_reached']:.1f} (max steps {s['max_steps']})"),
+        ("min true clearance", f"{s['min_clearance']:.4f}"),
+        ("compile time", fmt_seconds(s["compile_time_s"])),
+        ("run time", f"{fmt_seconds(s['run_time_s'])}: {s['steps_per_s']:,.0f} steps taken/s"
+         + (f"; fallback {fmt_seconds(s['fallback_time_s'])}" if s["fallback"] else "")
+         + f"; {s['scenes_per_s']:,.1f} scenes/s"),
+    ]
+    if s["out"]:
+        rows.append(("results", s["out"]))
+    width = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)

@@ -1,13 +1,8 @@
-"""What the ``softplan`` subcommands share: the exit codes, :class:`InputError`
-(bad user input: one line ``softplan: error: ...`` on stderr, exit code 2), the
-package version, warnings on stderr, the paper scenarios' names, the ``--gains``
-option resolved to gains and step options and recorded in the summary, the
-``--plot`` / ``--gif`` figures, number formats and the summary printed as text
-or JSON with its exit code.
-
-Nothing heavy at import: jax, numpy and matplotlib are imported inside the
-functions that need them, so that ``softplan --help`` is fast.
-"""
+"""What the ``softplan`` subcommands share: the exit codes, :class:`InputError` (bad user input:
+one line ``softplan: error: ...`` on stderr, exit code 2), the package version, warnings on
+stderr, the paper scenarios' names, ``--gains`` resolved and recorded, the ``--plot`` / ``--gif``
+figures, number formats and the printed summary; jax, numpy and matplotlib are imported inside
+the functions that need them, so that ``softplan --help`` is fast."""
 
 from __future__ import annotations
 
@@ -113,7 +108,7 @@ def gains_report(args, gain_values: dict) -> dict:
 def write_figures(args, summary: dict, make_plot, write_gif) -> None:
     """``run --plot`` / ``--gif``: the figure from ``make_plot(plotting)`` saved to args.plot,
     ``write_gif(plotting, path)`` for args.gif (written to a temporary path, then renamed);
-    their absolute paths into the summary."""
+    their absolute paths into the summary; a replaced file (``--force``) said on stderr."""
     if args.plot is None and args.gif is None:
         return
     if "matplotlib.pyplot" not in sys.modules:
@@ -126,6 +121,7 @@ def write_figures(args, summary: dict, make_plot, write_gif) -> None:
 
     from .interrupt import atomic_output  # each figure whole or not at all, also on Ctrl-C
 
+    replaced = [p for p in (args.plot, args.gif) if p is not None and os.path.exists(p)]  # with --force
     try:
         if args.plot is not None:
             fig = make_plot(plotting)
@@ -143,6 +139,8 @@ def write_figures(args, summary: dict, make_plot, write_gif) -> None:
             summary["gif"] = os.path.abspath(args.gif)
     except OSError as err:
         raise InputError(f"cannot write output: {err}") from None
+    for path in replaced:  # allowed by --force; never silently
+        print(f"softplan: overwrote {path} (--force)", file=sys.stderr)
 
 
 def report(args, summary: dict, text, reached: bool) -> int:
@@ -168,3 +166,26 @@ def check_points_args(args) -> None:
     elif args.n_points is not None:
         raise InputError("--n-points applies to --method points only")
 
+
+
+# glibc's mallopt parameter M_MMAP_THRESHOLD, and the size from which an allocation gets its own
+# mapping (returned to the system when freed) once it is set.
+_M_MMAP_THRESHOLD = -3
+_MMAP_THRESHOLD_BYTES = 4 << 20
+
+
+def return_freed_chunks() -> None:
+    """Let the batch commands' memory stay flat over their chunks: a fixed glibc mmap threshold,
+    so that every buffer of 4 MiB or more (a chunk's rollout, its host copies) is mapped on its
+    own and returned to the system when freed. glibc's default threshold grows with the largest
+    buffer freed, after which such buffers come from the heap, which fragments and grows chunk
+    by chunk (the documentation's Performance page, "Sweeps at scale"). Skipped outside glibc."""
+    import ctypes
+    import ctypes.util
+
+    name = ctypes.util.find_library("c")
+    try:
+        libc = ctypes.CDLL(name or "libc.so.6")
+        libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_BYTES)
+    except (OSError, AttributeError):  # not glibc (macOS, musl without mallopt, Windows)
+        pass

@@ -1,32 +1,6 @@
-"""Ctrl-C in the ``softplan`` command: one line, exit code 130, no partial files.
-
-A KeyboardInterrupt raised into Python while XLA compiles or runs on its own
-threads lets the interpreter shut down under them (jax's and XLA's threads
-and static objects are torn down while still in use): in most tries a
-segmentation fault after the "interrupted" line. So the command does not
-unwind on SIGINT. :func:`interrupt_guard` installs a handler that ends the
-process at once: it removes the temporary files of the outputs being written
-(:func:`atomic_output`: every output is written to a temporary file beside
-it and renamed into place when complete, so no partial file is ever under
-the user's name), writes ``softplan: interrupted`` on stderr and calls
-``os._exit(130)`` (no interpreter shutdown, no C++ destructors).
-
-Python runs a signal handler in the main thread between two bytecodes, which
-may be long after the signal while the main thread is inside one long C++
-call (an XLA compilation). So the guard also asks the C-level handler to
-write the signal's number to a pipe (``signal.set_wakeup_fd``), watched by a
-daemon thread that ends the process the same way as soon as the byte
-arrives (the compilation runs without the GIL).
-
-When the command's work is done, the process still has to exit: jax's exit
-handlers run, then the interpreter finalizes, and finalization resets Python's
-signal handlers to the system default, under which SIGINT kills the process
-(exit status -2, no message) or raises a KeyboardInterrupt into jax's exit
-handlers (a traceback after a complete run). So the process's own entry point
-(:func:`~softplan_jax.cli.main.console_main`) leaves the guard with SIGINT
-*ignored* (``restore=False``), a setting that survives finalization: a Ctrl-C
-after the command finished changes nothing, and the exit code is the command's.
-"""
+"""Ctrl-C in the ``softplan`` command: one line, exit code 130, no partial files
+(:func:`interrupt_guard`, :func:`atomic_output`; why the process ends without unwinding: the
+documentation's "The softplan command", "Ctrl-C")."""
 
 from __future__ import annotations
 
@@ -38,13 +12,26 @@ import threading
 
 from ..base.files import publish
 
-__all__ = ["EXIT_INTERRUPTED", "interrupt_guard", "atomic_output", "exit_interrupted"]
+__all__ = ["EXIT_INTERRUPTED", "interrupt_guard", "atomic_output", "exit_interrupted", "interrupted_say",
+           "interrupted_next_step"]
 
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, the shell's convention
 
 _PARTIAL: set[str] = set()  # temporary files being written
 _LOCK = threading.Lock()
 _MESSAGE = b"softplan: interrupted\n"
+_NEXT_STEP = [b""]  # a line after the message: what to do next (interrupted_say)
+
+
+def interrupted_say(text: str) -> None:
+    """If Ctrl-C ends this command, write ``softplan: <text>`` after ``softplan: interrupted``
+    (e.g. that the same command resumes); "" says nothing more."""
+    _NEXT_STEP[0] = f"softplan: {' '.join(text.split())}\n".encode() if text.strip() else b""
+
+
+def interrupted_next_step() -> str:
+    """The line :func:`interrupted_say` set ("" when none)."""
+    return _NEXT_STEP[0].decode()
 
 
 def exit_interrupted() -> None:
@@ -57,7 +44,7 @@ def exit_interrupted() -> None:
         except OSError:
             pass
     try:
-        os.write(2, _MESSAGE)  # not sys.stderr: its lock may be held by the interrupted thread
+        os.write(2, _MESSAGE + _NEXT_STEP[0])  # not sys.stderr: its lock may be held by the interrupted thread
     except OSError:
         pass
     os._exit(EXIT_INTERRUPTED)
@@ -84,7 +71,8 @@ def interrupt_guard(restore: bool = True):
     """While active, SIGINT ends the process with :func:`exit_interrupted`. A no-op outside
     the main thread (signal handlers can only be set there). On exit the previous wakeup fd
     is restored, and the previous SIGINT handler too, unless ``restore`` is False: then
-    SIGINT is ignored from there on (the process is about to exit; see the module's text).
+    SIGINT is ignored from there on (the process is about to exit, and finalization would reset
+    the handler to one that kills the process or raises into jax's exit handlers).
     The handler is swapped in one call, so no SIGINT falls between the two."""
     if threading.current_thread() is not threading.main_thread():
         yield

@@ -1,71 +1,11 @@
-"""The ``softplan`` command: the paper's simulations (section 3) and the user's
-own scenes from the shell.
-
-::
-
-    softplan run SCENARIO [--method curve|points] [--n-points N] [--max-steps N]
-                          [--gains paper|default|FILE] [--step safe|plain]
-                          [--goal-tolerance TOL] [--repulsion khatib|exponential]
-                          [--plot PNG] [--gif GIF] [--out FILE.json|FILE.npz [--force]]
-                          [--json] [--float32] [--require-reached]
-    softplan scenarios [--json]
-    softplan export NAME PATH [--force]
-    softplan fit CLOUD [--out JSON] [--goal X Y Z] [--degree D] [--max-degree D]
-                       [--max-residual R] [--radius R] [--inflate] [--single]
-                       [--plot PNG] [--force] [--json]
-    softplan sweep --n N --out DIR [--chunk C] [--seed S] [--method curve|points]
-                   [--max-steps N] [--gains PRESET|FILE] [--fallback] [--trajectories K|all]
-                   [--force] [--json] [--no-progress] [--float32]
-
-SCENARIO is a paper scenario name (``sim1``, ``sim2``, ``tree``) or the path of
-a JSON scenario file (a file literally named like a paper scenario: write
-``./sim1``).
-
-``--gains`` (``run`` and ``batch``) is a gain preset (``default``, ``paper``:
-gains, step options and start pose, :mod:`softplan_jax.planning.presets`) or the path of
-a gains file (format ``softplan-gains/1``, :mod:`softplan_jax.tuning.gains_file`,
-written by :func:`softplan_jax.save_gains`): the file's gains with the default
-preset's start pose and step options. A file tuned for another ``--method`` or
-``--n-points`` is bad input. The summary (and ``run --out``) records the gains
-used: ``gains`` (the preset name or the path as given), ``gains_file`` (its
-absolute path, or null for a preset) and ``gain_values``.
-
-``run --out FILE`` saves the whole trajectory: ``q`` (iterations + 1, n, 3),
-``tip`` (iterations + 1, 3) and ``clearance`` (iterations + 1, obstacles), the
-true clearance to every obstacle at every step, start first, plus the status,
-iterations and the run's metadata (format ``softplan-trajectory/1``, see
-:func:`~softplan_jax.cli.trajectory.trajectory_record`). The format follows the extension: ``.json`` (arrays
-as nested lists, non-finite numbers as null) or ``.npz`` (``numpy.load``; one
-array per field, strings and numbers as 0-d arrays, no pickles). Any other
-extension is bad input. An existing FILE is never replaced unless ``--force``
-is given (then the summary says it was overwritten).
-
-Exit codes: 0 success (for ``run``: planning finished, whatever its status —
-reached, stalled, collided or max_steps; the status is in the summary);
-2 bad input (unknown scenario, missing or malformed file, bad option value,
-output path that cannot be written, a size too large for memory), with one
-line ``softplan: error: ...`` on stderr; 3 ``run --require-reached`` and the
-run did not succeed (any status but "reached", or "held" for a moving goal);
-130 interrupted (Ctrl-C: one line ``softplan: interrupted`` on stderr, no
-partial output file left behind: an output is written whole under its name or
-not at all). A Ctrl-C that comes after the command finished, while the process
-exits, is ignored: the exit code is the command's.
-
-``run`` keeps compiled rollouts in jax's persistent compilation cache
-(``~/.cache/softplan_jax/jax``; see :mod:`softplan_jax.base.compilation_cache`;
-``SOFTPLAN_JAX_NO_CACHE=1`` or ``SOFTPLAN_COMPILATION_CACHE=0`` turns it off), so a
-second run of the same scenario shape does not compile again.
-
-jax is imported inside the commands, after :func:`main` has parsed the
-arguments, so ``--help`` is fast and float64 (``jax_enable_x64``) can be
-switched on before any array exists.
-
-The command is one module per subcommand: :mod:`.run`, :mod:`.batch`, :mod:`.sweep`,
-:mod:`.fit`, :mod:`.scenario_list` (``softplan scenarios``) and :mod:`.export`;
-:mod:`.parser` holds the argument parser and the checks of the arguments,
-:mod:`.trajectory` the ``run --out`` file format and :mod:`.common` what the
-commands share. This module dispatches and turns errors into exit codes.
-"""
+"""The ``softplan`` command (the documentation's "The softplan command"): one module per
+subcommand (:mod:`.run`, :mod:`.batch`, :mod:`.sweep`, :mod:`.fit`, :mod:`.scenario_list`,
+:mod:`.export`), the argument parser and checks in :mod:`.parser`, the ``run --out`` format in
+:mod:`.trajectory`, what the commands share in :mod:`.common`; this module dispatches and turns
+errors into exit codes (0 done, 2 bad input with one line ``softplan: error: ...``, 3
+``run --require-reached`` not met, 130 interrupted). jax is imported inside the commands, after
+the arguments are parsed, so ``--help`` is fast and float64 can be switched on before any array
+exists."""
 
 from __future__ import annotations
 
@@ -75,7 +15,7 @@ from .batch import cmd_batch
 from .common import EXIT_BAD_INPUT, InputError
 from .export import cmd_export
 from .fit import cmd_fit
-from .interrupt import EXIT_INTERRUPTED, interrupt_guard
+from .interrupt import EXIT_INTERRUPTED, interrupt_guard, interrupted_next_step, interrupted_say
 from .parser import build_parser
 from .run import cmd_run
 from .scenario_list import cmd_scenarios
@@ -102,6 +42,7 @@ def console_main() -> int:
 
 
 def _main(argv) -> int:
+    interrupted_say("")  # a command of its own: nothing said after "interrupted" unless it says so
     parser = build_parser()
     try:
         try:
@@ -127,8 +68,9 @@ def _main(argv) -> int:
         msg = " ".join(str(err).split())  # one line
         print(f"softplan: error: {msg}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:  # outside the guard's reach (not the main thread): one line all the same
+    except KeyboardInterrupt:  # outside the guard's reach (not the main thread): the same lines all the same
         print("softplan: interrupted", file=sys.stderr)
+        print(interrupted_next_step(), file=sys.stderr, end="")
         return EXIT_INTERRUPTED
 
 

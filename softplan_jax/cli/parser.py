@@ -91,7 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="FILE",
                      help="save the trajectory (q, tip, clearance per step, status, iterations, metadata) "
                      "as JSON (FILE.json) or NumPy (FILE.npz), chosen by the extension")
-    run.add_argument("--force", action="store_true", help="let --out replace an existing FILE")
+    run.add_argument("--force", action="store_true",
+                     help="let --out, --plot, --gif, --export and --plot-actuators replace existing files")
     run.add_argument("--json", action="store_true", help="print the summary as JSON")
     run.add_argument("--float32", action="store_true",
                      help="plan in float32 (default float64)")
@@ -257,11 +258,12 @@ def _add_fit_parser(sub) -> None:
         description="Fit polynomial curves to an unordered, noisy point cloud (one or several curve-like "
         "obstacles: a trunk with branches, crossing wires) and write a JSON scenario of them, with the "
         "fit's residuals as metadata, for 'softplan run'. CLOUD is .npy (an (N, 3) array), .csv "
-        "(x,y,z per line, optional header) or .xyz (x y z per line).",
+        "(x,y,z per line, optional header), .xyz (x y z per line), .ply (a PLY file's vertices, ASCII or "
+        "binary) or .pcd (a PCL point cloud: ascii, binary or binary_compressed).",
         epilog="Exit codes: 0 written (a poor fit prints a warning); 2 bad input, or the maximum "
         "residual is above --max-residual.",
     )
-    fit.add_argument("cloud", metavar="CLOUD", help="point cloud file: .npy, .csv or .xyz")
+    fit.add_argument("cloud", metavar="CLOUD", help="point cloud file: .npy, .csv, .xyz, .ply or .pcd")
     fit.add_argument("--out", metavar="JSON", default=None,
                      help="scenario file to write (default: CLOUD with the extension .json)")
     fit.add_argument("--goal", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
@@ -278,7 +280,7 @@ def _add_fit_parser(sub) -> None:
     fit.add_argument("--single", action="store_true",
                      help="fit exactly one curve to the whole cloud (default: split it into its curves)")
     fit.add_argument("--plot", metavar="PATH", help="write a figure of the cloud with the fitted curves (PNG, PDF, ...)")
-    fit.add_argument("--force", action="store_true", help="overwrite the output file if it exists")
+    fit.add_argument("--force", action="store_true", help="let the scenario file and --plot replace existing files")
     fit.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
@@ -383,6 +385,9 @@ def check_run_args(args, paper_names) -> None:
             import PIL  # noqa: F401
         except ImportError:
             raise InputError("--gif needs pillow: pip install pillow") from None
+    for opt, path in (("--plot", args.plot), ("--gif", args.gif)):
+        if path is not None and os.path.exists(path) and not args.force:
+            raise InputError(f"{opt}: {path} exists; pass --force to overwrite it (or choose another path)")
     if args.out is not None:
         outputs = [p for p in (args.plot, args.gif) if p is not None]
         if any(os.path.abspath(args.out) == os.path.abspath(p) for p in outputs):
@@ -395,8 +400,8 @@ def check_run_args(args, paper_names) -> None:
             )
         if os.path.exists(args.out) and not args.force:
             raise InputError(f"--out: {args.out} exists; pass --force to overwrite it")
-    elif args.force and args.export is None and args.plot_actuators is None:
-        raise InputError("--force only applies to --out, --export and --plot-actuators")
+    elif args.force and all(p is None for p in (args.plot, args.gif, args.export, args.plot_actuators)):
+        raise InputError("--force only applies to --out, --plot, --gif, --export and --plot-actuators")
     # Last, so that a bad argument is one error line, not a warning and an error.
     if n_points_given and args.method == "curve":
         warn("--n-points applies to --method points only; the curve method ignores it")

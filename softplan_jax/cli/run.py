@@ -142,8 +142,8 @@ def _compiled_run(world, gains, options, max_steps: int, seed) -> tuple:
 
 
 def _compiling_message(what: str = "") -> None:
-    print(f"softplan: compiling the planner{what}, or loading it from the cache (once per scene shape and option "
-          "set) ...", file=sys.stderr, flush=True)
+    print(f"softplan: preparing the planner{what} (compiled the first time a scene shape and option set is "
+          "planned, loaded from the cache after) ...", file=sys.stderr, flush=True)
 
 
 def _static_inputs(args, dtype, actuator_summary: dict) -> tuple:
@@ -298,7 +298,7 @@ def _cmd_track(args, dtype) -> int:
     moving, gains, options, preset, extra, gain_values = _moving_inputs(args, dtype, actuator_summary)
     max_steps = int(args.max_steps)
     _compiling_message(f" for a moving scene, tracked for {max_steps} steps ({max_steps * float(gains.dt):g} s "
-                       "of simulated time)")
+                       "of the scene's own time, not the wait)")
     track, compile_time, run_time, loaded = _compiled_run(moving, gains, options, max_steps, args.seed)
     result = result_from_track(track, moving, float(gains.dt))
     if result.status == "max_steps" and not args.no_fallback:

@@ -1,5 +1,6 @@
-"""``softplan scenarios``: list the paper's scenarios (the names for ``softplan run``)
-with their goals and obstacle curves (the paper's Tables 2-4)."""
+"""``softplan scenarios``: list the scenes ``softplan run`` knows by name: the paper's
+scenarios with their goals and obstacle curves (the paper's Tables 2-4), and the moving
+presets (:func:`~softplan_jax.scenarios.moving.moving_scenario`)."""
 
 from __future__ import annotations
 
@@ -18,23 +19,28 @@ PAPER_DESCRIPTIONS = {
 
 
 def cmd_scenarios(args) -> int:
-    """``softplan scenarios``: print the paper scenarios (text or JSON); the exit code."""
-    from ..scenarios import PAPER_SCENARIOS
+    """``softplan scenarios``: print the paper scenarios and the moving presets (text or JSON);
+    the exit code."""
+    import jax
 
-    rows = []
-    for name in sorted(PAPER_SCENARIOS):
-        spec = PAPER_SCENARIOS[name]
-        rows.append(
-            {
-                "name": name,
-                "goal": list(spec["goal"]),
-                "obstacles": len(spec["curves"]),
-                "description": PAPER_DESCRIPTIONS.get(name, ""),
-            }
-        )
+    jax.config.update("jax_enable_x64", True)  # the presets' goals as written
+    from ..scenarios import PAPER_SCENARIOS
+    from ..scenarios.moving import MOVING_SCENARIOS, moving_scenario
+
+    rows = [{"name": name, "kind": "paper", "goal": list(spec["goal"]), "goal_moves": False,
+             "obstacles": len(spec["curves"]), "description": PAPER_DESCRIPTIONS.get(name, "")}
+            for name, spec in sorted(PAPER_SCENARIOS.items())]
+    for name, text in MOVING_SCENARIOS.items():
+        m = moving_scenario(name)
+        rows.append({"name": name, "kind": "moving", "goal": [float(g) for g in m.scene.goal],
+                     "goal_moves": int(m.goal_path.attach) >= 0 or m.goal_path.times.shape[0] > 1,
+                     "obstacles": int(m.scene.curve_mask.sum()), "description": text})
     if args.json:
         print(json.dumps(rows, indent=2))
-    else:
-        for r in rows:
-            print(f"{r['name']:<6} {r['obstacles']} obstacle curve(s)  {r['description']}")
+        return EXIT_OK
+    for kind, title in (("paper", "The paper's scenarios (planned)"),
+                        ("moving", "Moving scenes (tracked)")):
+        print(title + ":")
+        for r in (r for r in rows if r["kind"] == kind):
+            print(f"  {r['name']:<10} {r['obstacles']} obstacle curve(s)  {r['description']}")
     return EXIT_OK

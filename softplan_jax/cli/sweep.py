@@ -10,7 +10,8 @@ from __future__ import annotations
 import json
 import os
 
-from .common import EXIT_OK, InputError, check_points_args, fmt_seconds
+from .common import EXIT_OK, InputError, check_points_args, fmt_seconds, return_freed_chunks
+from .interrupt import interrupted_say
 from .parser import check_distributed_args, check_gains_arg, initialize_distributed
 
 __all__ = ["cmd_sweep"]
@@ -44,7 +45,9 @@ def _check_args(args) -> bool:
 def cmd_sweep(args) -> int:
     """``softplan sweep``: run (or resume) the sweep and print its summary; the exit code."""
     distributed = _check_args(args)
+    return_freed_chunks()
     gains_file = check_gains_arg(args.gains)
+    interrupted_say(f"the same command again resumes the sweep in {args.out} after its last complete chunk")
     import jax
 
     from ..base.compilation_cache import enable_compilation_cache

@@ -1,13 +1,8 @@
-"""Exact distance from points to a polynomial curve, on the host (NumPy).
-
-:func:`curve_distance` gives the distances to a
-:class:`~softplan_jax.PolynomialCurve` over its whole ``u_range``. The solvers
-behind it live in :mod:`softplan_jax.geometry.point_curve`:
-:func:`closest_parameters` (the roots of the stationarity polynomial, paper
-eq. 14 with the arm point fixed: the global minimum to rounding) and
-:func:`project_newton` (safeguarded Newton from warm starts, the inner loop of
-a fit's refinement); they are re-exported here for the fitting modules.
-"""
+"""Exact distance from points to a polynomial curve, on the host (NumPy): :func:`curve_distance`
+over the curve's whole ``u_range``, and the solvers behind it from
+:mod:`softplan_jax.geometry.point_curve` re-exported for the fitting modules
+(:func:`closest_parameters`: the roots of the stationarity polynomial, paper eq. 14 with the
+arm point fixed; :func:`project_newton`: safeguarded Newton from warm starts)."""
 
 from __future__ import annotations
 

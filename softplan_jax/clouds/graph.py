@@ -1,24 +1,10 @@
-"""The neighbour graph of a cloud: its noise level, spanning tree, tree paths and length scales.
-
-What both fits build their structure on (host-side, NumPy and SciPy):
-
-* :func:`noise_level` — the cloud's noise level from local principal
-  components (the two small eigenvalues of a neighbourhood's covariance are the
-  noise variance across the curve), independent of any fit;
-  :func:`residual_tolerance` — the largest acceptable maximum residual,
-  ``(sqrt(2 ln N) + 2)`` noise levels (the largest of N Rayleigh-distributed
-  distances is about ``sqrt(2 ln N)`` noise levels).
-* :func:`spanning_tree` — a Euclidean minimum spanning tree (MST) built on a
-  k-nearest-neighbour graph; :func:`smooth_cloud` — a light local averaging
-  that first pulls the points towards the centre line, so that the tree grows
-  fewer noise spurs.
-* :func:`diameter_path`, :func:`attach` and :func:`path_parameters` — the
-  tree's longest path (two shortest-path sweeps), the path node each point's
-  subtree hangs from, and the path's normalised chord length in [-1, 1].
-* :func:`graph_subset` and :func:`cloud_scales` — the points that the structure
-  is built on, and the cloud's length scales (point spacing, noise, tolerance,
-  and the lengths that cut separate obstacles and prune spurs).
-"""
+"""The neighbour graph of a cloud, which both fits build on (host side, NumPy and SciPy): its
+noise level from local principal components and the residual tolerance (:func:`noise_level`,
+:func:`residual_tolerance`), a Euclidean minimum spanning tree on a k-nearest-neighbour graph
+(:func:`spanning_tree`, after :func:`smooth_cloud`), the tree's longest path and the
+parameters along it (:func:`diameter_path`, :func:`attach`, :func:`path_parameters`), and the
+points and length scales the structure is built on (:func:`graph_subset`,
+:func:`cloud_scales`)."""
 
 from __future__ import annotations
 

@@ -1,21 +1,9 @@
-"""Several curves in one cloud: a trunk with branches, crossing wires, separate obstacles (paper §2.3).
-
-A scan often holds several obstacles at once. Method of :func:`fit_curves`:
-the cloud's minimum spanning tree (:mod:`.graph`) is cut at edges much longer
-than the cloud's point spacing (separate obstacles); each remaining group is
-reduced to a skeleton and split into curves at its junctions
-(:mod:`.skeleton`). Each piece is fitted as by
-:func:`~softplan_jax.clouds.fit_curve` from its skeleton order
-(:mod:`.refine`); a piece whose fit is poor (maximum residual above the warning
-level) is split in two and refitted, up to ``max_splits`` times. Residuals are
-each point's distance to the nearest fitted curve. ``inflate=True`` adds each
-curve's maximum residual to its radius, so an arm clear of the inflated curves
-is clear of every raw point.
-
-Everything here runs on the host (NumPy/SciPy), not under ``jit``. The curves
-returned are ordinary :class:`~softplan_jax.PolynomialCurve` objects with
-``u_range`` (-1, 1).
-"""
+"""Several curves in one cloud, a trunk with branches, crossing wires or separate obstacles
+(paper §2.3): :func:`fit_curves` cuts the cloud's spanning tree at long edges, splits each
+part's skeleton into curves at its junctions (:mod:`.skeleton`), fits each piece
+(:mod:`.refine`), halves a poorly fitting piece up to ``max_splits`` times, and returns
+ordinary :class:`~softplan_jax.PolynomialCurve` objects with ``u_range`` (-1, 1) and each
+point's distance to its nearest curve."""
 
 from __future__ import annotations
 
@@ -181,7 +169,8 @@ def fit_curves(
     """Split an unordered, noisy cloud into its curve-like obstacles and fit each.
 
     A trunk with branches, two crossing wires, or separate wires become one
-    polynomial curve each (method: module docstring). Each point's residual is
+    polynomial curve each (the method: the documentation's 'Obstacles from
+    point clouds'). Each point's residual is
     its exact distance to the nearest fitted curve.
 
     Args:
@@ -219,13 +208,21 @@ def fit_curves(
         min_points = max(10, need)
     elif isinstance(min_points, bool) or not isinstance(min_points, (int, np.integer)) or min_points < need:
         raise ValueError(f"min_points must be an integer >= {need}, got {min_points!r}")
-    n = P.shape[0]
     G, gidx = graph_subset(P)
     sc = cloud_scales(P, G)
+    groups = _groups(P, G, gidx, sc, min_points)
+    fits_raw = _fit_and_split(P, groups, degree, max_degree, sc, max_splits, min_points)
+    result = _cloud_fit(P, fits_raw, sc, radius, inflate, out_dtype)
+    report_fit(result.max_residual, sc.tol, sc.noise, max_residual, warn, "fit_curves")
+    return result
 
-    # Separate obstacles: cut the raw cloud's spanning tree at edges much longer
-    # than the point spacing, both the cloud's and the local one at the edge's
-    # two ends (sampling is often sparser along parts of a curve).
+
+def _groups(P, G, gidx, sc: Scales, min_points: int) -> list:
+    """The cloud's curve-like pieces: ``[(member indices into P, initial parameters), ...]``.
+    Separate obstacles: the graph points' spanning tree cut at edges much longer than the
+    point spacing, both the cloud's and the local one at the edge's two ends (sampling is
+    often sparser along parts of a curve); then each part's skeleton split at its junctions."""
+    n = P.shape[0]
     T_raw = spanning_tree(G).tocoo()
     k = min(6, G.shape[0] - 1)
     local = cKDTree(G).query(G, k + 1)[0][:, k]
@@ -252,15 +249,19 @@ def fit_curves(
                 members = gidx[members]
             if members.size >= min_points:
                 groups.append((members, t_members))
-
     if not groups:
         raise ValueError(
             f"no group of at least min_points = {min_points} connected points was found in the cloud "
             f"({n} points, spacing {sc.spacing:.3g}); lower min_points or check the cloud"
         )
-    fits_raw = _fit_and_split(P, groups, degree, max_degree, sc, max_splits, min_points)
+    return groups
+
+
+def _cloud_fit(P, fits_raw: list, sc: Scales, radius, inflate: bool, out_dtype) -> CloudFit:
+    """The CloudFit of the fitted curves: every point against its nearest curve; curves nobody
+    is nearest to are dropped."""
+    n = P.shape[0]
     D = np.stack([closest_parameters(c, P, -1.0, 1.0)[1] for c, _ in fits_raw], axis=1)  # (N, m)
-    # Residuals: every point against its nearest curve; curves nobody is nearest to are dropped.
     labels = np.argmin(D, axis=1)
     used = np.unique(labels)
     remap = -np.ones(len(fits_raw), int)
@@ -270,15 +271,12 @@ def fit_curves(
         for k in used
     )
     residuals = D[np.arange(n), labels]
-    labels = remap[labels]
-    result = CloudFit(
+    return CloudFit(
         fits=fits,
-        labels=labels,
+        labels=remap[labels],
         residuals=residuals,
         rms_residual=float(np.sqrt(np.mean(residuals**2))),
         max_residual=float(residuals.max()),
         noise=sc.noise,
         tolerance=sc.tol,
     )
-    report_fit(result.max_residual, sc.tol, sc.noise, max_residual, warn, "fit_curves")
-    return result

@@ -1,41 +1,9 @@
-"""One polynomial curve through an unordered, noisy point cloud (paper §2.3).
-
-The paper models a real branch, pipe or wire as a curve ``F_o(u)`` "derived from
-a set of points ... using regression". A depth camera or a LiDAR returns those
-points unordered and noisy. :func:`fit_curve` fits one curve to such a cloud
-and says how well it fits:
-
-1. **Order.** A Euclidean minimum spanning tree (MST) of the cloud, built on a
-   k-nearest-neighbour graph (after a light local averaging that pulls the
-   points towards the centre line). The tree's longest path (its diameter,
-   found by two shortest-path sweeps) runs from one end of the obstacle to the
-   other; every point takes the parameter of the path node its subtree hangs
-   from; parameters are the path's normalised chord length, in [-1, 1] (a
-   well-conditioned range for the monomial coefficients).
-2. **Refine.** Alternate a least-squares fit of the coefficients for fixed
-   parameters with an exact projection of every point onto the current curve,
-   then map the parameters back to [-1, 1] (parameter correction, in
-   :mod:`.refine`).
-3. **Degree.** Unless given: the degree d in 1..max_degree minimising the
-   Bayesian information criterion ``BIC = n log(RSS / n) + 3 (d + 1) log(n)``
-   with ``n = 2 N`` (two orthogonal residual components per point) and RSS the
-   sum of squared exact point-curve distances (Schwarz 1978).
-4. **Quality.** RMS and maximum exact distance of the cloud to the curve
-   (:func:`~softplan_jax.clouds.curve_distance`), and the cloud's noise level
-   estimated independently of the fit from local principal components. A
-   maximum residual above ``(sqrt(2 ln N) + 2)`` noise levels (the largest of
-   N Rayleigh-distributed distances is about ``sqrt(2 ln N)`` noise levels)
-   warns with :class:`FitWarning`; a ``max_residual`` argument makes it a
-   ``ValueError``.
-
-:func:`fit_polynomial_curve` is the plain fit of an ORDERED cloud (the points
-follow the obstacle from one end to the other): least squares in the
-normalised chord length, u in [0, 1].
-
-Everything here runs on the host (NumPy/SciPy), not under ``jit``: fitting is a
-one-off step before planning. The curves returned are ordinary
-:class:`~softplan_jax.PolynomialCurve` objects.
-"""
+"""One polynomial curve through an unordered, noisy point cloud (paper §2.3): :func:`fit_curve`
+orders the points along the longest path of their spanning tree, refines the fit by parameter
+correction (:mod:`.refine`), chooses the degree by BIC unless given, and reports the RMS and
+maximum exact residuals against the cloud's noise level (warning with :class:`FitWarning`
+above ``(sqrt(2 ln N) + 2)`` noise levels); :func:`fit_polynomial_curve` is the plain
+least-squares fit of an ORDERED cloud in its normalised chord length, u in [0, 1]."""
 
 from __future__ import annotations
 

@@ -1,11 +1,8 @@
-"""Scenario files of fitted curves, with the fit's residuals as metadata (what ``softplan fit`` writes).
-
-:func:`fit_scenario_dict` builds the ``softplan-scenario/1`` JSON structure
-whose obstacles are the fitted curves; the residuals (whole cloud and per
-curve), the cloud's noise level and the degree criterion go into ``metadata``,
-which :func:`~softplan_jax.load_scenario` accepts and leaves out of the
-Scenario. :func:`save_fit_scenario` writes it to a file.
-"""
+"""Scenario files of fitted curves (what ``softplan fit`` writes): :func:`fit_scenario_dict`
+builds the ``softplan-scenario/1`` JSON structure whose obstacles are the fitted curves, with
+the residuals (whole cloud and per curve), the cloud's noise level and the degree criterion in
+``metadata`` (which :func:`~softplan_jax.load_scenario` accepts and leaves out of the
+Scenario); :func:`save_fit_scenario` writes it to a file."""
 
 from __future__ import annotations
 

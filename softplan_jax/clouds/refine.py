@@ -1,22 +1,11 @@
-"""One polynomial curve fitted to points from initial parameters: the refinement both fits share.
-
-Given points and first parameters in [-1, 1] (from a spanning-tree path),
-:func:`fit_from_parameters` alternates a least-squares fit of the coefficients
-for fixed parameters (in a Legendre basis, well conditioned on [-1, 1], then
-converted to monomials) with an exact projection of every point onto the
-current curve (a slightly extended range, so the ends can grow), then an affine
-map of the parameters back to [-1, 1] ("parameter correction", Hoschek 1988; it
-never increases the sum of squared orthogonal distances). Each round also tries
-a damped Gauss-Newton step on the orthogonal distances (tangent distance
-minimisation, Wang, Pottmann & Liu 2006), kept when it lowers that sum.
-
-Unless given, the degree d in 1..max_degree minimises the Bayesian information
-criterion ``BIC = n log(RSS / n) + 3 (d + 1) log(n)`` with ``n = 2 N`` (two
-orthogonal residual components per point) and RSS the sum of squared exact
-point-curve distances (Schwarz 1978), among the curves that stay near the
-points everywhere. The result is the monomial coefficients of the paper's
-``F_o(u)`` (eq. 10) with u in [-1, 1].
-"""
+"""One polynomial curve fitted to points from initial parameters in [-1, 1], the refinement
+both fits share (:func:`fit_from_parameters`): least squares in a Legendre basis for fixed
+parameters alternated with an exact projection of every point onto the curve and an affine map
+of the parameters back to [-1, 1] (parameter correction, Hoschek 1988), each round also trying
+a damped Gauss-Newton step on the orthogonal distances (Wang, Pottmann & Liu 2006); the degree,
+unless given, minimises ``BIC = n log(RSS / n) + 3 (d + 1) log(n)`` with ``n = 2 N`` (Schwarz
+1978) among the curves that stay near the points. The result: the monomial coefficients of
+the paper's ``F_o(u)`` (eq. 10), u in [-1, 1]."""
 
 from __future__ import annotations
 

@@ -1,16 +1,9 @@
-"""The skeleton of a cloud that holds several obstacles, joined into one point sequence per curve.
-
-For :func:`~softplan_jax.clouds.fit_curves`: the spanning tree of a connected
-group of points (:mod:`.graph`) loses the short side spurs that noise grows on
-it (a leaf branch whose tip stays within a few noise levels of the rest of the
-skeleton); the remaining skeleton splits at its junctions (nodes of degree
->= 3; junctions closer than the spur length are one junction); at each
-junction the two pieces that continue each other most straightly (directions
-more than 150 degrees apart) are joined, so a trunk stays one curve through
-its branch points and two crossing wires stay two curves.
-:func:`component_chains` returns, for each such curve, its points and their
-first parameters along the skeleton, which :mod:`.refine` then fits.
-"""
+"""The skeleton of a cloud that holds several obstacles, joined into one point sequence per
+curve (for :func:`~softplan_jax.clouds.fit_curves`): the spanning tree of a connected group
+loses its noise spurs, splits at its junctions (nodes of degree >= 3; junctions closer than the
+spur length are one), and at each junction the two pieces that continue each other most
+straightly (more than 150 degrees apart) are joined, so a trunk stays one curve through its
+branch points and two crossing wires stay two (:func:`component_chains`)."""
 
 from __future__ import annotations
 

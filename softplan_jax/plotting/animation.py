@@ -1,17 +1,8 @@
-"""Animated GIFs of a planned motion and of a tracking run (matplotlib's PillowWriter, host side).
-
-* :func:`animate` — the arm moving through every shown iteration of a plan,
-  the tip path drawn as it grows.
-* :func:`animate_tracking` — a tracking run (:func:`softplan_jax.track`): the
-  arm, the moving obstacles and the moving goal at every shown step.
-
-Both share one frame-and-writer loop: the argument checks, the choice of the
-steps shown (at most ``max_frames``, evenly spaced, the start and the last
-always), one 3-D axes whose box is shrunk until the axis labels fit inside every
-frame, the caption, the last frame held for ``hold`` seconds, and the GIF
-written by PillowWriter (pillow is needed). Each function only says what its
-frames show.
-"""
+"""Animated GIFs of a planned motion (:func:`animate`) and of a tracking run
+(:func:`animate_tracking`), with matplotlib's PillowWriter (pillow needed) on the host; both share
+one frame-and-writer loop (the argument checks, at most ``max_frames`` steps evenly spaced with
+the start and the last, one 3-D axes whose box shrinks until the labels fit every frame, the
+caption, the last frame held ``hold`` seconds), and each says only what its frames show."""
 
 from __future__ import annotations
 

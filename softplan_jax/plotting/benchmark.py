@@ -1,8 +1,6 @@
-"""Benchmark plots: collision rate against the cost per step, one labelled point per method.
-
-:func:`plot_benchmark` draws what ``benchmarks/batch_sweep.py`` measures: the
-exact closest points to a curve against N-point samplings of the same obstacle.
-"""
+"""Benchmark plots: :func:`plot_benchmark`, the collision rate against the cost per step, one
+labelled point per method (the exact closest points to a curve against N-point samplings of the
+same obstacle)."""
 
 from __future__ import annotations
 

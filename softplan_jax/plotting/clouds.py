@@ -1,9 +1,6 @@
-"""A point cloud with the curves fitted to it (matplotlib, host side).
-
-:func:`plot_cloud_fit` draws the raw cloud and, over it, every curve that
-:mod:`softplan_jax.clouds` fitted (a :class:`~softplan_jax.clouds.CloudFit` or
-:class:`~softplan_jax.clouds.CurveFit`), each labelled with its degree and residuals.
-"""
+"""A point cloud with the curves fitted to it (matplotlib, host side): :func:`plot_cloud_fit` draws
+the raw cloud and every curve of a :class:`~softplan_jax.clouds.CloudFit` or
+:class:`~softplan_jax.clouds.CurveFit` over it, each labelled with its degree and residuals."""
 
 from __future__ import annotations
 

@@ -1,18 +1,9 @@
-"""The scene of a figure: host-side data of a plan and the 3-D drawing every figure shares.
-
-* Data: :func:`trajectory_data` reads a :class:`~softplan_jax.planning.PlanResult`
-  (or an unbatched Rollout) into NumPy; :func:`arm_backbones` samples the arm's
-  smooth backbone, one constant-curvature arc per segment (the paper's Section 2,
-  Figs. 1-2); :func:`scene_obstacles` samples every obstacle.
-* The view: :func:`view_box` chooses axis limits around the arm, tip path and
-  goal and clips the obstacles to them; :func:`auto_view` chooses the camera;
-  :func:`setup_axes` applies both.
-* Drawing: :func:`draw_scene` (obstacles, goal, base, tip path), :func:`draw_arm`,
-  :func:`draw_shadow`, :func:`draw_global_part` and :func:`readable_legend`.
-
-Everything here is NumPy and matplotlib on the host; matplotlib is imported
-inside the functions, so importing this module does not import it.
-"""
+"""The scene of a figure, which every figure shares (NumPy and matplotlib on the host; matplotlib
+imported inside the functions): the plan's data (:func:`trajectory_data`), the arm's smooth
+backbone, one constant-curvature arc per segment (:func:`arm_backbones`, the paper's section 2),
+the obstacles (:func:`scene_obstacles`), the view (:func:`view_box`, :func:`auto_view`,
+:func:`setup_axes`) and the drawing (:func:`draw_scene`, :func:`draw_arm`, :func:`draw_shadow`,
+:func:`draw_global_part`, :func:`readable_legend`)."""
 
 from __future__ import annotations
 

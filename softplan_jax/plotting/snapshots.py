@@ -1,20 +1,10 @@
-"""Snapshots of a planned motion and its clearance (matplotlib, host side).
-
-* :func:`plot_snapshots` — the arm at a few iterations in one 3D view, like
-  the paper's Figs. 3-5 (obstacle curves, goal, tip path).
-* :func:`plot_snapshot_panels` — the same snapshots side by side, the paper's
-  panels (a) (b) (c).
-* :func:`plot_snapshots_with_clearance` — the 3D snapshots beside a top view
-  and the clearance: a 3D perspective alone hides how close the arm came.
-* :func:`plot_clearance` — true clearance to every obstacle per iteration.
-
-Every function takes a :class:`~softplan_jax.planning.PlanResult` (what
-:func:`softplan_jax.plan` returns) or a single, unbatched
-:class:`~softplan_jax.planning.Rollout`, returns the matplotlib Figure and
-never calls ``plt.show()``. Figures are made with pyplot (so they display in
-notebooks and scripts); without a display pyplot falls back to the Agg backend.
-Close figures you do not keep (``plt.close(fig)``).
-"""
+"""Snapshots of a planned motion and its clearance (matplotlib, host side): the arm at a few
+iterations in one 3-D view (:func:`plot_snapshots`, like the paper's Figs. 3-5), side by side
+(:func:`plot_snapshot_panels`), beside a top view and the clearance
+(:func:`plot_snapshots_with_clearance`), and the true clearance per iteration
+(:func:`plot_clearance`); each takes a :class:`~softplan_jax.planning.PlanResult` or an unbatched
+Rollout, returns the Figure (made with pyplot; close the ones you do not keep) and never calls
+``plt.show()``."""
 
 from __future__ import annotations
 

@@ -1,12 +1,8 @@
-"""A tracking run among moving obstacles in one figure (matplotlib, host side).
-
-:func:`plot_tracking` draws a :class:`~softplan_jax.planning.TrackResult`
-(what :func:`softplan_jax.track` returns): the arm with the obstacles where they
-were at a few times, the goal's path and the tip path, beside the distance to the
-goal and the smallest clearance over time. :func:`tracking_data` and
-:func:`obstacles_at` read the run; the animation (:func:`softplan_jax.plotting.animate_tracking`)
-uses them too.
-"""
+"""A tracking run among moving obstacles in one figure (matplotlib, host side):
+:func:`plot_tracking` draws a :class:`~softplan_jax.planning.TrackResult` (the arm with the
+obstacles where they were at a few times, the goal's path and the tip path, beside the distance
+to the goal and the smallest clearance over time); :func:`tracking_data` and
+:func:`obstacles_at` read the run for it and for the animation."""
 
 from __future__ import annotations
 

@@ -1,12 +1,8 @@
-"""Scenarios: planning problems as pytrees, one job per module.
-
-* :mod:`.scenario` -- the :class:`Scenario` type and its constructors
-  (:func:`make_scenario`, :func:`stack_scenarios`, :func:`default_start`);
-* :mod:`.paper` -- the paper's three simulations (section 3, Tables 2-4);
-* :mod:`.json_format` -- the JSON scenario format (:func:`load_scenario`,
-  :func:`save_scenario`);
-* :mod:`.random_suite` -- seeded random scenario suites for the benchmarks.
-"""
+"""Scenarios: planning problems as pytrees, one job per module (:mod:`.scenario`: the
+:class:`Scenario` type and its constructors; :mod:`.paper`: the paper's three simulations;
+:mod:`.motion` and :mod:`.moving`: moving obstacles and goals, their presets and random
+suite; :mod:`.json_format`: the JSON scenario format; :mod:`.random_suite`: seeded random
+suites for the benchmarks)."""
 
 from .json_format import (
     load_moving_scenario,

@@ -1,15 +1,8 @@
-"""Scenario files: the JSON format ``softplan-scenario/1`` (the documentation's
-"Scenario and gains files": arm, goal, obstacles as polynomial curves, line
-segments or point sets), read with every malformed field named in a ValueError, and written atomically.
-
-Moving scenes add an optional ``"motion"`` object to a polynomial
-or line-segment obstacle (the fields of :func:`~softplan_jax.scenarios.motion.curve_motion`:
-pivot, axis, amplitude, omega, phase, shift, velocity) and an optional
-top-level ``"goal_path"`` (``times``, ``points``, and ``attach``: the index in
-``obstacles`` of the curve that carries the goal). :func:`load_moving_scenario`
-reads them; :func:`load_scenario` refuses a file that has them (it would drop
-the motion).
-"""
+"""Scenario files: the JSON format ``softplan-scenario/1`` (arm, goal, obstacles as polynomial
+curves, line segments or point sets; for a moving scene a ``motion`` per curve and a
+``goal_path``: the documentation's "Scenario and gains files"), read with every malformed
+field named in a ValueError (:func:`load_scenario` refuses a moving scene, whose motion it
+would drop; :func:`load_moving_scenario` reads both) and written atomically."""
 
 from __future__ import annotations
 
@@ -187,6 +180,29 @@ def _parse_goal_path(value, curve_index: dict) -> dict:
 
 def _parse(data: dict, dtype=None):
     """(Scenario, {curve index: (field path, motion fields)}, goal path fields or None)."""
+    _check_top(data)
+    goal = _num_array(data["goal"], "goal", (3,))
+    q0, radius, L_min, L_max = _parse_arm(data.get("arm", {}))
+    obstacles_json = data.get("obstacles", [])
+    if not isinstance(obstacles_json, list):
+        raise _err("obstacles", "must be a list")
+    obstacles = []
+    motions, curve_index = {}, {}
+    for k, ob in enumerate(obstacles_json):
+        path = f"obstacles[{k}]"
+        kind, r = _check_obstacle(ob, path)
+        if kind != "points":
+            curve_index[k] = len(curve_index)  # polynomial curves keep their order in the scene
+            if "motion" in ob:
+                motions[curve_index[k]] = (f"{path}.motion", _parse_motion(ob["motion"], f"{path}.motion"))
+        obstacles.append(_parse_obstacle(ob, kind, r, path))
+    scen = _build(goal, q0, radius, L_min, L_max, obstacles, obstacles_json, dtype)
+    path = _parse_goal_path(data["goal_path"], curve_index) if "goal_path" in data else None
+    return scen, motions, path
+
+
+def _check_top(data) -> None:
+    """The top level's keys, name, description, format and metadata, and a goal."""
     if not isinstance(data, dict):
         raise _err("(top)", f"must be a JSON object, got {type(data).__name__}")
     for key in ("name", "description"):
@@ -201,8 +217,10 @@ def _parse(data: dict, dtype=None):
         raise _err("metadata", f"must be a JSON object, got {_short(data['metadata'])}")
     if "goal" not in data:
         raise _err("goal", "is missing")
-    goal = _num_array(data["goal"], "goal", (3,))
-    arm = data.get("arm", {})
+
+
+def _parse_arm(arm):
+    """``arm``: ``(q0 (n, 3), radius, L_min, L_max)``."""
     if not isinstance(arm, dict):
         raise _err("arm", "must be an object")
     unknown = set(arm) - _ARM_KEYS
@@ -237,67 +255,66 @@ def _parse(data: dict, dtype=None):
             raise _err("arm.length_limits", f"need 0 < L_min < L_max, got {_short(lim)}")
         if np.any(q0[:, 0] < L_min) or np.any(q0[:, 0] > L_max):
             raise _err("arm.length_limits", f"the start lengths {q0[:, 0].tolist()} lie outside {_short(lim)}")
-    obstacles_json = data.get("obstacles", [])
-    if not isinstance(obstacles_json, list):
-        raise _err("obstacles", "must be a list")
-    obstacles = []
-    motions, curve_index = {}, {}
-    for k, ob in enumerate(obstacles_json):
-        path = f"obstacles[{k}]"
-        if not isinstance(ob, dict) or "type" not in ob:
-            raise _err(path, "must be an object with a 'type'")
-        kind = ob["type"]
-        allowed = {
-            "polynomial": {"type", "coeffs", "u_range", "radius", "name", "metadata", "motion"},
-            "line_segment": {"type", "start", "end", "radius", "name", "metadata", "motion"},
-            "points": {"type", "points", "radius", "name", "metadata"},
-        }
-        if not isinstance(kind, str) or kind not in allowed:
-            raise _err(f"{path}.type", f"unknown obstacle type {_short(kind)}; choose one of {sorted(allowed)}")
-        extra = set(ob) - allowed[kind]
-        if extra:
-            raise _err(f"{path}.{sorted(extra)[0]}", f"unknown key for a {kind} obstacle")
-        if not isinstance(ob.get("metadata", {}), dict):
-            raise _err(f"{path}.metadata", f"must be a JSON object, got {_short(ob['metadata'])}")
-        r = _num_array(ob.get("radius", 0.0), f"{path}.radius", ())
-        if r < 0:
-            raise _err(f"{path}.radius", f"must be >= 0, got {float(r)}")
-        if kind != "points":
-            curve_index[k] = len(curve_index)  # polynomial curves keep their order in the scene
-            if "motion" in ob:
-                motions[curve_index[k]] = (f"{path}.motion", _parse_motion(ob["motion"], f"{path}.motion"))
-        if kind == "polynomial":
-            for key in ("coeffs", "u_range"):
-                if key not in ob:
-                    raise _err(f"{path}.{key}", "is missing")
-            coeffs = _num_array(ob["coeffs"], f"{path}.coeffs", (3, None))
-            if coeffs.shape[1] < 1:
-                raise _err(f"{path}.coeffs", "needs at least one coefficient per axis")
-            u_range = _num_array(ob["u_range"], f"{path}.u_range", (2,))
-            if not u_range[0] < u_range[1]:
-                raise _err(f"{path}.u_range", f"must satisfy u_min < u_max, got {u_range.tolist()}")
-            try:
-                obstacles.append(PolynomialCurve(coeffs, u_range, float(r)))
-            except ValueError as err:
-                raise _err(f"{path}.{str(err).split(' ')[0].rstrip(':')}", str(err)) from None
-        elif kind == "line_segment":
-            for key in ("start", "end"):
-                if key not in ob:
-                    raise _err(f"{path}.{key}", "is missing")
-            a = _num_array(ob["start"], f"{path}.start", (3,))
-            b = _num_array(ob["end"], f"{path}.end", (3,))
-            try:
-                obstacles.append(line_segment(a, b, float(r)))
-            except ValueError as err:
-                raise _err(path, str(err)) from None
-        else:
-            if "points" not in ob:
-                raise _err(f"{path}.points", "is missing")
-            pts = _num_array(ob["points"], f"{path}.points", (None, 3))
-            if pts.shape[0] == 0:
-                raise _err(f"{path}.points", "is empty")
-            obstacles.append((pts, float(r)))
-    # Point radii are per obstacle: build, then set them.
+    return q0, radius, L_min, L_max
+
+
+# The keys of each obstacle type.
+_OBSTACLE_KEYS = {
+    "polynomial": {"type", "coeffs", "u_range", "radius", "name", "metadata", "motion"},
+    "line_segment": {"type", "start", "end", "radius", "name", "metadata", "motion"},
+    "points": {"type", "points", "radius", "name", "metadata"},
+}
+
+
+def _check_obstacle(ob, path: str):
+    """An obstacle's type, keys, metadata and radius: ``(type, radius)``."""
+    if not isinstance(ob, dict) or "type" not in ob:
+        raise _err(path, "must be an object with a 'type'")
+    kind = ob["type"]
+    if not isinstance(kind, str) or kind not in _OBSTACLE_KEYS:
+        raise _err(f"{path}.type", f"unknown obstacle type {_short(kind)}; choose one of {sorted(_OBSTACLE_KEYS)}")
+    extra = set(ob) - _OBSTACLE_KEYS[kind]
+    if extra:
+        raise _err(f"{path}.{sorted(extra)[0]}", f"unknown key for a {kind} obstacle")
+    if not isinstance(ob.get("metadata", {}), dict):
+        raise _err(f"{path}.metadata", f"must be a JSON object, got {_short(ob['metadata'])}")
+    r = _num_array(ob.get("radius", 0.0), f"{path}.radius", ())
+    if r < 0:
+        raise _err(f"{path}.radius", f"must be >= 0, got {float(r)}")
+    return kind, r
+
+
+def _parse_obstacle(ob: dict, kind: str, r, path: str):
+    """One obstacle: a PolynomialCurve, or ``(points (N, 3), radius)`` for a point set."""
+    for key in {"polynomial": ("coeffs", "u_range"), "line_segment": ("start", "end"), "points": ("points",)}[kind]:
+        if key not in ob:
+            raise _err(f"{path}.{key}", "is missing")
+    if kind == "polynomial":
+        coeffs = _num_array(ob["coeffs"], f"{path}.coeffs", (3, None))
+        if coeffs.shape[1] < 1:
+            raise _err(f"{path}.coeffs", "needs at least one coefficient per axis")
+        u_range = _num_array(ob["u_range"], f"{path}.u_range", (2,))
+        if not u_range[0] < u_range[1]:
+            raise _err(f"{path}.u_range", f"must satisfy u_min < u_max, got {u_range.tolist()}")
+        try:
+            return PolynomialCurve(coeffs, u_range, float(r))
+        except ValueError as err:
+            raise _err(f"{path}.{str(err).split(' ')[0].rstrip(':')}", str(err)) from None
+    if kind == "line_segment":
+        a = _num_array(ob["start"], f"{path}.start", (3,))
+        b = _num_array(ob["end"], f"{path}.end", (3,))
+        try:
+            return line_segment(a, b, float(r))
+        except ValueError as err:
+            raise _err(path, str(err)) from None
+    pts = _num_array(ob["points"], f"{path}.points", (None, 3))
+    if pts.shape[0] == 0:
+        raise _err(f"{path}.points", "is empty")
+    return (pts, float(r))
+
+
+def _build(goal, q0, radius, L_min, L_max, obstacles: list, obstacles_json: list, dtype) -> Scenario:
+    """make_scenario of the parsed fields, then the point sets' radii (they are per obstacle)."""
     plain = [o[0] if isinstance(o, tuple) else o for o in obstacles]
     q0 = jnp.asarray(q0, dtype or jnp.result_type(float))
     try:
@@ -314,8 +331,7 @@ def _parse(data: dict, dtype=None):
         pr = np.zeros(scen.point_radius.shape)
         pr[: len(radii)] = radii
         scen = scen._replace(point_radius=jnp.asarray(pr, q0.dtype))
-    path = _parse_goal_path(data["goal_path"], curve_index) if "goal_path" in data else None
-    return scen, motions, path
+    return scen
 
 
 def scenario_to_dict(scenario: Scenario, name: str | None = None) -> dict:

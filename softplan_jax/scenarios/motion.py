@@ -1,40 +1,10 @@
-"""Moving obstacles and moving goals (the paper's future work, §4).
-
-A :class:`MovingScenario` is a :class:`~softplan_jax.scenarios.Scenario` (the
-scene at rest) plus
-
-* a :class:`CurveMotion` per polynomial curve slot: a RIGID motion of the curve
-
-      F_o(u, t) = p + R(a, theta(t)) (F_o(u) - p) + sigma(t) s + t v,
-      theta(t) = A sigma(t),   sigma(t) = sin(omega t + phase)
-
-  (``R(a, x)``: rotation by x about the unit axis a through the pivot p,
-  Rodrigues' formula). ``A`` > 0 is a branch swaying about its base p;
-  ``s`` an oscillating translation (a wire sweeping to and fro); ``v`` a
-  drift. All zeros is a static curve (the padding slots' motion);
-* a :class:`GoalPath`: goal samples at increasing times, interpolated
-  linearly (constant beyond the ends), optionally carried by the motion of a
-  curve slot (a fruit on a swaying branch moves with the branch).
-
-Exactness. A rotated and translated polynomial is a polynomial of the same
-degree (:func:`moved_curves`: its coefficients are ``R (C - p e_0^T) + (p +
-sigma s + t v) e_0^T``), so the closest point at time t is the SAME exact solve
-(paper §2.3) on the moved coefficients, and the warm start's per-curve data
-moves with it (:func:`moved_cells`: the curvature bound and the u-grid do not
-change under a rigid motion, the grid points move).
-
-The speed bound (:func:`speed_bounds`). For every point of the curve and
-every interval of length h,
-``|F_o(u, t + h') - F_o(u, t)| <= h (|v| + omega (|s| + A r_max))`` for
-``0 <= h' <= h``: ``|R(a, x) r - R(a, y) r| <= |x - y| |r|``, ``|sigma'| <=
-omega`` and ``|theta'| <= A omega``, with ``r_max >= max_u |F_o(u) - p|`` from
-the convex hull of the curve's Bernstein control points on its u-range (a
-proof, not a sample). It is derived, never guessed: the clearance-bounded
-step of :mod:`softplan_jax.planning.tracking` spends it.
-
-Only polynomial curves move; point sets and :class:`ParametricCurve` obstacles
-stay where they are.
-"""
+"""Moving obstacles and moving goals (the paper's future work, §4): a
+:class:`MovingScenario` is a :class:`~softplan_jax.scenarios.Scenario` at rest plus a rigid
+:class:`CurveMotion` per polynomial curve slot and a :class:`GoalPath`; a moved polynomial is
+the polynomial of the moved coefficients (:func:`moved_curves`), so the closest point at time
+t is the same exact solve (paper §2.3), and :func:`speed_bounds` proves how fast any point of
+an obstacle moves. Only polynomial curves move; point sets and :class:`ParametricCurve`
+obstacles stay where they are."""
 
 from __future__ import annotations
 
@@ -69,8 +39,16 @@ __all__ = [
 
 
 class CurveMotion(NamedTuple):
-    """The rigid motion of curve slots (see the module docstring); every field
-    has the slot axis first, ``(m_c, ...)``, or none for one curve.
+    """The rigid motion of curve slots; every field has the slot axis first, ``(m_c, ...)``,
+    or none for one curve::
+
+        F_o(u, t) = p + R(a, theta(t)) (F_o(u) - p) + sigma(t) s + t v,
+        theta(t) = A sigma(t),   sigma(t) = sin(omega t + phase)
+
+    (``R(a, x)``: rotation by x about the unit axis a through the pivot p, Rodrigues'
+    formula). ``A`` > 0 is a branch swaying about its base p; ``s`` an oscillating
+    translation (a wire sweeping to and fro); ``v`` a drift. All zeros is a static curve
+    (the padding slots' motion).
 
     Attributes:
       pivot: (m_c, 3) the point p the sway turns about (a branch's base) [m].
@@ -140,7 +118,7 @@ def _vector(x, name: str, shape, dtype):
 
 def curve_motion(*, pivot=(0.0, 0.0, 0.0), axis=(0.0, 0.0, 0.0), amplitude=0.0, omega=0.0, phase=0.0,
                  shift=(0.0, 0.0, 0.0), velocity=(0.0, 0.0, 0.0), dtype=None) -> CurveMotion:
-    """The motion of ONE curve (see the module docstring for the formula).
+    """The motion of ONE curve (the formula: :class:`CurveMotion`).
 
     Args:
       pivot: (3,) the point the sway turns about [m].
@@ -326,7 +304,12 @@ def speed_bounds(moving: MovingScenario):
     (slot order of :func:`~softplan_jax.geometry.obstacles.radius_and_mask`: polynomial
     curves, point sets, parametric curves; the last two are static: 0).
 
-    ``|v| + omega (|s| + A r_max)`` per polynomial curve (module docstring).
+    ``|v| + omega (|s| + A r_max)`` per polynomial curve: for every point of the curve and every
+    interval of length h, ``|F_o(u, t + h') - F_o(u, t)| <= h (|v| + omega (|s| + A r_max))`` for
+    ``0 <= h' <= h``, since ``|R(a, x) r - R(a, y) r| <= |x - y| |r|``, ``|sigma'| <= omega`` and
+    ``|theta'| <= A omega``, with ``r_max >= max_u |F_o(u) - p|`` from the convex hull of the
+    curve's Bernstein control points on its u-range (:func:`curve_radius_bound`: a proof, not
+    a sample).
     """
     scene, m = moving.scene, moving.motion
     dtype = scene.q0.dtype

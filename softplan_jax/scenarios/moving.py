@@ -1,22 +1,6 @@
-"""Moving scenes: presets people would try, and a seeded random suite.
-
-Presets (:func:`moving_scenario`), all on the paper's arm (3 segments of
-length 1, the default start):
-
-* ``"tree_sway"``: the paper's tree (Table 4's four legible branches and the
-  trunk, DESIGN.md); each branch sways about its base on the trunk, about the
-  horizontal axis across it (bobbing up and down), amplitude 0.06 rad at
-  1.5 rad/s, phases 1.3 rad apart; the trunk stands still; the goal is the
-  paper's, fixed.
-* ``"tree_fruit"``: the same swaying tree; the goal is a fruit hanging 0.12
-  below branch 2 at u = 1 and moving with the branch (a goal on a moving
-  curve, :class:`~softplan_jax.scenarios.motion.GoalPath` ``attach``).
-* ``"wire_sweep"``: a horizontal wire across the goal's side of the
-  workspace (x = 0.9, y from 0.4 to 2.0) moves up and down through the arm's
-  pose at the goal (1.2, 0.9, 1.4): height 1.2 + 0.8 sin(0.3 t). The arm gives
-  way and comes back; it is played with a look-ahead of 0.5 s
-  (:data:`MOVING_OPTIONS`; without it the safe step stops it ``too_fast``).
-"""
+"""Moving scenes: the presets people would try (:func:`moving_scenario`: ``tree_sway``,
+``tree_fruit``, ``wire_sweep``, on the paper's arm) and a seeded random suite
+(:func:`random_moving_scenarios`)."""
 
 from __future__ import annotations
 
@@ -53,7 +37,21 @@ def _tree_motions(coeffs: np.ndarray, amplitude: float, omega: float, dtype):
 
 
 def moving_scenario(name: str, *, dtype=None) -> MovingScenario:
-    """One of the :data:`MOVING_SCENARIOS` presets (see the module docstring)."""
+    """One of the :data:`MOVING_SCENARIOS` presets, on the paper's arm (3 segments of length 1,
+    the default start).
+
+    * ``"tree_sway"``: the paper's tree (Table 4's four legible branches and the trunk,
+      DESIGN.md); each branch sways about its base on the trunk, about the horizontal axis
+      across it (bobbing up and down), amplitude 0.06 rad at 1.5 rad/s, phases 1.3 rad
+      apart; the trunk stands still; the goal is the paper's, fixed.
+    * ``"tree_fruit"``: the same swaying tree; the goal is a fruit hanging 0.12 below
+      branch 2 at u = 1 and moving with the branch (:class:`GoalPath` ``attach``).
+    * ``"wire_sweep"``: a horizontal wire across the goal's side of the workspace (x = 0.9,
+      y from 0.4 to 2.0) moves up and down through the arm's pose at the goal (1.2, 0.9,
+      1.4): height 1.2 + 0.8 sin(0.3 t). The arm gives way and comes back; it is played with
+      a look-ahead of 0.5 s (:data:`MOVING_OPTIONS`; without it the safe step stops it
+      ``too_fast``).
+    """
     if name not in MOVING_SCENARIOS:
         raise ValueError(f"unknown moving scenario {name!r}; choose one of {sorted(MOVING_SCENARIOS)}")
     dtype = dtype or jnp.result_type(float)

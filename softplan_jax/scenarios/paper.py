@@ -1,12 +1,9 @@
-"""The paper's three simulations as data: Sim1 (Table 2), Sim2 (Table 3) and
-the tree (Table 4), with the results the paper prints (section 3).
-
-Three segments of static length 1 (paper Table 1), starting from
-:func:`~softplan_jax.scenarios.default_start`. Table 4 is garbled after its
-fourth row (the text speaks of six curved obstacles, five rows are printed, the
-fifth a stray ``u - u^2`` fragment): the tree uses the four legible branches
-plus the trunk ``X = 1, Y = 1, Z = u, u in [0, 3]`` (DESIGN.md).
-"""
+"""The paper's three simulations as data, with the results the paper prints (section 3):
+Sim1 (Table 2), Sim2 (Table 3) and the tree (Table 4), three segments of static length 1
+(Table 1) from :func:`~softplan_jax.scenarios.default_start`. Table 4 is garbled after its
+fourth row (the text speaks of six curved obstacles, five rows are printed, the fifth a stray
+``u - u^2`` fragment): the tree uses the four legible branches plus the trunk ``X = 1,
+Y = 1, Z = u, u in [0, 3]`` (DESIGN.md)."""
 
 from __future__ import annotations
 

@@ -1,11 +1,9 @@
-"""Seeded suites of random scenarios for batch benchmarking (the random sweep
-of ``benchmarks/``; the paper evaluates on its three scenes only, section 3).
-
-The geometry of the generator runs on the host in NumPy, and so does the
-assembly of the stack: every scene equals what the public constructors
-(:func:`~softplan_jax.scenarios.make_scenario`,
-:func:`~softplan_jax.scenarios.stack_scenarios`) build of it, bit for bit.
-"""
+"""Seeded suites of random scenarios for batch benchmarking (:func:`random_scenarios`; the
+paper evaluates on its three scenes only, section 3): goals drawn on the host in NumPy,
+curves placed across the path and redrawn until certainly clear of the start arm and the
+goal, and the stack assembled at once, every scene bit for bit what
+:func:`~softplan_jax.scenarios.make_scenario` and
+:func:`~softplan_jax.scenarios.stack_scenarios` build of it."""
 
 from __future__ import annotations
 
@@ -69,7 +67,7 @@ def _random_perpendicular(rng, e):
     return np.cos(ang) * b1 + np.sin(ang) * b2
 
 
-def _sampled_min_distance(curve_pts, cloud, chunk: int = 1024):
+def _sampled_min_distance(curve_pts, cloud, chunk: int = 128):
     """min over samples of |curve point - cloud point|: curve_pts (M, S, 3), cloud (A, 3) -> (M,)."""
     out = np.empty(curve_pts.shape[0])
     c2 = np.sum(cloud * cloud, axis=-1)
@@ -93,21 +91,30 @@ def _quadratic_points(coeffs, n_samples: int):
     return pts, speed / (n_samples - 1)
 
 
+# Candidate curves whose samples are held at once (a multiple of _sampled_min_distance's chunk,
+# so the arithmetic groups the same rows as on the whole array: the same bits, in bounded memory).
+_CANDIDATE_BLOCK = 8 * 1024
+
+
 def _clear_of(coeffs, arm_fine, h_fine, arm_coarse, h_coarse, goal, start_clearance, goal_clearance):
     """Whether each quadratic curve (M, 3, 3) is certainly at least start_clearance from the arm
     and goal_clearance from its goal (M, 3). Sampled distances minus the sampling error bound
     (half the sample spacing on each side), coarse first, fine only where the coarse answer is
     undecided; conservative: a curve within the error bound of a threshold is rejected."""
-    pts_c, hc_c = _quadratic_points(coeffs, 16)
-    d = _sampled_min_distance(pts_c, arm_coarse)
+    m = coeffs.shape[0]
+    d, hc_c, d_goal, hc_g = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    for a in range(0, m, _CANDIDATE_BLOCK):
+        block = slice(a, a + _CANDIDATE_BLOCK)
+        pts_c, hc_c[block] = _quadratic_points(coeffs[block], 16)
+        d[block] = _sampled_min_distance(pts_c, arm_coarse)
+        pts_g, hc_g[block] = _quadratic_points(coeffs[block], 64)
+        d_goal[block] = np.min(np.linalg.norm(pts_g - goal[block, None, :], axis=-1), axis=1)
     sure = d - 0.5 * (hc_c + h_coarse) >= start_clearance
     undecided = np.nonzero(~sure & (d >= start_clearance))[0]
     if undecided.size:
         pts_f, hc_f = _quadratic_points(coeffs[undecided], 64)
         d_f = _sampled_min_distance(pts_f, arm_fine)
         sure[undecided] = d_f - 0.5 * (hc_f + h_fine) >= start_clearance
-    pts_g, hc_g = _quadratic_points(coeffs, 64)
-    d_goal = np.min(np.linalg.norm(pts_g - goal[:, None, :], axis=-1), axis=1)
     return sure & (d_goal - 0.5 * hc_g >= goal_clearance)
 
 
@@ -189,9 +196,35 @@ def random_scenarios(
       (n, curve_slots), no point sets; each entry equals ``make_scenario(goal,
       curves, q0, curve_slots=curve_slots, degree=degree)``.
     """
+    n = _check_suite_args(n, obstacles, degrees, curve_slots, degree, theta_max, length, path_fraction,
+                          curve_length, dict(path_offset=path_offset, bend=bend, min_goal_distance=min_goal_distance,
+                                             start_clearance=start_clearance, goal_clearance=goal_clearance))
+    lo, hi = (int(v) for v in obstacles)
+    degrees = [int(d) for d in degrees]
+    dtype = dtype or jnp.result_type(float)
+    q0 = check_configuration(default_start() if q0 is None else q0)
+    _check_suite_memory(n, curve_slots, degree)
+    q0_np = np.asarray(q0, np.float64)
+    rng = np.random.default_rng(seed_sequence(key_or_seed))
+    arm = _StartArm(q0_np, q0.dtype)
+    goals = _GoalDraw(rng, n, q0_np.shape[0], length, theta_max, arm.tip, min_goal_distance, max_rounds)
+    goal = np.zeros((n, 3))
+    goals.fill(goal, np.arange(n))
+    counts = rng.integers(lo, hi + 1, n)
+    real = np.arange(curve_slots)[None, :] < counts[:, None]  # (n, slots)
+    deg = rng.choice(degrees, (n, curve_slots))
+    coeffs = np.zeros((n, curve_slots, 3, int(degree) + 1))
+    placement = dict(path_fraction=path_fraction, path_offset=path_offset, curve_length=curve_length, bend=bend,
+                     start_clearance=start_clearance, goal_clearance=goal_clearance)
+    _place_obstacles(rng, goals, arm, goal, real, deg, coeffs, placement, max_rounds)
+    return _assemble(q0_np, goal, real, coeffs, curve_slots, degree, goal_clearance, dtype)
+
+
+def _check_suite_args(n, obstacles, degrees, curve_slots, degree, theta_max, length, path_fraction, curve_length,
+                      nonneg: dict) -> int:
+    """random_scenarios' arguments checked (ValueError naming the argument); n as an int."""
     if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 1:
         raise ValueError(f"n must be an int >= 1, got {n!r}")
-    n = int(n)
     lo, hi = (int(v) for v in obstacles)
     if not 1 <= lo <= hi <= int(curve_slots):
         raise ValueError(
@@ -210,94 +243,118 @@ def random_scenarios(
     for name, v in (("theta_max", theta_max), ("length", length)):
         if not v > 0:
             raise ValueError(f"{name} must be > 0, got {v}")
-    for name, v in (("path_offset", path_offset), ("bend", bend), ("min_goal_distance", min_goal_distance),
-                    ("start_clearance", start_clearance), ("goal_clearance", goal_clearance)):
+    for name, v in nonneg.items():
         if not v >= 0:
             raise ValueError(f"{name} must be >= 0, got {v}")
-    dtype = dtype or jnp.result_type(float)
-    q0 = check_configuration(default_start() if q0 is None else q0)
-    # The generator's arrays per scene: its curve slots' coefficients and sampled points and
-    # distances (an estimate, bytes), before anything is drawn.
+    return int(n)
+
+
+def _check_suite_memory(n: int, curve_slots: int, degree: int) -> None:
+    """ValueError (naming n) when the generator's arrays would not fit in memory: per scene its
+    curve slots' coefficients and sampled points and distances (an estimate, bytes)."""
     per_scene = 8 * int(curve_slots) * (3 * (int(degree) + 1) + 16 * 30 + 64 * 8) + 1024
     check_memory(n * per_scene, "n", f"a suite of {n} random scenes with {curve_slots} curve slots",
                  "draw fewer scenes (or plan a large suite in parts: softplan sweep streams one of any size)",
                  on_device=False)
-    q0_np = np.asarray(q0, np.float64)
-    n_seg = q0_np.shape[0]
-    rng = np.random.default_rng(seed_sequence(key_or_seed))
-    tips = _batched_tips()
-    q0_j = jnp.asarray(q0_np, q0.dtype)
-    p0 = np.asarray(tips(q0_j[None]), np.float64)[0]
-    arm_fine = np.concatenate([np.zeros((1, 3)), np.asarray(_backbone()(q0_j, 40), np.float64)])
-    arm_coarse = np.concatenate([np.zeros((1, 3)), np.asarray(_backbone()(q0_j, 8), np.float64)])
-    h_fine, h_coarse = q0_np[:, 0].max() / 40, q0_np[:, 0].max() / 8
 
-    def draw_goals(idx):
-        """Goals for scenarios idx: tips of random configurations, at least
-        min_goal_distance from the start tip."""
+
+class _StartArm:
+    """The start arm as the placement test sees it: its tip ``p0``, its backbone at 40 (fine)
+    and 8 (coarse) points per segment with the base, and their sample spacings."""
+
+    def __init__(self, q0_np, dtype):
+        q0_j = jnp.asarray(q0_np, dtype)
+        self.tip = np.asarray(_batched_tips()(q0_j[None]), np.float64)[0]
+        self.fine = np.concatenate([np.zeros((1, 3)), np.asarray(_backbone()(q0_j, 40), np.float64)])
+        self.coarse = np.concatenate([np.zeros((1, 3)), np.asarray(_backbone()(q0_j, 8), np.float64)])
+        self.h_fine, self.h_coarse = q0_np[:, 0].max() / 40, q0_np[:, 0].max() / 8
+
+
+class _GoalDraw:
+    """Goals: tips of random configurations (every ``L_i = length``, ``theta_i ~ U[0, theta_max]``,
+    ``phi_i ~ U[-pi, pi]``) at least ``min_goal_distance`` from the start tip."""
+
+    def __init__(self, rng, n, n_seg, length, theta_max, p0, min_goal_distance, max_rounds):
+        self.rng, self.n, self.n_seg, self.length, self.theta_max = rng, n, n_seg, length, theta_max
+        self.p0, self.min_goal_distance, self.max_rounds = p0, min_goal_distance, max_rounds
+
+    def fill(self, goal, idx) -> None:
+        """Draw the goals of scenarios ``idx`` into ``goal`` (n, 3), in order."""
         todo = np.asarray(idx)
-        for _ in range(max_rounds):
+        n, rng = self.n, self.rng
+        for _ in range(self.max_rounds):
             # Always n candidates (one compiled shape); the accepted ones fill todo in order.
             qs = np.stack(
-                [np.full((n, n_seg), float(length)), rng.uniform(0.0, theta_max, (n, n_seg)),
-                 rng.uniform(-np.pi, np.pi, (n, n_seg))], axis=-1)
-            g = np.asarray(tips(jnp.asarray(qs)), np.float64)
-            g = g[np.linalg.norm(g - p0, axis=-1) >= min_goal_distance]
+                [np.full((n, self.n_seg), float(self.length)), rng.uniform(0.0, self.theta_max, (n, self.n_seg)),
+                 rng.uniform(-np.pi, np.pi, (n, self.n_seg))], axis=-1)
+            g = np.asarray(_batched_tips()(jnp.asarray(qs)), np.float64)
+            g = g[np.linalg.norm(g - self.p0, axis=-1) >= self.min_goal_distance]
             take = min(todo.size, g.shape[0])
             goal[todo[:take]] = g[:take]
             todo = todo[take:]
             if todo.size == 0:
                 return
-        raise ValueError(f"no goal at least {min_goal_distance} from the start tip after {max_rounds} rounds")
+        raise ValueError(f"no goal at least {self.min_goal_distance} from the start tip after {self.max_rounds} "
+                         "rounds")
 
-    goal = np.zeros((n, 3))
-    draw_goals(np.arange(n))
-    counts = rng.integers(lo, hi + 1, n)
-    real = np.arange(curve_slots)[None, :] < counts[:, None]  # (n, slots)
-    deg = rng.choice(degrees, (n, curve_slots))
-    coeffs = np.zeros((n, curve_slots, 3, int(degree) + 1))
+
+def _place_obstacles(rng, goals: _GoalDraw, arm: _StartArm, goal, real, deg, coeffs, placement: dict,
+                     max_rounds: int) -> None:
+    """Draw every real slot's curve (``real`` (n, slots), degrees ``deg``) into ``coeffs`` in
+    place, redrawing a curve until it is clear of the start arm and of its goal, and a scenario's
+    goal and curves where one curve finds no place in ``max_rounds`` draws (random_scenarios)."""
     todo_i, todo_j = np.nonzero(real)
     tries = np.zeros(todo_i.size, int)
-    redrawn = 0
     for _ in range(20 * max_rounds):
         # An obstacle that found no place in max_rounds draws: the goal leaves no room
         # (e.g. a path hugging the arm); draw a new goal and all obstacles of that scenario.
         stuck = np.unique(todo_i[tries >= max_rounds])
         if stuck.size:
-            redrawn += stuck.size
-            draw_goals(stuck)
+            goals.fill(goal, stuck)
             coeffs[stuck] = 0.0
             keep = ~np.isin(todo_i, stuck)
             si, sj = np.nonzero(real[stuck])
             todo_i = np.concatenate([todo_i[keep], stuck[si]])
             todo_j = np.concatenate([todo_j[keep], sj])
             tries = np.concatenate([tries[keep], np.zeros(si.size, int)])
-        m = todo_i.size
         gi = goal[todo_i]
-        ei = _unit(gi - p0)
-        t = rng.uniform(path_fraction[0], path_fraction[1], m)
-        r = path_offset * np.sqrt(rng.uniform(0.0, 1.0, m))
-        c = p0 + t[:, None] * (gi - p0) + r[:, None] * _random_perpendicular(rng, ei)
-        a = _random_perpendicular(rng, ei)
-        b = _random_perpendicular(rng, a)
-        ell = rng.uniform(curve_length[0], curve_length[1], m)
-        beta = np.where(deg[todo_i, todo_j] == 2, rng.uniform(-bend, bend, m), 0.0)
-        # F(u) = c + l (u - 1/2) a + beta l (u - 1/2)^2 b in the power basis.
-        k0 = c - 0.5 * ell[:, None] * a + 0.25 * (beta * ell)[:, None] * b
-        k1 = ell[:, None] * a - (beta * ell)[:, None] * b
-        k2 = (beta * ell)[:, None] * b
-        cand = np.stack([k0, k1, k2], axis=-1)  # (m, 3, 3)
-        ok = _clear_of(cand, arm_fine, h_fine, arm_coarse, h_coarse, gi, start_clearance, goal_clearance)
+        cand = _candidate_curves(rng, arm.tip, gi, deg[todo_i, todo_j] == 2, placement)
+        ok = _clear_of(cand, arm.fine, arm.h_fine, arm.coarse, arm.h_coarse, gi, placement["start_clearance"],
+                       placement["goal_clearance"])
         coeffs[todo_i[ok], todo_j[ok], :, :3] = cand[ok]
         todo_i, todo_j, tries = todo_i[~ok], todo_j[~ok], tries[~ok] + 1
         if todo_i.size == 0:
-            break
-    else:
-        raise ValueError(
-            f"{todo_i.size} obstacles could not be placed; loosen start_clearance, goal_clearance, "
-            "path_offset or min_goal_distance"
-        )
+            return
+    raise ValueError(
+        f"{todo_i.size} obstacles could not be placed; loosen start_clearance, goal_clearance, "
+        "path_offset or min_goal_distance"
+    )
 
+
+def _candidate_curves(rng, p0, gi, quadratic, placement: dict):
+    """One candidate curve (3, 3) per goal of ``gi`` (m, 3) across the path from the start tip
+    ``p0`` to it; ``quadratic`` (m,) says which ones bend (random_scenarios' formula)."""
+    m = gi.shape[0]
+    ei = _unit(gi - p0)
+    t = rng.uniform(placement["path_fraction"][0], placement["path_fraction"][1], m)
+    r = placement["path_offset"] * np.sqrt(rng.uniform(0.0, 1.0, m))
+    c = p0 + t[:, None] * (gi - p0) + r[:, None] * _random_perpendicular(rng, ei)
+    a = _random_perpendicular(rng, ei)
+    b = _random_perpendicular(rng, a)
+    ell = rng.uniform(placement["curve_length"][0], placement["curve_length"][1], m)
+    bend = placement["bend"]
+    beta = np.where(quadratic, rng.uniform(-bend, bend, m), 0.0)
+    # F(u) = c + l (u - 1/2) a + beta l (u - 1/2)^2 b in the power basis.
+    k0 = c - 0.5 * ell[:, None] * a + 0.25 * (beta * ell)[:, None] * b
+    k1 = ell[:, None] * a - (beta * ell)[:, None] * b
+    k2 = (beta * ell)[:, None] * b
+    return np.stack([k0, k1, k2], axis=-1)  # (m, 3, 3)
+
+
+def _assemble(q0_np, goal, real, coeffs, curve_slots, degree, goal_clearance, dtype) -> Scenario:
+    """The stacked Scenario of the drawn goals and curves (what make_scenario and
+    stack_scenarios build of each scene, bit for bit)."""
+    n = goal.shape[0]
     q0_d = jnp.asarray(q0_np, dtype)
 
     def one(i):
@@ -308,11 +365,9 @@ def random_scenarios(
         # Each scene through the public constructor (its checks and warnings: a goal on an
         # obstacle is possible here), then stacked.
         return stack_scenarios([one(i) for i in range(n)])
-    # The goals are proven goal_clearance > 0 from every curve above, so make_scenario would
-    # warn of nothing: the first scene goes through it (its checks), and the others take its
-    # fields with their own goal, coefficients and mask, assembled on the host at once (a
-    # scene at a time took ~8 ms; minutes for 10^4 scenes, longer on an accelerator).
-    # The same arrays as stack_scenarios of make_scenario's (a test compares them).
+    # The goals are proven goal_clearance > 0 from every curve, so make_scenario would warn of
+    # nothing: the first scene goes through it (its checks), and the others take its fields
+    # with their own goal, coefficients and mask, assembled on the host at once.
     first = one(0)
     stacked = jax.tree_util.tree_map(lambda x: np.broadcast_to(np.asarray(x), (n, *np.shape(x))), first)
     curves = stacked.curves

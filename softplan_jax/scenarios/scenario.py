@@ -1,20 +1,10 @@
-"""The Scenario pytree and its constructors: the arm's start, the goal and the
-obstacles of one planning problem (paper section 2: the arm of section 2.1,
-the obstacles of section 2.3 and the goal of the planner, eq. 9).
-
-Obstacles come in three padded groups so that scenes of one padded shape share
-one compilation:
-
-* ``curves`` -- polynomial curves stacked to ``(m_c, 3, K)`` with ``curve_mask``;
-* ``points`` -- point-set obstacles padded to ``(m_p, N_max, 3)`` with
-  ``point_mask`` ``(m_p, N_max)`` (a slot with no real point is padding);
-* ``parametric`` -- a tuple of :class:`ParametricCurve` (their functions are
-  static, so each distinct function compiles separately).
-
-:func:`make_scenario` builds one scene, :func:`stack_scenarios` a batch of
-scenes of one padded shape. The layout of the three groups belongs to
-:mod:`softplan_jax.geometry.obstacles`; this module only stores it.
-"""
+"""The Scenario pytree and its constructors (paper section 2: the arm of section 2.1, the
+obstacles of section 2.3, the goal of eq. 9): obstacles in three padded groups so that scenes
+of one padded shape share one compilation (``curves``: polynomial curves stacked to
+``(m_c, 3, K)`` with ``curve_mask``; ``points``: point sets padded to ``(m_p, N_max, 3)``
+with ``point_mask``; ``parametric``: a tuple of :class:`ParametricCurve`, each function
+compiled separately), whose layout :mod:`softplan_jax.geometry.obstacles` owns;
+:func:`make_scenario` builds one scene, :func:`stack_scenarios` a batch."""
 
 from __future__ import annotations
 

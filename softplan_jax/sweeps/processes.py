@@ -1,22 +1,9 @@
-"""One sweep on several processes (``jax.distributed``), through a folder they all see.
-
-Every process runs the same :func:`~softplan_jax.sweeps.sweep` call after
-``jax.distributed.initialize``. Process ``i`` of ``P`` plans the chunks ``c`` with
-``c % P == i`` (the chunks are independent: their scenes, keys and fallback seeds
-depend on their index only) and writes them into the shared sweep folder, as one
-process would. So the table does not depend on ``P``: a sweep started on four hosts
-can be resumed on one, and ``scenes.csv`` is byte for byte the one-process table.
-Only summaries cross between processes (they are files in the folder); no trajectory
-is gathered.
-
-The processes meet three times, through the coordination service's key-value store
-(no device collective): after process 0 prepared the folder (header, stale temporary
-files), after the others checked the header against their own arguments, and after
-every process wrote its chunks (then process 0 merges the tables and writes the
-summary, which the others read). At each meeting every process posts "" or its error,
-and all of them raise the first error, naming its process, instead of waiting for a
-process that gave up.
-"""
+"""One sweep on several processes (``jax.distributed``) through a folder they all see:
+process ``i`` of ``P`` plans the chunks ``c`` with ``c % P == i`` into the shared folder,
+and the processes meet three times through the coordination service's key-value store
+(folder prepared, header checked, chunks written), each posting "" or its error so that
+all raise the first error instead of waiting (the documentation's "A sweep on several
+hosts")."""
 
 from __future__ import annotations
 

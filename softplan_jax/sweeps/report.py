@@ -11,9 +11,10 @@ from . import store
 __all__ = ["reporter", "summary"]
 
 
-def reporter(progress, n, n_chunks, out, already, fallback, name="sweep"):
+def reporter(progress, n, n_chunks, out, already, fallback, name="sweep", resumable=True):
     """The per-chunk progress callback: a line on stderr (starting with ``name``), the user's
-    callable, or nothing. ``n_chunks``: this process's chunks, ``already`` of them done before."""
+    callable, or nothing. ``n_chunks``: this process's chunks, ``already`` of them done before;
+    ``resumable``: count the scenes "this run" (a sweep), else out of ``n``."""
     state = dict(chunks=already, scenes=0, local=0, glob=0)
     if progress is True and already:
         print(f"{name}: resuming {out}: {already}/{n_chunks} chunks done", file=sys.stderr, flush=True)
@@ -34,7 +35,8 @@ def reporter(progress, n, n_chunks, out, already, fallback, name="sweep"):
         elif progress:
             pct = 100.0 * info["reached"] / state["scenes"]
             share = f" (global {100.0 * state['glob'] / state['scenes']:.1f} %)" if fallback else ""
-            line = (f"{name}: {state['chunks']}/{n_chunks} chunks, {state['scenes']:,} scenes this run, reached "
+            scenes = f"{state['scenes']:,} scenes this run" if resumable else f"{state['scenes']:,}/{n:,} scenes"
+            line = (f"{name}: {state['chunks']}/{n_chunks} chunks, {scenes}, reached "
                     f"{pct:.1f} %{share}, {rate:,.1f} scenes/s, "
                     f"{elapsed:.1f} s" + (f", eta {info['eta_s']:.0f} s" if left else "")
                     + f" (compile {compile_s:.1f} s)")

@@ -1,40 +1,8 @@
-"""Sweeps at scale: plan a seeded random suite of any size in chunks, in constant
-memory, streamed to disk, resumable, with the global fallback where asked.
-
-**The scenes.** Scene ``i`` of the sweep with seed ``s`` is scene ``i mod B`` of
-``random_scenarios(seed_b, B)`` with ``B = SCENE_BLOCK`` (64) and ``seed_b`` drawn
-from ``numpy.random.SeedSequence(s, spawn_key=(b,))`` for the block ``b = i // B``;
-its escapes' random walks use the key ``jax.random.fold_in(PRNGKey(s), i)``. So a
-scene depends on the seed, its index and the suite's options (obstacles, slots,
-dtype), never on ``n`` or the chunk size: the first K scenes of every sweep with
-the same seed are the same scenes (prefix-consistent), and
-:func:`sweep_scenarios` / :func:`sweep_keys` give any of them again.
-``softplan batch --n N`` plans ``random_scenarios(seed, N)``, whose scenes depend
-on N: the two see different scenes drawn from the same distribution. The
-outcomes of a scene agree across chunk sizes to rounding only (a vmapped
-program rounds by its batch shape, see :func:`~softplan_jax.plan_batch`), and
-the fallback's searches are seeded per chunk; ``chunk`` is part of a sweep's
-identity.
-
-**The loop.** Chunk ``c`` holds scenes ``[c C, (c + 1) C)`` (C = ``chunk``, the last
-chunk padded to C with copies of its last scene, so every call has one shape and
-the planner compiles once): one :func:`~softplan_jax.planning.planner.plan_batch`
-call (lanes refilled as scenes finish, so the cost follows the steps taken), then,
-with ``fallback``, :func:`~softplan_jax.search.fallback.rescue` (reachability and
-the certified search of :func:`~softplan_jax.plan_fallback`) on the chunk's scenes
-the local planner left stalled or at max_steps. While chunk c runs, chunk c + 1's
-scenes are generated on the host. Each chunk's summary rows (and trajectories,
-when asked) are written to disk (:mod:`.store`) and dropped: the process holds at
-most two chunks, whatever ``n``.
-
-**Several processes.** Under ``jax.distributed`` every process runs the same call;
-process ``i`` of ``P`` plans the chunks ``c % P == i`` into the shared folder, and
-process 0 merges (:mod:`.processes`). The table does not depend on ``P``.
-
-**Resuming.** A chunk is done when its table exists (written last, atomically). A
-sweep run again into the same folder with the same arguments skips the done
-chunks; the chunks are independent (their scenes, keys and fallback seeds depend
-on their index only), so the merged table is the one an uninterrupted run writes.
+"""Sweeps at scale: :func:`sweep` plans a seeded random suite of any size chunk by chunk
+(:mod:`.chunks`), in constant memory, streamed to a folder (:mod:`.store`), resumable, on
+one or several processes (:mod:`.processes`), with the global fallback where asked; and the
+suite it plans, :func:`sweep_scenarios` and :func:`sweep_keys`, whose scene ``i`` depends on
+the seed and ``i`` only (the documentation's "Sweeps at scale" gives the rules).
 """
 
 from __future__ import annotations
@@ -53,15 +21,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..base.compilation_cache import package_jit
-from ..base.status import STATUS_NAMES
-from ..planning.batching import batch_mesh, pad_batch, round_chunk
-from ..planning.planner import check_gains, make_options, plan_batch
+from ..planning.batching import batch_mesh, round_chunk
+from ..planning.planner import check_gains, make_options
 from ..planning.presets import PRESETS, apply_preset
 from ..planning.step import GainFunction, Gains
 from ..scenarios import random_scenarios
-from ..search.fallback import rescue_batch
 from ..search.reach import ReachOptions, check_reach_options
 from . import processes, report, store
+from .chunks import ChunkLoop
 
 __all__ = ["SCENE_BLOCK", "sweep", "sweep_scenarios", "sweep_keys"]
 
@@ -107,10 +74,13 @@ def _block(seed: int, block: int, obstacles: tuple, slots: int, dtype: str):
 
 
 class _Scenes:
-    """Scenes of a sweep by index, generated block by block (:data:`SCENE_BLOCK` scenes)."""
+    """Scenes of a sweep by index, generated block by block (:data:`SCENE_BLOCK` scenes); with
+    ``preset``, the start pose of that gain preset (if it has one)."""
 
-    def __init__(self, seed, obstacles, slots, dtype):
+    def __init__(self, seed, obstacles, slots, dtype, preset=None):
         self.seed, self.args = seed, (tuple(int(v) for v in obstacles), int(slots), str(jnp.dtype(dtype)))
+        p = None if preset is None else PRESETS[preset]
+        self.preset = preset if p is not None and (p.start_theta is not None or p.start_phi is not None) else None
 
     def _get(self, b):
         return _block(self.seed, b, *self.args)
@@ -122,9 +92,19 @@ class _Scenes:
             parts.append(jax.tree_util.tree_map(lambda x, lo=lo, hi=hi: x[lo:hi], self._get(b)))
         return parts[0] if len(parts) == 1 else jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
 
+    def take_with_keys(self, start, stop):
+        """``(scenes, keys)`` of scenes ``start .. stop - 1``: the chunk loop's source."""
+        scenes = self.take(start, stop)
+        if self.preset is not None:  # the preset's start pose
+            scenes = apply_preset(self.preset, scenes._replace(q0=jnp.asarray(scenes.q0)))[0]
+            scenes = scenes._replace(q0=np.asarray(scenes.q0))
+        return scenes, sweep_keys(self.seed, start, stop)
+
 
 def sweep_scenarios(seed: int, start: int, stop: int, *, obstacles=(1, 8), slots: int = 8, dtype=None):
-    """Scenes ``start .. stop - 1`` of the sweep suite (module docstring), as one batched Scenario.
+    """Scenes ``start .. stop - 1`` of the sweep suite, as one batched Scenario: scene ``i`` is
+    scene ``i mod 64`` of ``random_scenarios(seed_b, 64)`` (:data:`SCENE_BLOCK`), ``seed_b`` from
+    ``numpy.random.SeedSequence(seed, spawn_key=(i // 64,))``, so it depends on the seed and ``i`` only.
 
     Args:
       seed: the sweep's seed, an int >= 0.
@@ -237,7 +217,8 @@ def sweep(n: int, out, seed: int = 0, *, chunk: int = 256, method: str = "curve"
           overwrite: bool = False, **options) -> dict:
     """Plan ``n`` scenes of the sweep suite in chunks, streaming one summary row per scene to disk.
 
-    The scenes, the loop, the files and resuming: module docstring and :mod:`.store`.
+    The scenes, the loop, the files and resuming: the documentation's Performance page,
+    "How a sweep works", and :mod:`.store`.
     Memory stays flat in ``n``: the process holds at most two chunks (their scenes and
     rollouts) and two blocks of 64 generated scenes; the rows go to disk chunk by
     chunk, and the summary is computed by streaming the merged table.
@@ -292,6 +273,33 @@ def sweep(n: int, out, seed: int = 0, *, chunk: int = 256, method: str = "curve"
     """
     n, seed, max_steps = _int("n", n), _int("seed", seed, 0), _int("max_steps", max_steps)
     chunk, slots, n_points = _int("chunk", chunk), _int("slots", slots), _int("n_points", n_points)
+    out, obstacles = _check_run_args(out, obstacles, slots, fallback, resume, overwrite, progress, options)
+    dt = _check_dtype(dtype)
+    if isinstance(devices, str):
+        raise ValueError(f"devices must be None or an int (sweep runs on local devices), got {devices!r}")
+    mesh = batch_mesh(devices)
+    size = round_chunk(chunk, n, 1 if mesh is None else mesh.size)
+    preset_name, g, extra = _check_gains(gains, dt)
+    opts = make_options(method, n_points, **{**extra, **options})
+    reach = check_reach_options(ReachOptions() if reach is None else reach) if fallback else None
+    keep = _check_trajectories(trajectories, n)
+    header = dict(format=store.FORMAT, n=n, seed=seed, chunk=size, scene_block=SCENE_BLOCK, method=opts.method,
+                  n_points=opts.n_points, max_steps=max_steps, fallback=bool(fallback), reach=_jsonable(reach),
+                  obstacles=list(obstacles), slots=slots, dtype=str(dt), devices=1 if mesh is None else mesh.size,
+                  trajectories=None if not keep else ("all" if trajectories == "all" else keep),
+                  gains=dict(preset=preset_name, values=_jsonable(g)), options=_jsonable(opts),
+                  versions=_versions(), created=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+    header = json.loads(json.dumps(store.finite_json(header), default=str))
+    procs = processes.current()
+    _meet_over_folder(procs, out, header, bool(resume), bool(overwrite))
+    loop = ChunkLoop(_Scenes(seed, obstacles, slots, dt, preset_name).take_with_keys, n, size, opts, g, max_steps,
+                     devices, reach=reach, fallback_seed=functools.partial(_chunk_seed, seed), keep=keep)
+    resumed = _plan_share(loop, procs, out, header, progress)
+    return _merge(procs, out, header, resumed)
+
+
+def _check_run_args(out, obstacles, slots, fallback, resume, overwrite, progress, options):
+    """The sweep's flags checked (ValueError); ``(out as an absolute path, (lo, hi))``."""
     for name, v in (("fallback", fallback), ("resume", resume), ("overwrite", overwrite)):
         if not isinstance(v, (bool, np.bool_)):
             raise ValueError(f"{name} must be True or False, got {v!r}")
@@ -299,7 +307,6 @@ def sweep(n: int, out, seed: int = 0, *, chunk: int = 256, method: str = "curve"
         raise ValueError(f"progress must be True, False or a callable, got {progress!r}")
     if out is None or not str(out):
         raise ValueError("out: give the sweep folder")
-    out = os.path.abspath(os.fspath(out))
     try:
         lo, hi = (int(v) for v in obstacles)
     except (TypeError, ValueError):
@@ -308,46 +315,47 @@ def sweep(n: int, out, seed: int = 0, *, chunk: int = 256, method: str = "curve"
         raise ValueError(f"obstacles: need 1 <= min <= max <= slots ({slots}), got {obstacles!r}")
     if {"method", "n_points"} & set(options):
         raise ValueError("pass method and n_points once")
-    dt = _check_dtype(dtype)
-    if isinstance(devices, str):
-        raise ValueError(f"devices must be None or an int (sweep runs on local devices), got {devices!r}")
-    mesh = batch_mesh(devices)
-    n_dev = 1 if mesh is None else mesh.size
-    size = round_chunk(chunk, n, n_dev)
-    n_chunks = math.ceil(n / size)
-    preset_name, g, extra = _check_gains(gains, dt)
-    opts = make_options(method, n_points, **{**extra, **options})
-    reach = check_reach_options(ReachOptions() if reach is None else reach) if fallback else None
-    keep = _check_trajectories(trajectories, n)
-    header = dict(format=store.FORMAT, n=n, seed=seed, chunk=size, scene_block=SCENE_BLOCK, method=opts.method,
-                  n_points=opts.n_points, max_steps=max_steps, fallback=bool(fallback), reach=_jsonable(reach),
-                  obstacles=[lo, hi], slots=slots, dtype=str(dt), devices=n_dev,
-                  trajectories=None if not keep else ("all" if trajectories == "all" else keep),
-                  gains=dict(preset=preset_name, values=_jsonable(g)), options=_jsonable(opts),
-                  versions=_versions(), created=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
-    header = json.loads(json.dumps(store.finite_json(header), default=str))
-    procs = processes.current()
-    _meet_over_folder(procs, out, header, bool(resume), bool(overwrite))
+    return os.path.abspath(os.fspath(out)), (lo, hi)
 
+
+def _chunk_seed(seed: int, chunk: int) -> int:
+    """The fallback's seed of a chunk: its index only, so a resumed chunk searches as the first run did."""
+    return int(np.random.SeedSequence(seed, spawn_key=(1, chunk)).generate_state(1)[0] >> 1)
+
+
+def _plan_share(loop: ChunkLoop, procs, out: str, header: dict, progress) -> int:
+    """Plan this process's chunks not yet done into ``out``; the number already done before."""
+    n_chunks = math.ceil(header["n"] / header["chunk"])
     done = store.completed_chunks(out, clean=False)
     mine = processes.share(range(n_chunks), procs)
     todo = [c for c in mine if c not in done]
-    say = report.reporter(progress, n, len(mine), out, len(mine) - len(todo), fallback, procs.prefix("sweep"))
-    scenes = _Scenes(seed, (lo, hi), slots, dt)
-    run = _Run(out, n, seed, size, max_steps, opts, g, preset_name, reach, keep, devices, scenes)
+    say = report.reporter(progress, header["n"], len(mine), out, len(mine) - len(todo), header["fallback"],
+                          procs.prefix("sweep"))
+
+    def commit(rows, timing, paths, elapsed):
+        if paths:
+            store.write_trajectories(store.chunk_paths(out, timing["chunk"])["trajectories"], paths)
+        store.write_chunk(out, timing["chunk"], rows, timing)
+        say(rows, timing, elapsed, loop.compile_s or 0.0)
+
     try:
-        run.loop(todo, say)
+        loop.run(todo, commit)
     except BaseException as err:  # the others stop waiting for this process's chunks
         procs.post("written", f"{type(err).__name__}: {err}")
         raise
     procs.meet("written")
-    if not procs.lead:  # process 0 merges; the others read its summary
+    return len(done)
+
+
+def _merge(procs, out: str, header: dict, resumed: int) -> dict:
+    """Process 0 merges the tables and writes the summary; the others read it. The summary."""
+    if not procs.lead:
         procs.meet("merged")
         with open(os.path.join(out, "summary.json"), encoding="utf-8") as fh:
             return json.load(fh)
     try:
-        merged = store.merge_tables(out, n_chunks)
-        summary = report.summary(header, merged, out, len(done), procs.count)
+        merged = store.merge_tables(out, math.ceil(header["n"] / header["chunk"]))
+        summary = report.summary(header, merged, out, resumed, procs.count)
         store.write_summary(out, summary)
     except BaseException as err:
         procs.post("merged", f"{type(err).__name__}: {err}")
@@ -373,94 +381,3 @@ def _meet_over_folder(procs, out, header, resume, overwrite) -> None:
         except ValueError as err:
             error = str(err)
     procs.meet("checked", error)
-
-
-class _Run:
-    """The chunk loop of one sweep session."""
-
-    def __init__(self, out, n, seed, size, max_steps, opts, gains, preset_name, reach, keep, devices, scenes):
-        self.out, self.n, self.seed, self.size, self.max_steps = out, n, seed, size, max_steps
-        self.opts, self.gains, self.preset_name, self.reach, self.keep = opts, gains, preset_name, reach, keep
-        self.devices, self.scenes = devices, scenes
-        self.local_options = {k: v for k, v in opts._asdict().items() if k not in ("method", "n_points")}
-        self.session = f"{os.getpid()}-{time.time_ns()}"
-        p = None if preset_name is None else PRESETS[preset_name]
-        self.preset_pose = p is not None and (p.start_theta is not None or p.start_phi is not None)
-        self.compile_s = None
-
-    def launch(self, c):
-        """Generate chunk c's scenes and start its planning (asynchronous)."""
-        t0 = time.perf_counter()
-        a, b = c * self.size, min(self.n, (c + 1) * self.size)
-        scenes, keys = pad_batch((self.scenes.take(a, b), sweep_keys(self.seed, a, b)), self.size)
-        if self.preset_name is not None and self.preset_pose:  # the preset's start pose
-            scenes = apply_preset(self.preset_name, scenes._replace(q0=jnp.asarray(scenes.q0)))[0]
-            scenes = scenes._replace(q0=np.asarray(scenes.q0))
-        t1 = time.perf_counter()
-        r = plan_batch(scenes, self.opts.method, self.opts.n_points, self.gains, self.max_steps, keys,
-                       devices=self.devices, **self.local_options)
-        if self.compile_s is None:
-            self.compile_s = time.perf_counter() - t1  # the first call returns after tracing and compiling
-        return dict(chunk=c, first=a, m=b - a, scenes=scenes, rollout=r, generation_s=t1 - t0)
-
-    def finish(self, p):
-        """Collect chunk p's rollouts, run the fallback, and commit its rows (and trajectories)."""
-        m, r, first = p["m"], p["rollout"], p["first"]
-        get = lambda x: np.asarray(x)[:m]  # noqa: E731
-        status, iters, escapes = get(r.status), get(r.iterations), get(r.escapes)
-        reached, clear, err = get(r.reached), get(r.min_clearance), get(r.final_error)
-        tip = get(r.tip)
-        path = np.linalg.norm(np.diff(tip, axis=1), axis=-1).sum(axis=1)  # frozen after the end: no extra length
-        rows = [dict(index=first + k, chunk=p["chunk"], status=STATUS_NAMES[int(status[k])], reached=bool(reached[k]),
-                     planner="local" if reached[k] else "none", iterations=int(iters[k]), local_iterations=int(iters[k]),
-                     escapes=int(escapes[k]), min_clearance=float(clear[k]), path_length=float(path[k]),
-                     final_error=float(err[k]), reason="") for k in range(m)]
-        kept = {k: None for k in range(min(m, max(0, self.keep - first)))}  # scene k of the chunk: its path
-        t_fb = time.perf_counter()
-        if self.reach is not None:
-            self._fallback(p, rows, kept)
-        fallback_s = time.perf_counter() - t_fb if self.reach is not None else 0.0
-        if kept:
-            q = np.asarray(r.q)
-            traj = []
-            for k, res in kept.items():
-                it = rows[k]["iterations"]
-                qk, tk = (q[k, : it + 1], tip[k, : it + 1]) if res is None else (res.q, res.tip)
-                traj.append((first + k, qk, tk, rows[k]["status"], rows[k]["planner"]))
-            store.write_trajectories(store.chunk_paths(self.out, p["chunk"])["trajectories"], traj)
-        return rows, dict(chunk=p["chunk"], first=first, scenes=m, session=self.session,
-                          generation_s=p["generation_s"], fallback_s=fallback_s, local_steps=int(iters.sum()))
-
-    def _fallback(self, p, rows, kept):
-        """rescue() on the chunk's scenes the local planner left stalled or at max_steps."""
-        # A seed per chunk (its index only): a resumed chunk searches as the first run did.
-        chunk_seed = int(np.random.SeedSequence(self.seed, spawn_key=(1, p["chunk"])).generate_state(1)[0] >> 1)
-        head = lambda tree: jax.tree_util.tree_map(lambda x: x[: p["m"]], tree)  # noqa: E731  (not the padding)
-        idx, results = rescue_batch(head(p["scenes"]), head(p["rollout"]), self.opts, reach=self.reach,
-                                    seed=chunk_seed)
-        for k, res in zip(idx, results, strict=True):
-            k = int(k)
-            rows[k].update(status=res.status, reached=bool(res.reached), iterations=int(res.iterations),
-                           min_clearance=float(res.min_clearance), final_error=float(res.final_error),
-                           path_length=float(np.linalg.norm(np.diff(res.tip, axis=0), axis=-1).sum()),
-                           planner=("global" if res.planner == "global" else "local") if res.reached else "none",
-                           reason=res.reason)
-            if k in kept:
-                kept[k] = res
-
-    def loop(self, todo, say):
-        """Launch chunk c + 1 before finishing chunk c: the host generates while the device plans."""
-        t_start = last = time.perf_counter()
-        pending = None
-        for c in [*todo, None]:
-            launched = self.launch(c) if c is not None else None
-            if pending is not None:
-                rows, timing = self.finish(pending)
-                now = time.perf_counter()
-                first_of_session = timing["chunk"] == todo[0]
-                compile_s = self.compile_s if first_of_session else 0.0
-                timing.update(seconds=now - last - compile_s, compile_s=compile_s)
-                store.write_chunk(self.out, pending["chunk"], rows, timing)
-                last = now
-                say(rows, timing, now - t_start, self.compile_s or 0.0)
-            pending = launched

@@ -1,27 +1,9 @@
-"""The files of a sweep folder: the header, the per-chunk tables, the merged
-table, trajectory shards, and the summary statistics of the merged table.
-
-A sweep folder (:func:`~softplan_jax.sweeps.sweep`)::
-
-    sweep.json            header: format, seed, n, chunk, options, gains, versions
-    chunks/000000.csv     scene rows of chunk 0 (the chunk's commit: it exists only whole)
-    chunks/000000.json    chunk 0's timing (wall, generation, compile, fallback seconds)
-    trajectories/000000.npz   chunk 0's trajectories (only when asked)
-    scenes.csv            every scene row, in index order (written at the end)
-    chunks.csv            one row per chunk: its timing (written at the end)
-    summary.json          counts, rates with 95 % Wilson intervals, throughput
-
-Every file is written whole or not at all: into a temporary file of the same
-folder, then ``os.replace`` (atomic on POSIX), so a sweep killed at any moment
-leaves complete chunks and, at worst, a temporary file that the next run removes.
-A chunk's table is written last, after its timing and trajectories: a chunk is
-done exactly when its table exists.
-
-The tables are CSV (pandas ``read_csv`` and polars ``read_csv`` read them as
-they are; :func:`read_table` without either): booleans ``true``/``false``,
-floats in Python's shortest round-trip form (``inf``, ``nan`` as such), so a
-table written twice from the same results is byte for byte the same.
-"""
+"""The files of a sweep folder: the header ``sweep.json``, the per-chunk tables and timings
+``chunks/NNNNNN.{csv,json}``, trajectory shards ``trajectories/NNNNNN.npz``, the merged
+``scenes.csv`` and ``chunks.csv``, and ``summary.json``; each written whole or not at all
+(a temporary file, then ``os.replace``), a chunk's table last, so a chunk is done exactly
+when its table exists; CSV that pandas and polars read as it is, byte for byte the same
+when written twice from the same results (the documentation's "Sweeps at scale")."""
 
 from __future__ import annotations
 

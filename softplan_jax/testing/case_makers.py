@@ -1,14 +1,9 @@
-"""The closest-point case generators: seeded random arms and curves, constructed
-touching, crossing and parallel cases, minima on the boundary, long curves, and
-the paper's obstacles (Tables 2-4).
-
-Each ``make_*_case(rng)`` draws one :class:`Case` (an arm configuration q and a
-polynomial curve, lowest degree first) from a NumPy generator; :func:`build_cases`
-draws the ~1000 "main" cases of :mod:`.closest_cases` from one seed. The
-constructed cases know their answer (``expected``, ``exact``) from the
-construction, not from any solver. Like :mod:`.oracle_geometry`, which gives the
-arm's geometry, it imports nothing else of ``softplan_jax`` and not jax.
-"""
+"""The closest-point case generators (importing nothing else of ``softplan_jax`` and not jax):
+each ``make_*_case(rng)`` draws one :class:`Case` (an arm configuration q and a polynomial
+curve, lowest degree first) from a NumPy generator, random or constructed (touching, crossing,
+parallel, minima on the boundary, long curves, the paper's obstacles of Tables 2-4), the
+constructed ones with their answer (``expected``, ``exact``) from the construction, not from
+any solver; :func:`build_cases` draws the ~1000 "main" cases of :mod:`.closest_cases`."""
 
 from __future__ import annotations
 

@@ -1,33 +1,9 @@
-"""The closest-point case corpus and the oracle's answers, cached on disk.
-
-Shared by ``tests/test_closest.py`` (the accuracy suite) and
-``benchmarks/closest.py`` (the SolverOptions sweep). Like :mod:`.oracle`, it
-imports no other module of ``softplan_jax`` and not jax, nor anything under
-``tests/`` (only the oracle and the case generators, :mod:`.case_makers`, beside
-it), and importing it does nothing but define names:
-
-* the cases are built on first use (:func:`cases`, functools.cache);
-* the oracle's answers (:func:`oracle_answers`) are read from
-  ``<cache>/oracle/<which>-<hash of the oracle's source>.npz``, one entry per
-  case keyed by a hash of the case's data; missing entries are computed on the
-  first request (in a pool of ``SOFTPLAN_ORACLE_WORKERS`` spawned processes,
-  default 2; 0 = in this process) and written back. ``<cache>`` is
-  ``$SOFTPLAN_CACHE_DIR`` or ``.cache/`` at the repository root (three folders
-  above this file; git-ignored).
-  A changed oracle gets a new file name, so stale answers are never read.
-
-Case families (``which``):
-
-* ``"main"``: ~1000 cases: generic random arms and polynomial curves (n = 1..4
-  segments, degree 1..3, theta = 0 / 1e-12 / large), constructed touching,
-  crossing and parallel cases, minima on the boundary, long Sim2-like curves;
-* ``"paper"``: 20 arms per obstacle of the paper's Tables 2-4 (the tree: the
-  four legible branches plus the trunk X = 1, Y = 1, Z = u, u in [0, 3]);
-* ``"helix"``: 40 arms against the helix (cos u, sin u, 0.2 u), u in [-3, 3]
-  (a non-polynomial curve: the library side is a ``ParametricCurve``);
-* ``"grad_fd"``: the central-difference neighbours (h = ``FD_H``) of the 8
-  gradient cases (:func:`gradient_cases`).
-"""
+"""The closest-point case corpus and the oracle's answers, cached on disk (shared by
+``tests/test_closest.py`` and ``benchmarks/closest.py``; like :mod:`.oracle` it imports no
+other module of ``softplan_jax``, not jax and nothing under ``tests/``, and importing it does
+nothing but define names): :func:`cases` builds a family on first use, :func:`oracle_answers`
+reads the oracle's answers from a cache keyed by the oracle's source and computes the missing
+ones."""
 
 from __future__ import annotations
 
@@ -201,7 +177,18 @@ def grad_fd_cases() -> tuple:
 
 
 def cases(which: str) -> tuple:
-    """The cases of family ``which``: "main", "paper", "helix" or "grad_fd"."""
+    """The cases of family ``which`` (built on first use, functools.cache):
+
+    * ``"main"``: ~1000 cases: generic random arms and polynomial curves (n = 1..4 segments,
+      degree 1..3, theta = 0 / 1e-12 / large), constructed touching, crossing and parallel
+      cases, minima on the boundary, long Sim2-like curves;
+    * ``"paper"``: 20 arms per obstacle of the paper's Tables 2-4 (the tree: the four legible
+      branches plus the trunk X = 1, Y = 1, Z = u, u in [0, 3]);
+    * ``"helix"``: 40 arms against the helix (cos u, sin u, 0.2 u), u in [-3, 3] (a
+      non-polynomial curve: the library side is a ``ParametricCurve``);
+    * ``"grad_fd"``: the central-difference neighbours (h = ``FD_H``) of the 8 gradient cases
+      (:func:`gradient_cases`).
+    """
     makers = {"main": main_cases, "paper": paper_cases, "helix": helix_cases, "grad_fd": grad_fd_cases}
     if which not in makers:
         raise KeyError(f"unknown case family {which!r}; choose one of {sorted(makers)}")
@@ -311,8 +298,12 @@ def _compute(jobs, workers: int):
 def oracle_answers(which: str, subset=None) -> list:
     """The oracle's :class:`Answer` for every case of family ``which`` (or for
     the cases ``subset``, all of that family; "grad" holds the gradient cases),
-    from the disk cache; missing answers are computed (see the module
-    docstring) and added to it.
+    from the disk cache ``<cache>/oracle/<which>-<hash of the oracle's source>.npz``, one
+    entry per case keyed by a hash of the case's data (``<cache>``: ``$SOFTPLAN_CACHE_DIR``
+    or ``.cache/`` at the repository root, git-ignored; a changed oracle gets a new file
+    name, so stale answers are never read). Missing answers are computed in a pool of
+    ``SOFTPLAN_ORACLE_WORKERS`` spawned processes (default 2; 0 = in this process) and
+    written back.
     """
     todo = list(cases(which) if subset is None else subset)
     path = _cache_path(which, _source_hash())

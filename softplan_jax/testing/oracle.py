@@ -1,26 +1,12 @@
-"""Independent NumPy/SciPy reference for the geometry core: the closest point.
-
-Written from the paper's formulas (paper.md sections 2.1-2.3) and deliberately
-NOT importing the rest of ``softplan_jax`` (nor jax): the test suite compares
-the library against this module, never the library against itself. The
-kinematics, the curves and the moving curves are :mod:`.oracle_geometry`'s,
-re-exported here, so that ``oracle.segment_point``, ``oracle.OPoly``, ... are
-one namespace with the closest point.
-
-Closest point (paper section 2.3): for each segment, the minimum of
-``D^2(s, u) = |F_R(s) - F_o(u)|^2`` over ``[0, 1] x [u0, u1]`` from
-
-* a dense 2-D grid; the promising grid local minima are refined by
-  ``scipy.optimize.minimize`` (L-BFGS-B with bounds) and then polished with a
-  projected Newton iteration on the exact gradient and Hessian;
-* dense 1-D scans of the four edges (s = 0, s = 1, u = u0, u = u1), refined
-  with ``scipy.optimize.minimize_scalar(method="bounded")`` and 1-D Newton;
-* the four corners.
-
-The answer is the minimum over all candidates and all segments.  The oracle is
-checked against closed-form answers in ``tests/test_closest.py``. The N-point
-model's nearest pair (:func:`closest_point_to_points`) is brute force.
-"""
+"""Independent NumPy/SciPy reference for the closest point (paper section 2.3), written from the
+paper's formulas and importing nothing else of ``softplan_jax`` (nor jax): for each segment the
+minimum of ``D^2(s, u) = |F_R(s) - F_o(u)|^2`` over ``[0, 1] x [u0, u1]`` from a dense 2-D grid
+(local minima refined by L-BFGS-B and a projected Newton polish), dense scans of the four edges
+(refined by bounded 1-D minimisation and Newton) and the four corners, the minimum over every
+candidate and segment (:func:`closest_point`, checked against closed-form answers in
+``tests/test_closest.py``); the N-point model's nearest pair by brute force
+(:func:`closest_point_to_points`); and :mod:`.oracle_geometry`'s kinematics and curves
+re-exported, one namespace."""
 
 from __future__ import annotations
 
@@ -324,6 +310,55 @@ def _polish_edge(prob, kind, fixed, x, iters=30):
     return f, s, u
 
 
+class _Grids:
+    """The oracle's sample grids: the 2-D grid (s, u) and the edge scans, with the curve's points."""
+
+    def __init__(self, curve, ns, nu, n_edge_s, n_edge_u, u0, u1):
+        self.u0, self.u1 = u0, u1
+        self.sg, self.ug = np.linspace(0.0, 1.0, ns), np.linspace(u0, u1, nu)
+        self.se, self.ue = np.linspace(0.0, 1.0, n_edge_s), np.linspace(u0, u1, n_edge_u)
+        self.Cg = curve.point(self.ug)
+        self.Cg2 = np.sum(self.Cg * self.Cg, 1)
+        self.Ce = curve.point(self.ue)
+        self.C_end = curve.point(np.array([u0, u1]))
+
+
+def _segment_candidates(prob, i, L, speed, g: _Grids, margin_factor, max_seeds, raw: list, jobs: list) -> None:
+    """One segment's unrefined candidates (paper §2.3's three cases): its corners into ``raw``,
+    its grid and edge-scan local minima, with their margins, into ``jobs``."""
+    u0, u1 = g.u0, g.u1
+    # corners (case 3)
+    for s in (0.0, 1.0):
+        for u in (u0, u1):
+            raw.append((math.sqrt(prob.f(s, u)), i, s, u))
+    # 2-D grid (case 1)
+    A = prob.arm(g.sg)[0]
+    # |A|^2 + |C|^2 - 2 A.C: only used to pick starts (the candidates'
+    # values are recomputed exactly), so its rounding near 0 is harmless
+    Dg = np.sqrt(np.maximum(np.sum(A * A, 1)[:, None] + g.Cg2[None, :] - 2.0 * (A @ g.Cg.T), 0.0))
+    m2 = margin_factor * 0.5 * (L * (g.sg[1] - g.sg[0]) + speed * (g.ug[1] - g.ug[0]))
+    lm = np.argwhere(_grid_local_minima(Dg))
+    vals = Dg[lm[:, 0], lm[:, 1]]
+    for k in np.argsort(vals)[: 4 * max_seeds]:
+        a_, b_ = lm[k]
+        jobs.append((vals[k], m2, i, ("2d", g.sg[a_], g.ug[b_])))
+    # edges (case 2): s = 0 / 1 scanned in u, u = u0 / u1 scanned in s
+    mu = margin_factor * 0.5 * speed * (g.ue[1] - g.ue[0])
+    ms = margin_factor * 0.5 * L * (g.se[1] - g.se[0])
+    for s_fix in (0.0, 1.0):
+        p = prob.arm(s_fix)[0][0]
+        dv = np.linalg.norm(g.Ce - p, axis=1)
+        for j in _local_minima_1d(dv):
+            lo, hi = g.ue[max(j - 1, 0)], g.ue[min(j + 1, g.ue.size - 1)]
+            jobs.append((dv[j], mu, i, ("u", s_fix, lo, hi)))
+    Ae = prob.arm(g.se)[0]
+    for jj, u_fix in enumerate((u0, u1)):
+        dv = np.linalg.norm(Ae - g.C_end[jj], axis=1)
+        for j in _local_minima_1d(dv):
+            lo, hi = g.se[max(j - 1, 0)], g.se[min(j + 1, g.se.size - 1)]
+            jobs.append((dv[j], ms, i, ("s", u_fix, lo, hi)))
+
+
 def closest_point(
     q,
     curve,
@@ -359,50 +394,11 @@ def closest_point(
         n_edge_u = int(np.clip(np.ceil(length_bound / 0.002), 1001, 10001))
     frames = segment_frames(q)
     probs = [_SegmentProblem(q, i, curve, frames) for i in range(n)]
-
-    sg = np.linspace(0.0, 1.0, ns)
-    ug = np.linspace(u0, u1, nu)
-    se = np.linspace(0.0, 1.0, n_edge_s)
-    ue = np.linspace(u0, u1, n_edge_u)
-    Cg = curve.point(ug)
-    Cg2 = np.sum(Cg * Cg, 1)
-    Ce = curve.point(ue)
-    C_end = curve.point(np.array([u0, u1]))
-
+    grids = _Grids(curve, ns, nu, n_edge_s, n_edge_u, u0, u1)
     raw = []  # (D, i, s, u) of every unrefined grid/edge/corner candidate
     jobs = []  # (threshold-able value, margin, i, job)
     for i, prob in enumerate(probs):
-        L = float(q[i, 0])
-        # corners (case 3)
-        for s in (0.0, 1.0):
-            for u in (u0, u1):
-                raw.append((math.sqrt(prob.f(s, u)), i, s, u))
-        # 2-D grid (case 1)
-        A = prob.arm(sg)[0]
-        # |A|^2 + |C|^2 - 2 A.C: only used to pick starts (the candidates'
-        # values are recomputed exactly), so its rounding near 0 is harmless
-        Dg = np.sqrt(np.maximum(np.sum(A * A, 1)[:, None] + Cg2[None, :] - 2.0 * (A @ Cg.T), 0.0))
-        m2 = margin_factor * 0.5 * (L * (sg[1] - sg[0]) + speed * (ug[1] - ug[0]))
-        lm = np.argwhere(_grid_local_minima(Dg))
-        vals = Dg[lm[:, 0], lm[:, 1]]
-        for k in np.argsort(vals)[: 4 * max_seeds]:
-            a_, b_ = lm[k]
-            jobs.append((vals[k], m2, i, ("2d", sg[a_], ug[b_])))
-        # edges (case 2): s = 0 / 1 scanned in u, u = u0 / u1 scanned in s
-        mu = margin_factor * 0.5 * speed * (ue[1] - ue[0])
-        ms = margin_factor * 0.5 * L * (se[1] - se[0])
-        for s_fix in (0.0, 1.0):
-            p = prob.arm(s_fix)[0][0]
-            dv = np.linalg.norm(Ce - p, axis=1)
-            for j in _local_minima_1d(dv):
-                lo, hi = ue[max(j - 1, 0)], ue[min(j + 1, n_edge_u - 1)]
-                jobs.append((dv[j], mu, i, ("u", s_fix, lo, hi)))
-        Ae = prob.arm(se)[0]
-        for jj, u_fix in enumerate((u0, u1)):
-            dv = np.linalg.norm(Ae - C_end[jj], axis=1)
-            for j in _local_minima_1d(dv):
-                lo, hi = se[max(j - 1, 0)], se[min(j + 1, n_edge_s - 1)]
-                jobs.append((dv[j], ms, i, ("s", u_fix, lo, hi)))
+        _segment_candidates(prob, i, float(q[i, 0]), speed, grids, margin_factor, max_seeds, raw, jobs)
 
     best_raw = min([r[0] for r in raw] + [j[0] for j in jobs])
     all_c = list(raw)

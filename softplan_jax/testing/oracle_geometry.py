@@ -1,30 +1,8 @@
-"""Independent NumPy/SciPy reference: the arm's kinematics, the obstacle curves, moving curves.
-
-Written from the paper's formulas (paper.md sections 2.1-2.2) and deliberately
-NOT importing the rest of ``softplan_jax`` (nor jax): the test suite compares
-the library against it, never the library against itself. :mod:`.oracle`
-builds the closest point on it and re-exports every name listed here.
-
-Kinematics (paper section 2.1, Webster & Jones 2010)::
-
-    R_i = [[c(phi)c(th), -s(phi), c(phi)s(th)],
-           [s(phi)c(th),  c(phi), s(phi)s(th)],
-           [-s(th),       0,      c(th)     ]]
-    P_i = [(1-cos th) L/th cos phi, (1-cos th) L/th sin phi, sin th L/th]
-    P_si = R_{i-1}^0 [(1-cos(th s)) L/th cos phi, ..., sin(th s) L/th] + P_{i-1}^0
-
-The removable singularities at ``th = 0`` are removed analytically, with no
-division by theta at all: ``sin(th s)/th = s sinc(th s)`` and
-``(1 - cos(th s))/th = (th s^2/2) sinc(th s/2)^2`` (half-angle identity), with
-``sinc`` from its Taylor series for |x| < 0.1.  All formulas also accept
-complex input, so ``jacobian_complex_step`` gives Jacobians exact to rounding,
-at ``th = 0`` included.
-
-Curves: polynomials (``OPoly``), any function of u (``OFunc``), the helix.
-Moving curves (:func:`moving_min_clearance`): the rigid motion of the library's
-moving scenes written independently (the rotation as SciPy's matrix exponential
-of the axis' cross-product matrix), and a brute force over space and time.
-"""
+"""Independent NumPy/SciPy reference for the arm's kinematics (paper section 2.1, Webster &
+Jones 2010; complex-step Jacobians exact to rounding, theta = 0 included), the obstacle curves
+(``OPoly``, ``OFunc``, the helix) and the clearance to moving curves sampled in space and time,
+written from the paper's formulas and importing nothing else of ``softplan_jax`` (nor jax);
+:mod:`.oracle` builds the closest point on it and re-exports every name listed here."""
 
 from __future__ import annotations
 
@@ -105,7 +83,17 @@ def arc_coeffs(theta, s):
 
 
 def segment_transform(q_i):
-    """Paper's (R_i, P_i) for one row q_i = [L, theta, phi]."""
+    """Paper's (R_i, P_i) for one row q_i = [L, theta, phi]::
+
+        R_i = [[c(phi)c(th), -s(phi), c(phi)s(th)],
+               [s(phi)c(th),  c(phi), s(phi)s(th)],
+               [-s(th),       0,      c(th)     ]]
+        P_i = [(1-cos th) L/th cos phi, (1-cos th) L/th sin phi, sin th L/th]
+
+    with no division by theta: ``sin(th)/th = sinc(th)`` and ``(1 - cos th)/th =
+    (th/2) sinc(th/2)^2`` (half-angle identity), ``sinc`` from its Taylor series for
+    |x| < 0.1; complex input works too (complex-step Jacobians).
+    """
     L, th, ph = q_i[0], q_i[1], q_i[2]
     cp, sp_ = np.cos(ph), np.sin(ph)
     ct, st = np.cos(th), np.sin(th)
@@ -196,7 +184,8 @@ def segment_point_derivs(q, i, s):
 
 
 def segment_point(q, i, s):
-    """Single point (3,) at fraction s of segment i (paper's P_si)."""
+    """Single point (3,) at fraction s of segment i (paper's P_si):
+    ``R_{i-1}^0 [(1-cos(th s)) L/th cos phi, ..., sin(th s) L/th] + P_{i-1}^0``."""
     return segment_points(q, i, np.array([s]))[0]
 
 
@@ -416,7 +405,9 @@ def moving_min_clearance(qs, times, coeffs, u_ranges, radii, motions, arm_radius
     (q linear, time linear from times[k] to times[k+1]) at ``substeps + 1`` instants, the
     arm at ``arm_samples`` points per segment (this module's kinematics), each curve at
     ``curve_samples`` points at that instant. ``motions``: a list of per-curve dicts (see
-    :func:`moving_curve_points`). Returns the smallest sampled distance minus the radii."""
+    :func:`moving_curve_points`: the library's rigid motion written independently, the rotation
+    as SciPy's matrix exponential of the axis' cross-product matrix). Returns the smallest
+    sampled distance minus the radii."""
     qs = np.asarray(qs, dtype=np.float64)
     s = np.linspace(0.0, 1.0, arm_samples)
     best = np.inf

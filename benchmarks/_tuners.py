@@ -1,11 +1,11 @@
-"""The gradient tuner against the tuners practitioners reach for first (Optuna's TPE,
-CMA-ES), at equal rollouts, on constant gains and on the goal-distance gain function,
-judged on held-out scenes over several tuner seeds.
+"""The second part of ``tuning.py`` (``--tuners``): the gradient tuner against the tuners
+practitioners reach for first (Optuna's TPE, CMA-ES), at equal rollouts, on constant gains and
+on the goal-distance gain function, judged on held-out scenes over several tuner seeds.
 
 One command regenerates the comparison (progress on stderr; about 25 min on 2 CPUs)::
 
-    python benchmarks/tuners.py            # train seed 0 (64 scenes), held-out seed 1 (1,024 scenes), 5 tuner seeds
-    python benchmarks/tuners.py --quick    # smoke run, written to benchmarks/results/quick/
+    python benchmarks/tuning.py --tuners            # train seed 0 (64 scenes), held-out seed 1 (1,024), 5 tuner seeds
+    python benchmarks/tuning.py --tuners --quick    # smoke run, written to benchmarks/results/quick/
 
 Every tuner sees the same training scenes and the same objective, the mean
 :func:`softplan_jax.tuning.rollout_score` with ``--weights`` (default the recipe's
@@ -50,7 +50,6 @@ Paired comparisons on the same scenes (bootstrap 95 % intervals over scenes). Wr
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
@@ -70,14 +69,10 @@ PROFILE_BOX = (-1.5, 1.5)
 
 
 def parse_args(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--quick", action="store_true", help="smoke run (small sizes) into results/quick/")
-    ap.add_argument("--train-seed", type=int, default=0)
-    ap.add_argument("--eval-seed", type=int, default=1)
-    ap.add_argument("--n-train", type=int, default=None, help="training scenes (default 64; quick 8)")
-    ap.add_argument("--n-eval", type=int, default=None, help="held-out scenes (default 1024; quick 16)")
-    ap.add_argument("--train-steps", type=int, default=None, help="rollout steps when tuning (default 100; quick 30)")
-    ap.add_argument("--max-steps", type=int, default=None, help="rollout steps held out (default 150; quick 40)")
+    from _common import held_out_parser
+
+    ap = held_out_parser(__doc__, "rollout steps when tuning (default 100; quick 30)",
+                         "rollout steps held out (default 150; quick 40)")
     ap.add_argument("--budget", type=int, default=None, help="rollouts per tuner run (default 3072; quick 32)")
     ap.add_argument("--pairs", type=int, default=None, help="the gradient's antithetic pairs (default 32; quick 4)")
     ap.add_argument("--seeds", default=None, help="comma list of tuner seeds (default 0,1,2,3,4; quick 0,1)")
@@ -384,7 +379,7 @@ def markdown(args, rep) -> str:
     rows, summary, paired = rep["rows"], rep["summary"], rep["paired"]
     L = ["# Tuners at equal rollouts: the gradient against Optuna's TPE and CMA-ES (held-out scenes)", ""]
     L += machine_lines(rep["machine"])
-    L += [f"- command: `python benchmarks/tuners.py{' --quick' if args.quick else ''}`, one process; wall "
+    L += [f"- command: `python benchmarks/tuning.py --tuners{' --quick' if args.quick else ''}`, one process; wall "
           f"{rep['wall_seconds']:.0f} s, compile included",
           f"- training: `random_scenarios({args.train_seed}, {args.n_train})`, {args.train_steps} steps; held-out: "
           f"`random_scenarios({args.eval_seed}, {args.n_eval})`, {args.max_steps} steps; tuner seeds {args.seeds}; "

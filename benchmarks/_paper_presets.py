@@ -1,11 +1,11 @@
-"""The paper's Tables 2-4 with three figures per cell: the paper's printed
-figure, this library with the "paper" gain preset, this library with its
-defaults; plus the independent NumPy implementation (benchmarks/numpy_baseline.py)
-with the "paper" preset under the paper's rotation convention (a check of the
-library) and under Webster & Jones' (the effect of the R_i convention).
+"""The second part of ``paper_tables.py`` (``--presets``): the paper's Tables 2-4 with three
+figures per cell: the paper's printed figure, this library with the "paper" gain preset, this
+library with its defaults; plus the independent NumPy implementation
+(benchmarks/numpy_baseline.py) with the "paper" preset under the paper's rotation convention
+(a check of the library) and under Webster & Jones' (the effect of the R_i convention).
 
-    python benchmarks/paper_presets.py            # ~10-20 min on 2 cores (the NumPy curve method is slow)
-    python benchmarks/paper_presets.py --quick    # sim2 only, the curve and 10-point models only
+    python benchmarks/paper_tables.py --presets            # ~10-20 min on 2 cores (the NumPy curve method is slow)
+    python benchmarks/paper_tables.py --presets --quick    # sim2 only, the curve and 10-point models only
 
 Cell format: ``r33`` = reached the goal after 33 iterations, ``c21`` =
 collided at iteration 21 (true clearance <= 1e-6 at a step or during the
@@ -131,7 +131,7 @@ def main(argv=None) -> dict:
         L = ["# The paper's tables, three ways: printed, 'paper' preset, library defaults" + (" (QUICK)" if args.quick
                                                                                               else ""), ""]
         L += machine_lines(machine)
-        L += [f"- command: `python benchmarks/paper_presets.py{' --quick' if args.quick else ''}`; wall time "
+        L += [f"- command: `python benchmarks/paper_tables.py --presets{' --quick' if args.quick else ''}`; wall time "
               f"{total:.0f} s (shared machine)",
               f"- 'paper' preset: gains {p.gains}, start theta = {p.start_theta}, phi = {p.start_phi} on every segment, "
               f"options {p.options} (`sp.apply_preset('paper', scenario)`); 150 steps",
