@@ -23,8 +23,10 @@ import numpy as np
 from softplan_jax.base.compilation_cache import disable_compilation_cache
 
 # Compile times are measured here: never from the cache that importing softplan_jax turns on by
-# default (a cache directory the user or the test session gave jax is kept).
-disable_compilation_cache()
+# default (a cache directory the user or the test session gave jax is kept). Only in a benchmark's
+# own process: a test that imports a script to check its arguments keeps its worker's cache.
+if os.path.dirname(os.path.abspath(sys.argv[0])) == os.path.dirname(os.path.abspath(__file__)):
+    disable_compilation_cache()
 
 RESULTS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 FIGURES_DIR = os.path.join(RESULTS_DIR, "figures")

@@ -175,6 +175,6 @@ def test_the_path_is_checked_before_the_result(scenario, track_result, tmp_path)
 def test_the_package_exports_the_same_names():
     assert sorted(plotting.__all__) == sorted([
         "plot_snapshots", "plot_snapshot_panels", "plot_snapshots_with_clearance", "plot_clearance", "plot_tracking",
-        "animate", "animate_tracking", "plot_cloud_fit", "plot_benchmark"])
+        "animate", "animate_tracking", "plot_cloud_fit", "plot_benchmark", "plot_actuators"])
     for name in plotting.__all__:
         assert callable(getattr(plotting, name))
