@@ -20,7 +20,7 @@ import time
 import jax
 import numpy as np
 
-from softplan_jax.base.compilation_cache import disable_compilation_cache
+from softplan_jax.base._compilation_cache import disable_compilation_cache
 
 # Compile times are measured here: never from the cache that importing softplan_jax turns on by
 # default (a cache directory the user or the test session gave jax is kept). Only in a benchmark's
@@ -166,16 +166,16 @@ def rollout_wrappers(rollout):
 
 
 def lanes_program(opts, max_steps: int, lanes: int, trips: int):
-    """``compile_(*args, **kw) -> (compiled, seconds)``: :func:`softplan_jax.planning.engine.run_lanes`
+    """``compile_(*args, **kw) -> (compiled, seconds)``: :func:`softplan_jax.planning._engine.run_lanes`
     jitted (the curve rollout's XLA options) and compiled with the warm start's fallback trip
     bound set to ``trips`` on every platform (``FALLBACK_TRIPS`` and ``CPU_FALLBACK_TRIPS``; a
     huge value: a chunk of 8 at every width). The bound is read at trace time, so it is set
     around ``lower`` and restored after."""
     import functools
 
-    from softplan_jax.geometry import warm_start as ws
-    from softplan_jax.planning.engine import run_lanes
-    from softplan_jax.planning.options import rollout_compiler_options
+    from softplan_jax.geometry import _warm_start as ws
+    from softplan_jax.planning._engine import run_lanes
+    from softplan_jax.planning._options import rollout_compiler_options
 
     fn = jax.jit(functools.partial(run_lanes, options=opts, max_steps=max_steps, lanes=lanes),
                  compiler_options=rollout_compiler_options("curve"))

@@ -46,7 +46,7 @@ def _between(nb, q_a, q_b, cp_a, cp_b, curve, radius):
     """Smallest distance (minus radii) during the straight motion q_a -> q_b to one curve:
     scipy least_squares over (tau, s, u) in [0, 1]^2 x u_range on the arm segment of either
     end's closest pair, started from both ends' pairs (the NumPy analogue of
-    softplan_jax.geometry.clearance.between_steps)."""
+    softplan_jax.geometry._clearance.between_steps)."""
     from scipy import optimize
 
     dq = q_b - q_a
@@ -116,7 +116,7 @@ def main(argv=None) -> dict:
     from _common import RESULTS_DIR, finish_machine, log, machine_info, machine_lines, write_results
 
     import softplan_jax as sp
-    from softplan_jax.planning.presets import preset
+    from softplan_jax.planning._presets import preset
     from softplan_jax.scenarios import PAPER_RESULTS
 
     t_all = time.perf_counter()

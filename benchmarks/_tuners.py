@@ -9,13 +9,13 @@ One command regenerates the comparison (progress on stderr; about 25 min on 2 CP
 
 Every tuner sees the same training scenes and the same objective, the mean
 :func:`softplan_jax.tuning.rollout_score` with ``--weights`` (default the recipe's
-:data:`~softplan_jax.tuning.tuner.RECIPE_WEIGHTS`: failures, progress and the time to a
+:data:`~softplan_jax.tuning._tuner.RECIPE_WEIGHTS`: failures, progress and the time to a
 plan), of the library's default planner (``--train-steps`` steps), and the same budget
 of ``--budget`` rollouts. Two parameter spaces:
 
 * **const**: d0 and dt (eta at the start's 0.002), the issue's setting: log d0 and the
   logit of dt's fraction of the Euler bound (``GainSpace(("d0", "dt"), stable_dt=True)``);
-* **fn**: the recipe's gain function (:data:`~softplan_jax.tuning.tuner.RECIPE_SPACE`):
+* **fn**: the recipe's gain function (:data:`~softplan_jax.tuning._tuner.RECIPE_SPACE`):
   d0, dt and a ``--goal-knots``-knot goal-distance profile of k_att, v_max, eta and d0
   (2 + 4 K parameters; all zeros: the constant gains).
 
@@ -38,7 +38,7 @@ The tuners, per space and tuner seed:
 * and once: **default** gains; **grid** (the grid of ``benchmarks/science.py``, d0 x dt x
   eta, 60 settings on all training scenes, the best mean score; 60 x 64 rollouts).
 
-All start from the recipe's start (:func:`~softplan_jax.tuning.tuner.recipe_start`, the
+All start from the recipe's start (:func:`~softplan_jax.tuning._tuner.recipe_start`, the
 grid box's geometric centre). Held-out: every choice on ``random_scenarios(eval seed,
 n_eval)``, ``--max-steps`` steps: success (reached without collision, Wilson 95 %
 intervals), steps to the goal, tip path length, the held-out score (the tuning
@@ -135,10 +135,10 @@ def main(argv=None) -> dict:
     from _common import finish_machine, log, machine_info, output_paths, write_results
 
     import softplan_jax as sp
-    from softplan_jax.planning.planner import make_options
+    from softplan_jax.planning._planner import make_options
     from softplan_jax.tuning import GainSpace, ScoreWeights, rollout_score, score_batch, tune_smoothed
-    from softplan_jax.tuning.objective import check_weights
-    from softplan_jax.tuning.tuner import RECIPE_SPACE, recipe_sigma, recipe_start
+    from softplan_jax.tuning._objective import check_weights
+    from softplan_jax.tuning._tuner import RECIPE_SPACE, recipe_sigma, recipe_start
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     weights = check_weights(ScoreWeights(**args.weight_items))

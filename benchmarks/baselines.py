@@ -103,7 +103,7 @@ def save(path: str, fallback: bool, quick: bool = False) -> int:
 
 def summary(arrays: dict) -> list:
     """One row per run (the group of arrays under one prefix): statuses, iterations, digest."""
-    from softplan_jax.base.status import STATUS_NAMES
+    from softplan_jax.base._status import STATUS_NAMES
 
     groups = {}
     for k in sorted(arrays):

@@ -64,13 +64,13 @@ import jax.numpy as jnp
 import numpy as np
 
 import softplan_jax as sp
-from softplan_jax.geometry.closest import (
+from softplan_jax.geometry._closest import (
     SolverOptions,
     curve_closest,
 )
-from softplan_jax.geometry.closest_grid import GridSolverOptions
-from softplan_jax.geometry.curves import PolynomialCurve, curve_points
-from softplan_jax.geometry.point_sets import points_closest
+from softplan_jax.geometry._closest_grid import GridSolverOptions
+from softplan_jax.geometry._curves import PolynomialCurve, curve_points
+from softplan_jax.geometry._point_sets import points_closest
 from softplan_jax.testing import closest_cases as cc
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -676,7 +676,7 @@ def _solver_source() -> dict:
     """
     import subprocess
 
-    import softplan_jax.geometry.closest as closest_module
+    import softplan_jax.geometry._closest as closest_module
 
     src = inspect.getsource(closest_module)
     info = dict(file="softplan_jax/closest.py", sha256=hashlib.sha256(src.encode()).hexdigest()[:12])

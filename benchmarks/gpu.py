@@ -11,7 +11,7 @@ Parts (each one timed with compile apart; warm calls interleaved in rounds):
 1. ``plan(paper_scenario("tree"))`` at ``max_steps`` = 58 (its 53 steps + 5) and
    600 (the default), on the accelerator and on the host CPU of the same machine.
 2. The batched rollout that :func:`softplan_jax.plan_batch` runs
-   (:func:`~softplan_jax.planning.engine.run_lanes`) on ``random_scenarios(0, B)``
+   (:func:`~softplan_jax.planning._engine.run_lanes`) on ``random_scenarios(0, B)``
    with at most ``--steps`` steps, for each B of ``--sizes`` with every scene in
    its own lane (``lanes = B``), float64; at the first size also 64 lanes (the
    engine's default) and the fallback loop's former fixed chunk of 8 ("before");
@@ -209,8 +209,8 @@ def part_defaults(args, rep):
     import numpy as np
 
     import softplan_jax as sp
-    from softplan_jax.planning.engine import default_lanes
-    from softplan_jax.planning.planner import plan_device
+    from softplan_jax.planning._engine import default_lanes
+    from softplan_jax.planning._planner import plan_device
 
     tree = sp.paper_scenario("tree")
     suite = load_suite(args.suites, args.defaults_size, "float64")
@@ -278,7 +278,7 @@ def part_tracking(args, rep):
 
 def batch_variants(args):
     """[(name, dtype, B, lanes, trips)]: the batched programs of part 2."""
-    from softplan_jax.geometry import warm_start as ws
+    from softplan_jax.geometry import _warm_start as ws
 
     s = args.size_list
     trips = ws.fallback_trips()  # the platform's default bound
@@ -320,7 +320,7 @@ def part_batch(args, rep, programs):
     from _common import lanes_program  # imported here: it imports jax and the package
 
     import softplan_jax as sp
-    from softplan_jax.planning.programs import batch_keys, strong_gains
+    from softplan_jax.planning._programs import batch_keys, strong_gains
 
     opts = sp.make_options("curve")
     calls, info = {}, {}
@@ -501,9 +501,9 @@ def audit(path, suites=None, substeps: int = 16):
     import jax.numpy as jnp
     import numpy as np
 
-    from softplan_jax.geometry.closest import DEFAULT_OPTIONS
-    from softplan_jax.geometry.kinematics import motion_bound
-    from softplan_jax.geometry.obstacles import radius_and_mask, true_closest
+    from softplan_jax.geometry._closest import DEFAULT_OPTIONS
+    from softplan_jax.geometry._kinematics import motion_bound
+    from softplan_jax.geometry._obstacles import radius_and_mask, true_closest
 
     d = np.load(path)
     q, it, b = d["q"].astype(np.float64), d["iterations"], int(d["batch"])
@@ -621,7 +621,7 @@ def main(argv=None):
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from softplan_jax.base.compilation_cache import disable_compilation_cache
+    from softplan_jax.base._compilation_cache import disable_compilation_cache
 
     disable_compilation_cache()
     rep = Report(args.out)

@@ -1,6 +1,6 @@
 """A NumPy/SciPy peer of the paper's planner: what a competent NumPy user would write.
 
-The same planner as :mod:`softplan_jax.planning.planner` (paper eq. 9), written from the
+The same planner as :mod:`softplan_jax.planning._planner` (paper eq. 9), written from the
 paper with NumPy and SciPy only (``softplan_jax`` is used to READ scenarios and
 default gains and, in :func:`jax_trajectory`, to run the JAX side).
 The speed benchmarks (``speed_targets.py``, ``paper_tables.py``,
@@ -19,7 +19,7 @@ fast in NumPy's own terms:
   series near 0), all the step needs in one call; checked against the
   complex-step oracle and central finite differences in the tests.
 * Pseudo-inverse with ``numpy.linalg``: by default the damped form
-  ``J^T (J J^T + lambda^2 I)^-1`` exactly as ``softplan_jax.base.numerics.damped_pinv``
+  ``J^T (J J^T + lambda^2 I)^-1`` exactly as ``softplan_jax.base._numerics.damped_pinv``
   (so trajectories can agree), or ``pinv="svd"``: ``numpy.linalg.pinv`` (the
   paper's undamped pseudo-inverse with an SVD cut-off; trajectories differ).
 * Closest point segment <-> curve, paper §2.3: ``D(s, u)`` sampled for all
@@ -69,7 +69,7 @@ from scipy import optimize, spatial
 
 import softplan_jax as sp
 from softplan_jax.planning import PAPER_STEP, planner_step
-from softplan_jax.planning.planner import make_options
+from softplan_jax.planning._planner import make_options
 
 __all__ = [
     "NumpyScenario",
@@ -411,7 +411,7 @@ def fd_jacobian(fn, q):
 
 
 def damped_pinv(J, damping: float):
-    """J^T (J J^T + damping^2 I)^-1, as softplan_jax.base.numerics.damped_pinv."""
+    """J^T (J J^T + damping^2 I)^-1, as softplan_jax.base._numerics.damped_pinv."""
     A = J @ J.T + damping * damping * np.eye(J.shape[0])
     return np.linalg.solve(A, J).T
 
@@ -748,13 +748,13 @@ def closest_point_points(q, points, tree=None, points_per_segment: int = 10,
 
 
 def attraction(V_e, g: dict):
-    """F_e(V_e) = k_att V_e, saturated to speed v_max (as softplan_jax.planning.planner.attraction)."""
+    """F_e(V_e) = k_att V_e, saturated to speed v_max (as softplan_jax.planning._planner.attraction)."""
     speed = g["k_att"] * float(np.linalg.norm(V_e))
     return g["k_att"] * V_e / max(1.0, speed / g["v_max"])
 
 
 def repulsion(V_s, clearance: float, g: dict, kind: str = "khatib"):
-    """F_s(V_s) as softplan_jax.planning.planner.repulsion: Khatib's eta (1/d - 1/d0)/d^2 for
+    """F_s(V_s) as softplan_jax.planning._planner.repulsion: Khatib's eta (1/d - 1/d0)/d^2 for
     d < d0 (0 beyond), smoothly capped with rep_max tanh(. / rep_max); or
     rep_max exp(-d/d0). d is floored at 1e-3 d0."""
     d = max(clearance, 1e-3 * g["d0"])

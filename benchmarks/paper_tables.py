@@ -60,10 +60,10 @@ from _common import (  # noqa: E402
 )
 
 import softplan_jax as sp  # noqa: E402
-from softplan_jax.base.status import status_name  # noqa: E402
+from softplan_jax.base._status import status_name  # noqa: E402
 from softplan_jax.planning import PAPER_STEP  # noqa: E402
-from softplan_jax.planning.planner import make_options, result_from_rollout  # noqa: E402
-from softplan_jax.planning.programs import rollout_jit  # noqa: E402
+from softplan_jax.planning._planner import make_options, result_from_rollout  # noqa: E402
+from softplan_jax.planning._programs import rollout_jit  # noqa: E402
 from softplan_jax.scenarios import PAPER_RESULTS, PAPER_SCENARIOS  # noqa: E402
 
 METHODS = ("curve", 1, 10, 50, 100)

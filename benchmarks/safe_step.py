@@ -106,10 +106,10 @@ def main(argv=None) -> dict:
     from _common import RESULTS_DIR, finish_machine, log, machine_info, machine_lines
 
     import softplan_jax as sp
-    from softplan_jax.base.status import status_name
+    from softplan_jax.base._status import status_name
     from softplan_jax.planning import apply_collision_checks
-    from softplan_jax.planning.planner import make_options
-    from softplan_jax.planning.programs import rollout_batch
+    from softplan_jax.planning._planner import make_options
+    from softplan_jax.planning._programs import rollout_batch
 
     dtype = jnp.float32 if args.float32 else jnp.float64
     dname = "float32" if args.float32 else "float64"

@@ -144,7 +144,7 @@ class Runner:
 
     @staticmethod
     def options(method, check: bool = True):
-        from softplan_jax.planning.planner import make_options
+        from softplan_jax.planning._planner import make_options
 
         return make_options("curve" if method == "curve" else "points", 10 if method == "curve" else method,
                             check_collisions=check)
@@ -160,7 +160,7 @@ class Runner:
     def ensure_compiled(self, suite, gains, method, max_steps: int, check: bool = True, log=None) -> float:
         """Compile the program for this shape ahead of time (jax keeps it for the
         later calls); returns the compile seconds (0 if already compiled)."""
-        from softplan_jax.planning.programs import rollout_batch
+        from softplan_jax.planning._programs import rollout_batch
 
         jax = self.jax
         _, idx = self.batches(suite)[0]
@@ -179,8 +179,8 @@ class Runner:
         """Checked rollouts of every scene of ``suite``. Chunk c0's escapes use
         ``seed * 100003 + c0``. -> dict(status names, iterations, min_clearance,
         seconds per scene-step of each chunk, run seconds, compile seconds)."""
-        from softplan_jax.base.status import status_name
-        from softplan_jax.planning.programs import rollout_batch
+        from softplan_jax.base._status import status_name
+        from softplan_jax.planning._programs import rollout_batch
 
         jax = self.jax
         n = suite.q0.shape[0]
@@ -426,7 +426,7 @@ def cost_per_step(args, runner, suite, gains, stamp) -> dict:
     robin over the methods (so the machine's load falls on all alike)."""
     import jax
 
-    from softplan_jax.planning.programs import rollout_batch
+    from softplan_jax.planning._programs import rollout_batch
 
     batches = runner.batches(suite)[: args.timing_chunks]
     for m in args.method_list:

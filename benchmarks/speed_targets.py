@@ -66,10 +66,10 @@ from _common import (  # noqa: E402
 )
 
 import softplan_jax as sp  # noqa: E402
-from softplan_jax.geometry.obstacles import radius_and_mask  # noqa: E402
-from softplan_jax.planning.options import rollout_compiler_options  # noqa: E402
-from softplan_jax.planning.planner import make_options  # noqa: E402
-from softplan_jax.planning.programs import rollout, rollout_jit  # noqa: E402
+from softplan_jax.geometry._obstacles import radius_and_mask  # noqa: E402
+from softplan_jax.planning._options import rollout_compiler_options  # noqa: E402
+from softplan_jax.planning._planner import make_options  # noqa: E402
+from softplan_jax.planning._programs import rollout, rollout_jit  # noqa: E402
 from softplan_jax.tuning.pathwise import rollout_loss  # noqa: E402
 
 

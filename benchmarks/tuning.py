@@ -39,7 +39,7 @@ checks in the scan). Per obstacle model (curve, N = 10, N = 50):
    instead or as well; validation chose the clip).
 5. **gain function** (beyond the grid's reach; with the ablation
    ``gradient+``: the same extra updates on the three gains alone): the 20-parameter
-   :class:`~softplan_jax.planning.planner.GainFunction` space (log d0, dt, eta; a
+   :class:`~softplan_jax.planning._planner.GainFunction` space (log d0, dt, eta; a
    14-knot repulsion profile over d / d0; 3 segment weights),
    ``tune_smoothed`` from the gradient's result for ``--fn-updates`` more
    updates of ``--fn-pairs`` pairs: dt as in the gradient's space
@@ -237,7 +237,7 @@ def main(argv=None) -> dict:
     from _common import FIGURES_DIR, RESULTS_DIR, log, machine_info
 
     import softplan_jax as sp
-    from softplan_jax.planning.planner import make_options
+    from softplan_jax.planning._planner import make_options
     from softplan_jax.tuning import GainSpace, ScoreWeights, score_batch, tune_smoothed
 
     t_all = time.perf_counter()
@@ -578,7 +578,7 @@ def figures(results: dict, args, fig_dir: str, sp) -> None:
     # tuned repulsion functions
     import jax.numpy as jnp
 
-    from softplan_jax.planning.step import GainFunction, repulsion, repulsion_scale
+    from softplan_jax.planning._step import GainFunction, repulsion, repulsion_scale
 
     fig, axes = plt.subplots(1, len(labs), figsize=(4 * len(labs), 3.2), squeeze=False)
     for ax, lab in zip(axes[0], labs, strict=True):

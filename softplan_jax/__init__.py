@@ -28,28 +28,28 @@ from . import search as search
 from . import sweeps as sweeps
 from . import trajectories as trajectories
 from . import tuning as tuning
-from .base.compilation_cache import disable_compilation_cache, enable_compilation_cache
-from .base.compilation_cache import enable_default_cache as _enable_default_cache
-from .base.status import Status
-from .geometry.closest import closest_point
-from .geometry.curves import ParametricCurve, PolynomialCurve, line_segment
-from .geometry.kinematics import point_jacobian, segment_point, tip_position
-from .geometry.point_sets import closest_point_to_points
-from .planning.gains import GainFunction, Gains, default_gains
-from .planning.options import PAPER_STEP, PlanOptions, make_options
-from .planning.planner import PlanResult, plan, plan_batch
-from .planning.presets import apply_preset
-from .planning.tracking import track, track_batch
+from .base._compilation_cache import disable_compilation_cache, enable_compilation_cache
+from .base._compilation_cache import enable_default_cache as _enable_default_cache
+from .base._status import Status
+from .geometry._closest import closest_point
+from .geometry._curves import ParametricCurve, PolynomialCurve, line_segment
+from .geometry._kinematics import point_jacobian, segment_point, tip_position
+from .geometry._point_sets import closest_point_to_points
+from .planning._gains import GainFunction, Gains, default_gains
+from .planning._options import PAPER_STEP, PlanOptions, make_options
+from .planning._planner import PlanResult, plan, plan_batch
+from .planning._presets import apply_preset
+from .planning._tracking import track, track_batch
 from .scenarios import Scenario, load_scenario, make_scenario, paper_scenario, random_scenarios, save_scenario
-from .scenarios.motion import make_moving_scenario
-from .scenarios.moving import moving_scenario
-from .search.fallback import plan_fallback
-from .search.tracking import track_fallback
+from .scenarios._motion import make_moving_scenario
+from .scenarios._moving import moving_scenario
+from .search._fallback import plan_fallback
+from .search._tracking import track_fallback
 from .trajectories import Trajectory, load_trajectory, save_trajectory, time_parametrize
-from .tuning.gains_file import load_gains, save_gains
+from .tuning._gains_file import load_gains, save_gains
 
 # jax's persistent compilation cache on for the planner's programs, unless the user set one or
-# opted out (SOFTPLAN_JAX_NO_CACHE=1; see softplan_jax.base.compilation_cache).
+# opted out (SOFTPLAN_JAX_NO_CACHE=1; see softplan_jax.base._compilation_cache).
 _enable_default_cache()
 
 try:

@@ -1,15 +1,15 @@
 """Moving goals and moving obstacles, in one namespace (``sp.moving``).
 
 The types and scenes live in :mod:`softplan_jax.scenarios` (:mod:`.scenarios.motion`,
-:mod:`.scenarios.moving`), the tracker in :mod:`softplan_jax.planning.tracking` (its evasive step in
-:mod:`softplan_jax.planning.evasion`), the tracker with the global search in
-:mod:`softplan_jax.search.tracking`.
+:mod:`.scenarios.moving`), the tracker in :mod:`softplan_jax.planning._tracking` (its evasive step in
+:mod:`softplan_jax.planning._evasion`), the tracker with the global search in
+:mod:`softplan_jax.search._tracking`.
 """
 
-from .planning.options import TrackOptions, make_track_options
-from .planning.tracking import Track, TrackResult, track, track_batch
-from .scenarios.json_format import load_moving_scenario, save_moving_scenario
-from .scenarios.motion import (
+from .planning._options import TrackOptions, make_track_options
+from .planning._tracking import Track, TrackResult, track, track_batch
+from .scenarios._json_format import load_moving_scenario, save_moving_scenario
+from .scenarios._motion import (
     CurveMotion,
     GoalPath,
     MovingScenario,
@@ -21,8 +21,8 @@ from .scenarios.motion import (
     speed_bounds,
     stack_moving_scenarios,
 )
-from .scenarios.moving import MOVING_SCENARIOS, moving_scenario, random_moving_scenarios
-from .search.tracking import track_fallback
+from .scenarios._moving import MOVING_SCENARIOS, moving_scenario, random_moving_scenarios
+from .search._tracking import track_fallback
 
 __all__ = [
     "CurveMotion",

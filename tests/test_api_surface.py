@@ -98,6 +98,21 @@ def _private_imports(path):
     return _private_imports_src(src, path)
 
 
+def _is_module(where, node, name) -> bool:
+    """``from <node's package> import name`` imports a module (a namespace's private ``_module``
+    file), not a private name of another module."""
+    if node.level > 0:
+        base = os.path.dirname(os.path.abspath(where))
+        for _ in range(node.level - 1):
+            base = os.path.dirname(base)
+    elif (node.module or "").startswith("softplan_jax"):
+        base = os.path.dirname(PACKAGE_DIR)
+    else:
+        return False
+    parts = (node.module or "").split(".") if node.module else []
+    return os.path.isfile(os.path.join(base, *parts, name + ".py"))
+
+
 def _private_imports_src(src, where):
     out = []
     tree = ast.parse(src, where)
@@ -105,7 +120,8 @@ def _private_imports_src(src, where):
         if isinstance(node, ast.ImportFrom):
             from_softplan = node.level > 0 or (node.module or "").startswith("softplan_jax")
             for alias in node.names:
-                if from_softplan and alias.name.startswith("_") and alias.name != "__version__":
+                if from_softplan and alias.name.startswith("_") and alias.name != "__version__" \
+                        and not _is_module(where, node, alias.name):
                     out.append((node.lineno, f"from {'.' * node.level}{node.module or ''} import {alias.name}"))
         elif isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__"):
             base = node.value
@@ -140,7 +156,7 @@ def test_no_module_imports_private_names_of_another():
 
 
 def test_the_checker_finds_private_imports():
-    src = ("from .kinematics import _frames\nfrom softplan_jax.geometry.closest import _x as y\n"
+    src = ("from .kinematics import _frames\nfrom softplan_jax.geometry._closest import _x as y\n"
            "import softplan_jax as sp\nsp.planner._f()\n")
     assert [ln for ln, _ in _private_imports_src(src, "x")] == [1, 2, 4]
     assert _private_imports_src("from .kinematics import frames\nsp.planner.f()\n", "x") == []

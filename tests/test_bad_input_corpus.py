@@ -19,8 +19,8 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.cli import main
-from softplan_jax.planning.planner import check_gains
-from softplan_jax.scenarios.json_format import moving_to_dict
+from softplan_jax.planning._planner import check_gains
+from softplan_jax.scenarios._json_format import moving_to_dict
 
 STEPS = 5
 

@@ -1,7 +1,7 @@
 """Batches: the LAPACK-free small solve, plan_batch in chunks with progress,
 and plan_batch sharded over 2 host devices.
 
-* :func:`softplan_jax.base.numerics.solve_small` (the planner's and the swept
+* :func:`softplan_jax.base._numerics.solve_small` (the planner's and the swept
   check's 3x3 solves): backward stable against NumPy's LAPACK solve over
   condition numbers up to 1e12, pivots, differentiable; no LAPACK custom call
   left in a lowered rollout or collision check. (jaxlib's batched LAPACK
@@ -32,10 +32,10 @@ import pytest
 from session import free_port, one_device_env, subprocess_env
 
 import softplan_jax as sp
-from softplan_jax.base.numerics import evaluate_where, solve_small, tie
+from softplan_jax.base._numerics import evaluate_where, solve_small, tie
 from softplan_jax.planning import apply_collision_checks
-from softplan_jax.planning.planner import make_options
-from softplan_jax.planning.programs import rollout_jit
+from softplan_jax.planning._planner import make_options
+from softplan_jax.planning._programs import rollout_jit
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PAD = dict(curve_slots=5, degree=2)
@@ -258,7 +258,7 @@ def test_two_host_devices_match_one():
 
 
 def test_batch_keys_per_scenario():
-    from softplan_jax.planning.programs import batch_keys
+    from softplan_jax.planning._programs import batch_keys
 
     keys = jax.random.split(jax.random.PRNGKey(4), 5)
     np.testing.assert_array_equal(np.asarray(batch_keys(4, 5)), np.asarray(keys))
@@ -359,7 +359,7 @@ def test_batch_command_on_two_processes_is_the_sharded_run(tmp_path):
 def test_global_mesh_in_one_process():
     """devices="global" without jax.distributed is every local device: no mesh for one
     device, and a plan_batch equal to devices=None's."""
-    from softplan_jax.planning.batching import batch_mesh, is_global
+    from softplan_jax.planning._batching import batch_mesh, is_global
 
     mesh = batch_mesh("global")
     assert mesh is None if len(jax.devices()) == 1 else mesh.size == len(jax.devices())

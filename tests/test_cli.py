@@ -24,7 +24,7 @@ from session import subprocess_env
 
 import softplan_jax as sp
 from softplan_jax.cli import main
-from softplan_jax.planning.planner import PlanResult
+from softplan_jax.planning._planner import PlanResult
 
 STEPS = "80"
 SUMMARY_FIELDS = {
@@ -462,7 +462,7 @@ def test_animate_writes_gif(mixed_scenario, tmp_path):
 @pytest.mark.parametrize("name", ["sim1", "tree"])
 def test_animation_axis_labels_inside_the_frame(name, tmp_path, monkeypatch):
     """A GIF frame is the whole figure: the X, Y, Z labels must be drawn inside it."""
-    from softplan_jax.plotting import animation as plotting
+    from softplan_jax.plotting import _animation as plotting
 
     fitted = []
     fit = plotting._fit_axis_labels_inside

@@ -29,7 +29,7 @@ import pytest
 from helpers import assert_allclose, assert_finite, closest_per_obstacle, unpack_stacked
 
 import softplan_jax as sp
-from softplan_jax.geometry.closest import SolverOptions
+from softplan_jax.geometry._closest import SolverOptions
 from softplan_jax.testing import closest_cases as cc
 from softplan_jax.testing import oracle
 
@@ -649,7 +649,7 @@ def test_point_distance_matches_dense_sampling():
 def test_newton_kernel_matches_autodiff(theta):
     """closest_newton.pair_terms (paper eqs. 13-18, the one Newton kernel) against
     jax.grad / jax.hessian of |F_Ri(s) - F_o(u)|^2 / 2, at and near theta = 0."""
-    from softplan_jax.geometry.closest_newton import Segment, pair_terms
+    from softplan_jax.geometry._closest_newton import Segment, pair_terms
 
     q = jnp.array([[0.9, 0.4, 0.3], [1.1, theta, -0.7]])
     R, P = sp.geometry.segment_frames(q)
@@ -667,7 +667,7 @@ def test_newton_kernel_matches_autodiff(theta):
 
 
 def test_atan_over_x_both_branches():
-    from softplan_jax.base.numerics import atan_over_x
+    from softplan_jax.base._numerics import atan_over_x
 
     w = jnp.array([0.0, 1e-12, 0.019, 0.021, 0.5, -3.0])
     ref = np.where(np.asarray(w) == 0, 1.0, np.arctan(np.asarray(w)) / np.where(np.asarray(w) == 0, 1, np.asarray(w)))
@@ -677,7 +677,7 @@ def test_atan_over_x_both_branches():
 
 @jax.jit
 def _arc_distances(q, pts):
-    from softplan_jax.geometry.closest_newton import Segment, arc_distance2, project_to_arc
+    from softplan_jax.geometry._closest_newton import Segment, arc_distance2, project_to_arc
 
     R, P = sp.geometry.segment_frames(q)
     seg = Segment.from_frame(q[0], R[0], P[0])
@@ -721,7 +721,7 @@ def test_arc_distance_matches_dense_sampling(theta):
 
 
 def test_arc_distance_gradient_finite_at_theta_zero_and_the_centre():
-    from softplan_jax.geometry.closest_newton import Segment, arc_distance2
+    from softplan_jax.geometry._closest_newton import Segment, arc_distance2
 
     def f(q, p):
         R, P = sp.geometry.segment_frames(q)

@@ -1,4 +1,4 @@
-"""The user-facing persistent compilation cache (softplan_jax.base.compilation_cache)."""
+"""The user-facing persistent compilation cache (softplan_jax.base._compilation_cache)."""
 
 import os
 import subprocess
@@ -7,7 +7,7 @@ import sys
 import pytest
 from session import REPO, subprocess_env
 
-from softplan_jax.base.compilation_cache import compilation_cache_dir
+from softplan_jax.base._compilation_cache import compilation_cache_dir
 
 
 def test_directory_follows_the_environment(monkeypatch, tmp_path):
@@ -54,8 +54,8 @@ def test_traced_rollout_is_kept_on_disk_and_gives_the_same_result(monkeypatch, t
     import numpy as np
 
     import softplan_jax as sp
-    from softplan_jax.planning.planner import make_options
-    from softplan_jax.planning.programs import rollout_jit
+    from softplan_jax.planning._planner import make_options
+    from softplan_jax.planning._programs import rollout_jit
 
     monkeypatch.delenv("SOFTPLAN_COMPILATION_CACHE", raising=False)
     monkeypatch.setenv("SOFTPLAN_CACHE_DIR", str(tmp_path))
@@ -97,15 +97,15 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
     import numpy as np
 
     import softplan_jax as sp
-    from softplan_jax.base.compilation_cache import (
+    from softplan_jax.base._compilation_cache import (
         CPU_COMPILER_OPTIONS,
         CURVE_CPU_COMPILER_OPTIONS,
         XLA_DEFAULT_OPTIONS,
         compiler_options,
     )
-    from softplan_jax.planning.options import rollout_compiler_options
-    from softplan_jax.planning.planner import make_options
-    from softplan_jax.planning.programs import rollout, rollout_jit
+    from softplan_jax.planning._options import rollout_compiler_options
+    from softplan_jax.planning._planner import make_options
+    from softplan_jax.planning._programs import rollout, rollout_jit
 
     sc, g, key = sp.paper_scenario("sim1"), sp.default_gains(), jax.random.PRNGKey(0)
     opts = make_options("points", 10, check_collisions=False)
@@ -139,7 +139,7 @@ def test_rollouts_compile_with_the_package_xla_options(monkeypatch):
 
 def test_xla_options_this_jaxlib_does_not_know_are_left_out(monkeypatch):
     """An option that XLA has renamed or retired is dropped on its own; the others stay."""
-    from softplan_jax.base import compilation_cache as cc
+    from softplan_jax.base import _compilation_cache as cc
 
     known = dict(cc.CPU_COMPILER_OPTIONS)
     monkeypatch.setattr(cc, "CPU_COMPILER_OPTIONS", {"xla_cpu_no_such_option": True, **known})
@@ -166,7 +166,7 @@ def test_package_jit_inside_the_users_jit_and_transforms():
     import jax.numpy as jnp
     import numpy as np
 
-    from softplan_jax.base.compilation_cache import compiler_options, package_jit
+    from softplan_jax.base._compilation_cache import compiler_options, package_jit
 
     f = package_jit(lambda x, k: jnp.sin(x) * k, static_argnames=("k",))
     x = jnp.linspace(0.0, 1.0, 5)

@@ -253,7 +253,7 @@ def test_point_curve_lower_bound_never_exceeds_the_distance():
     the exact point-curve distance and a dense sampling of the curve, for degrees 1 to 9, ranges
     inside and beyond [-1, 1] and points on, near and far from the curve; far away it is within
     its slack of the distance (it does skip)."""
-    from softplan_jax.geometry.point_curve import point_curve_distance, point_curve_lower_bound
+    from softplan_jax.geometry._point_curve import point_curve_distance, point_curve_lower_bound
 
     rng = np.random.default_rng(7)
     for trial in range(60):
@@ -281,8 +281,8 @@ def test_goal_obstacle_hits_skip_only_far_curves():
     does not clear the radius plus the arm's: the same hits, clearances and exactness as the
     exact distance of every curve, for goals inside, on, just outside and far from the tree's
     obstacles."""
-    from softplan_jax.geometry.obstacles import point_obstacle_distances
-    from softplan_jax.scenarios.scenario import goal_obstacle_hits
+    from softplan_jax.geometry._obstacles import point_obstacle_distances
+    from softplan_jax.scenarios._scenario import goal_obstacle_hits
 
     tree = sp.paper_scenario("tree")
     arm_r = float(tree.arm_radius)

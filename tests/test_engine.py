@@ -1,4 +1,4 @@
-"""The rollout engine (softplan_jax.planning.engine): its drivers give the same arrays, a
+"""The rollout engine (softplan_jax.planning._engine): its drivers give the same arrays, a
 finished rollout's records are frozen, a batch's refilled lanes give every scene
 its own rollout (checked against a Python loop of single rollouts), the lanes and the
 single plan's device by platform, the safe step's scale against its formula, and the
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.planning.engine import (
+from softplan_jax.planning._engine import (
     ACCELERATOR_LANES,
     DEFAULT_LANES,
     DEFAULT_QUANTUM,
@@ -20,10 +20,10 @@ from softplan_jax.planning.engine import (
     run,
     run_lanes,
 )
-from softplan_jax.planning.options import rollout_compiler_options
-from softplan_jax.planning.planner import make_options, plan_device
-from softplan_jax.planning.programs import batch_keys, rollout, rollout_jit
-from softplan_jax.planning.step import safe_scale
+from softplan_jax.planning._options import rollout_compiler_options
+from softplan_jax.planning._planner import make_options, plan_device
+from softplan_jax.planning._programs import batch_keys, rollout, rollout_jit
+from softplan_jax.planning._step import safe_scale
 
 PAD = dict(curve_slots=5, degree=2)  # test_planner's shape: its programs are shared (conftest SHARED)
 STEPS = 200
@@ -156,7 +156,7 @@ def test_batch_entry_points_default_lanes(entry, monkeypatch):
     """plan_batch and track_batch without ``lanes`` hand the engine the CPU's width for their
     mode: 64 lanes when planning, the whole batch (up to 1,024) when tracking. Caught at the
     engine's door (run_lanes replaced), so nothing compiles."""
-    from softplan_jax.planning import programs
+    from softplan_jax.planning import _programs as programs
 
     seen = {}
 
@@ -259,7 +259,7 @@ def test_tracking_a_static_scene_plans_it_then_holds(paper):
     """The mode is the options': TrackOptions on a static scene hold the goal to the horizon. Up to
     the step where planning ends at the goal, the two rollouts are the same step bit for bit (the
     static attraction, no motion); tracking then holds the goal (status reached, held to the end)."""
-    from softplan_jax.planning.tracking import make_track_options
+    from softplan_jax.planning._tracking import make_track_options
 
     sc, g = paper["tree"], sp.default_gains()
     planned = jax.device_get(rollout_jit(sc, g, make_options("curve"), STEPS, 0))

@@ -14,8 +14,8 @@ import pytest
 from scipy.optimize import minimize
 
 import softplan_jax as sp
-from softplan_jax.geometry.obstacles import radius_and_mask
-from softplan_jax.planning.evasion import barrier_velocity, certify_motion, clearance_gradients
+from softplan_jax.geometry._obstacles import radius_and_mask
+from softplan_jax.planning._evasion import barrier_velocity, certify_motion, clearance_gradients
 from softplan_jax.testing import oracle
 
 PAD = dict(curve_slots=5, degree=2)

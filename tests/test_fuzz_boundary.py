@@ -23,9 +23,9 @@ from hypothesis import strategies as st
 
 import softplan_jax as sp
 from softplan_jax.cli import main
-from softplan_jax.scenarios.json_format import moving_from_dict, moving_to_dict, scenario_from_dict
-from softplan_jax.scenarios.scenario import check_scenario
-from softplan_jax.tuning.gains_file import gains_from_dict, gains_to_dict
+from softplan_jax.scenarios._json_format import moving_from_dict, moving_to_dict, scenario_from_dict
+from softplan_jax.scenarios._scenario import check_scenario
+from softplan_jax.tuning._gains_file import gains_from_dict, gains_to_dict
 
 STEPS = 5
 FUZZ = settings(max_examples=60, deadline=None, derandomize=True,

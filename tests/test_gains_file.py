@@ -1,4 +1,4 @@
-"""Gains files (softplan_jax.tuning.gains_file, format ``softplan-gains/1``) and the CLI's
+"""Gains files (softplan_jax.tuning._gains_file, format ``softplan-gains/1``) and the CLI's
 ``--gains FILE``.
 
 Compilation dominates the cost, so the planning here reuses programs other tests

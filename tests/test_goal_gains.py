@@ -17,10 +17,10 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.planning import planner_step
-from softplan_jax.planning.planner import make_options
-from softplan_jax.planning.step import GOAL_GAINS, goal_scaled
+from softplan_jax.planning._planner import make_options
+from softplan_jax.planning._step import GOAL_GAINS, goal_scaled
 from softplan_jax.tuning import GainSpace, ScoreWeights, estimate_objective, rollout_score, smoothing_sample
-from softplan_jax.tuning.tuner import (
+from softplan_jax.tuning._tuner import (
     RECIPE_SPACE,
     RECIPE_WEIGHTS,
     recipe_sigma,
@@ -174,10 +174,10 @@ def test_euler_warning_sees_the_goal_profile_and_the_space_its_knots():
     near = g._replace(goal_profile=jnp.zeros((4, 3)).at[0, 0].set(math.log(2.0)))
     far = g._replace(goal_profile=jnp.zeros((4, 3)).at[0, 2].set(math.log(2.0)))
     with pytest.warns(UserWarning, match="goal profile"):
-        sp.planning.planner.check_gains(near, jnp.float64)
+        sp.planning._planner.check_gains(near, jnp.float64)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        sp.planning.planner.check_gains(far, jnp.float64)
-        sp.planning.planner.check_gains(g, jnp.float64)
+        sp.planning._planner.check_gains(far, jnp.float64)
+        sp.planning._planner.check_gains(g, jnp.float64)
     with pytest.raises(ValueError, match="goal_knots = 6"):
         tune_smoothed(sp.random_scenarios(0, 2), gains=g, updates=1, pairs=2, max_steps=5, progress=False)

@@ -13,8 +13,8 @@ import pytest
 from helpers import assert_allclose
 
 import softplan_jax as sp
-from softplan_jax.geometry.curves import HORNER_MAX_DEGREE, taylor_coefficients
-from softplan_jax.planning.programs import rollout
+from softplan_jax.geometry._curves import HORNER_MAX_DEGREE, taylor_coefficients
+from softplan_jax.planning._programs import rollout
 from softplan_jax.testing import oracle
 
 P = np.polynomial.polynomial

@@ -1,4 +1,4 @@
-"""Moving obstacles and moving goals (issue 23): softplan_jax.scenarios.motion and softplan_jax.planning.tracking.
+"""Moving obstacles and moving goals (issue 23): softplan_jax.scenarios._motion and softplan_jax.planning._tracking.
 
 References, all independent of the library's code paths: the rigid motion
 and its speed by NumPy/SciPy (``scipy.linalg.expm`` of the axis' cross-product
@@ -23,7 +23,7 @@ import pytest
 import softplan_jax as sp
 from softplan_jax.cli import main
 from softplan_jax.scenarios import load_moving_scenario, load_scenario, moving_to_dict, save_moving_scenario
-from softplan_jax.scenarios.motion import curve_radius_bound, goal_velocity, moved_curves
+from softplan_jax.scenarios._motion import curve_radius_bound, goal_velocity, moved_curves
 from softplan_jax.testing import oracle
 
 STEPS = 200
@@ -454,7 +454,7 @@ def test_cli_plays_a_moving_preset(tmp_path, capsys, monkeypatch):
     assert main(["run", "tree_fruit", "--hold-tolerance", "0"]) == 2
     # --require-reached: success only ("reached", or "held": back on the goal at the end); "lost" fails.
     assert main(["run", "tree_fruit", "--max-steps", str(STEPS), "--require-reached"]) == 0
-    import softplan_jax.planning.tracking as tracking
+    import softplan_jax.planning._tracking as tracking
 
     held = tracking.result_from_track
     monkeypatch.setattr(tracking, "result_from_track", lambda *a: held(*a)._replace(status="lost"))

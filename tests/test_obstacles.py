@@ -1,4 +1,4 @@
-"""softplan_jax.geometry.obstacles: the slot layout of a scene, against brute-force references.
+"""softplan_jax.geometry._obstacles: the slot layout of a scene, against brute-force references.
 
 One small mixed scene (a padded polynomial curve group, a padded point-set
 group, a parametric curve); one jitted function of it shared by every test.
@@ -15,8 +15,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 import softplan_jax as sp
-from softplan_jax.geometry import obstacles
-from softplan_jax.geometry.closest import DEFAULT_OPTIONS
+from softplan_jax.geometry import _obstacles as obstacles
+from softplan_jax.geometry._closest import DEFAULT_OPTIONS
 
 N_POINTS = 7
 
@@ -71,9 +71,9 @@ def test_true_closest_against_dense_sampling():
     truth, _, _, _, mask = _layout()
     assert truth.distance.shape == (5,) and truth.segment.dtype == np.int32 and truth.u.dtype == np.float64
     arm = _arm(sc.q0, 2000)
-    refs = {0: _min_dist(arm, np.asarray(sp.geometry.curves.curve_points(curve, 20001))),
+    refs = {0: _min_dist(arm, np.asarray(sp.geometry.curve_points(curve, 20001))),
             2: _min_dist(arm, np.asarray(pts)),
-            4: _min_dist(arm, np.asarray(sp.geometry.curves.curve_points(helix, 20001)))}
+            4: _min_dist(arm, np.asarray(sp.geometry.curve_points(helix, 20001)))}
     for slot, ref in refs.items():
         # Exact: never above the sampled minimum, and within the sampling error of it.
         assert truth.distance[slot] <= ref + 1e-12
@@ -87,8 +87,8 @@ def test_model_closest_is_the_n_point_model():
     sc, (curve, pts, helix) = _scene()
     truth, model_pts, model_crv, _, _ = _layout()
     arm = np.asarray(sp.geometry.backbone_points(sc.q0, 10))
-    for slot, obs in ((0, sp.geometry.curves.curve_points(curve, N_POINTS)), (2, pts),
-                      (4, sp.geometry.curves.curve_points(helix, N_POINTS))):
+    for slot, obs in ((0, sp.geometry.curve_points(curve, N_POINTS)), (2, pts),
+                      (4, sp.geometry.curve_points(helix, N_POINTS))):
         obs = np.asarray(obs)
         d = np.sqrt(((arm[:, None, :] - obs[None, :, :]) ** 2).sum(-1))
         a, p = np.unravel_index(np.argmin(d), d.shape)
@@ -106,9 +106,9 @@ def test_obstacle_samples_for_plots():
     sc, (curve, pts, helix) = _scene()
     obs = obstacles.obstacle_samples(sc, 50)
     assert [o["kind"] for o in obs] == ["curve", "points", "curve"]
-    np.testing.assert_allclose(obs[0]["pts"], np.asarray(sp.geometry.curves.curve_points(curve, 50)), atol=1e-12)
+    np.testing.assert_allclose(obs[0]["pts"], np.asarray(sp.geometry.curve_points(curve, 50)), atol=1e-12)
     np.testing.assert_array_equal(obs[1]["pts"], np.asarray(pts))
-    np.testing.assert_allclose(obs[2]["pts"], np.asarray(sp.geometry.curves.curve_points(helix, 50)), atol=1e-12)
+    np.testing.assert_allclose(obs[2]["pts"], np.asarray(sp.geometry.curve_points(helix, 50)), atol=1e-12)
     assert [o["radius"] for o in obs] == [0.02, 0.0, 0.01]
 
 

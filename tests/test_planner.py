@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.planning.options import rollout_compiler_options
-from softplan_jax.planning.planner import make_options, result_from_rollout
-from softplan_jax.planning.programs import rollout_jit
+from softplan_jax.planning._options import rollout_compiler_options
+from softplan_jax.planning._planner import make_options, result_from_rollout
+from softplan_jax.planning._programs import rollout_jit
 from softplan_jax.testing import oracle
 
 # All paper scenarios padded to one shape: one compilation serves the three.
@@ -380,7 +380,7 @@ def test_swept_proof_skips_only_motions_that_cannot_collide():
     end clearance) is at least the search's value. The skipped motions nearest the contact
     tolerance are checked by brute force too. Not vacuous: most motions are skipped, some
     are searched, some rollouts collide."""
-    from softplan_jax.geometry.clearance import contact_tolerance
+    from softplan_jax.geometry._clearance import contact_tolerance
     from softplan_jax.planning import apply_collision_checks
 
     always = make_options("curve", check_collisions=False, swept_proof=False, **sp.PAPER_STEP)
@@ -428,8 +428,8 @@ def test_swept_proof_skips_only_motions_that_cannot_collide():
 def test_swept_clear_edge_cases(paper):
     """swept_clear: a zero motion proves every clear slot clear; NaN, a clearance at the contact
     tolerance, a motion as long as the clearance or a solve that did not converge never do."""
-    from softplan_jax.geometry.clearance import swept_clear
-    from softplan_jax.geometry.obstacles import radius_and_mask
+    from softplan_jax.geometry._clearance import swept_clear
+    from softplan_jax.geometry._obstacles import radius_and_mask
 
     sc = paper["tree"]
     q = sc.q0

@@ -1,4 +1,4 @@
-"""The animations' shared frame-and-writer loop (softplan_jax.plotting.animation), on
+"""The animations' shared frame-and-writer loop (softplan_jax.plotting._animation), on
 hand-made results: no planning, no rollout compile.
 
 What a GIF shows is read off the writer: every frame it grabs is recorded with the
@@ -26,7 +26,7 @@ import matplotlib.animation  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 
 from softplan_jax import plotting  # noqa: E402
-from softplan_jax.plotting import animation  # noqa: E402
+from softplan_jax.plotting import _animation as animation  # noqa: E402
 
 
 def _plan_result(scenario, steps):

@@ -1,4 +1,4 @@
-"""Gain presets (softplan_jax.planning.presets) and the CLI's ``--gains`` option.
+"""Gain presets (softplan_jax.planning._presets) and the CLI's ``--gains`` option.
 
 The paper preset's figures checked here are the ones issue 10 quotes (and an
 independent NumPy implementation, benchmarks/numpy_baseline.py, reproduces:
@@ -18,7 +18,7 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.cli import main
-from softplan_jax.planning.presets import PRESETS, preset
+from softplan_jax.planning._presets import PRESETS, preset
 
 
 def test_preset_data():
@@ -82,7 +82,7 @@ def test_cli_gains_paper_shows_the_collision(capsys, monkeypatch):
     # The run of the test above: without the CLI's traced-program artifact (the artifact is
     # test_compilation_cache's), the command compiles the same program as sp.plan did, found
     # in the compilation cache instead of compiled a second time.
-    monkeypatch.setattr(sp.base.compilation_cache, "_exported_dir", lambda: None)
+    monkeypatch.setattr(sp.base._compilation_cache, "_exported_dir", lambda: None)
     code = main(["run", "sim2", "--gains", "paper", "--method", "points", "--n-points", "10",
                  "--max-steps", "40", "--json"])
     out, err = capsys.readouterr()

@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.search import tree as global_planner
-from softplan_jax.search.fallback import _fallback_jit, _search_starts
-from softplan_jax.search.reach import _goal_configurations_jit
+from softplan_jax.search import _tree as global_planner
+from softplan_jax.search._fallback import _fallback_jit, _search_starts
+from softplan_jax.search._reach import _goal_configurations_jit
 
 OPTS = sp.search.ReachOptions()
 PAD = dict(curve_slots=5, degree=2)  # test_planner's shape
@@ -74,8 +74,8 @@ def test_goal_configurations_and_the_fallback_hold_one_exact_solve(monkeypatch):
     round are assessed at one site, the body of one loop; the fallback's loop assesses the IK's
     starts, walks every certified motion of the search and checks the path at one site.
     Traced only (make_jaxpr): nothing compiles."""
-    from softplan_jax.search import machine
-    from softplan_jax.search import reach as reach_module
+    from softplan_jax.search import _machine as machine
+    from softplan_jax.search import _reach as reach_module
 
     sites = []
 
@@ -104,8 +104,8 @@ def test_batch_loop_equals_jax_vmap_of_the_scene_loop(decided):
     arrays agree bit for bit on scenes that end at different rounds (certified at once,
     beyond reach: every null-space round). Slow: the reference is a 3-scene IK program of its
     own (about 8 s to trace and compile) that nothing else uses."""
-    from softplan_jax.planning.options import rollout_compiler_options
-    from softplan_jax.search.reach import goal_configurations
+    from softplan_jax.planning._options import rollout_compiler_options
+    from softplan_jax.search._reach import goal_configurations
 
     batch, _ = decided
     batch = jax.tree_util.tree_map(lambda x: x[:3], batch)
@@ -209,7 +209,7 @@ def test_fallback_programs_compile_with_the_package_xla_options(decided):
     shows it on a plain jit). Checked on the IK, with the shapes the fixture compiled (its
     program comes from the persistent cache); an earlier version of
     benchmarks/fallback_compile.py measured what the options buy (docs/performance.md)."""
-    from softplan_jax.base.compilation_cache import package_jit
+    from softplan_jax.base._compilation_cache import package_jit
 
     batch, _ = decided
     one = jax.tree_util.tree_map(lambda x: x[:1], batch)
@@ -224,7 +224,7 @@ def test_fallback_programs_compile_with_the_package_xla_options(decided):
 def test_batch_compiles_the_search_once_and_keeps_local_results(rescued):
     # rescue() on a batch (plan_fallback's second half), from the local results of plan's
     # compiled program: the search runs per scene in chunks of one shape, one program.
-    from softplan_jax.search.fallback import rescue
+    from softplan_jax.search._fallback import rescue
 
     s, local, single = rescued
     near = scene(goal=(0.005, 0.0, 3.0))  # within the goal tolerance of the start's tip

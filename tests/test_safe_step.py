@@ -12,8 +12,8 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.planning import apply_collision_checks
-from softplan_jax.planning.planner import make_options, result_from_rollout
-from softplan_jax.planning.programs import rollout_batch, rollout_jit
+from softplan_jax.planning._planner import make_options, result_from_rollout
+from softplan_jax.planning._programs import rollout_batch, rollout_jit
 from softplan_jax.testing import oracle
 
 PAD = dict(curve_slots=5, degree=2)

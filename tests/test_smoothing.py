@@ -1,4 +1,4 @@
-"""The smoothed tuning objective (softplan_jax.tuning.objective, .tuner): its gradient
+"""The smoothed tuning objective (softplan_jax.tuning._objective, .tuner): its gradient
 against central finite differences of the same objective, against re-run
 differences of the smoothed objective (common random numbers), the GainFunction
 against the Gains it generalises, tune_smoothed's history and budget, bad input.
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.planning.planner import make_options
+from softplan_jax.planning._planner import make_options
 from softplan_jax.tuning import (
     GainSpace,
     ScoreWeights,

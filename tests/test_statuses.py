@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.base.status import Status, status_name
-from softplan_jax.planning.records import finish, record_zeros
-from softplan_jax.planning.tracking import make_track_options
+from softplan_jax.base._status import Status, status_name
+from softplan_jax.planning._records import finish, record_zeros
+from softplan_jax.planning._tracking import make_track_options
 
 HOLD = 0.02  # hold tolerance; goal tolerance 0.01
 

@@ -19,7 +19,7 @@ from helpers import assert_allclose
 
 import softplan_jax as sp
 from softplan_jax import actuators as A
-from softplan_jax.planning.planner import make_options
+from softplan_jax.planning._planner import make_options
 from softplan_jax.testing import oracle_actuators as O
 
 PAD = dict(curve_slots=5, degree=2)

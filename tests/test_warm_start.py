@@ -1,4 +1,4 @@
-"""The planner's warm-started, certified closest points (softplan_jax.geometry.warm_start).
+"""The planner's warm-started, certified closest points (softplan_jax.geometry._warm_start).
 
 References: dense sampling of the curve (the lower bound never exceeds the
 sampled distance; a certified answer is the sampled global minimum) and the
@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
-from softplan_jax.geometry import warm_start as ws
-from softplan_jax.geometry.closest import DEFAULT_OPTIONS
-from softplan_jax.geometry.closest_newton import Segment, project_to_arc, solve_pair_reduced
-from softplan_jax.geometry.kinematics import segment_frames
+from softplan_jax.geometry import _warm_start as ws
+from softplan_jax.geometry._closest import DEFAULT_OPTIONS
+from softplan_jax.geometry._closest_newton import Segment, project_to_arc, solve_pair_reduced
+from softplan_jax.geometry._kinematics import segment_frames
 from softplan_jax.planning import apply_collision_checks
-from softplan_jax.planning.planner import make_options
+from softplan_jax.planning._planner import make_options
 
 SAMPLES = 2001  # dense samples of u per case
 

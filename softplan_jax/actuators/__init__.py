@@ -1,14 +1,14 @@
 """Actuators of the arm (a geometry-level layer: imports only ``base`` and ``geometry``).
 
-* :mod:`.lengths` -- tendon and chamber lengths of a configuration (eq. A1, with the
+* :mod:`._lengths` -- tendon and chamber lengths of a configuration (eq. A1, with the
   tendons' frame carried without twist), their inverses and Jacobians;
-* :mod:`.layout` -- :class:`ActuatorLayout`: where the actuators sit;
-* :mod:`.limits` -- :class:`ActuatorLimits`, their check on a sampled motion, and the
+* :mod:`._layout` -- :class:`ActuatorLayout`: where the actuators sit;
+* :mod:`._limits` -- :class:`ActuatorLimits`, their check on a sampled motion, and the
   segment length limits that follow from them.
 """
 
-from .layout import ActuatorLayout, actuator_layout
-from .lengths import (
+from ._layout import ActuatorLayout, actuator_layout
+from ._lengths import (
     actuator_jacobian,
     actuator_lengths,
     chamber_lengths,
@@ -17,7 +17,7 @@ from .lengths import (
     configuration_from_tendons,
     tendon_lengths,
 )
-from .limits import ActuatorLimits, LimitReport, actuator_limits, check_limits, segment_length_limits
+from ._limits import ActuatorLimits, LimitReport, actuator_limits, check_limits, segment_length_limits
 
 __all__ = [
     "tendon_lengths",

@@ -1,7 +1,7 @@
 """``softplan batch``: plan a seeded suite of random scenarios
 (:func:`~softplan_jax.scenarios.random_scenarios`) chunk by chunk on the sweep's chunk loop
-(:class:`~softplan_jax.sweeps.chunks.ChunkLoop`: each chunk planned by
-:func:`~softplan_jax.planning.planner.plan_batch`, reduced to one summary row per scene and
+(:class:`~softplan_jax.sweeps._chunks.ChunkLoop`: each chunk planned by
+:func:`~softplan_jax.planning._planner.plan_batch`, reduced to one summary row per scene and
 dropped, the global fallback per chunk with ``--fallback``), split over the local devices (or
 the devices of several processes with ``--coordinator``), and print the outcome counts and the
 speed.
@@ -40,7 +40,7 @@ def cmd_batch(args) -> int:
     return_freed_chunks()
     import jax
 
-    from ..base.compilation_cache import enable_compilation_cache
+    from ..base._compilation_cache import enable_compilation_cache
 
     if distributed:
         initialize_distributed(args)
@@ -114,9 +114,9 @@ def _prepare(args) -> dict:
     import jax.numpy as jnp
     import numpy as np
 
-    from ..planning.batching import batch_mesh, round_chunk
-    from ..planning.planner import make_options
-    from ..planning.programs import batch_keys
+    from ..planning._batching import batch_mesh, round_chunk
+    from ..planning._planner import make_options
+    from ..planning._programs import batch_keys
     from ..scenarios import random_scenarios
 
     dtype = jnp.float32 if args.float32 else jnp.float64
@@ -138,14 +138,14 @@ def _plan(args, setup: dict):
     chunk is rescued exactly as ``rescue_batch(suite, ..., seed=seed)`` rescues it."""
     import numpy as np
 
-    from ..base.status import Status
-    from ..sweeps.chunks import ChunkLoop, SuiteSource
-    from ..sweeps.report import reporter
+    from ..base._status import Status
+    from ..sweeps._chunks import ChunkLoop, SuiteSource
+    from ..sweeps._report import reporter
 
     n, size = args.n, setup["size"]
     reach = None
     if args.fallback:
-        from ..search.reach import ReachOptions
+        from ..search._reach import ReachOptions
 
         reach = ReachOptions()
     loop = ChunkLoop(SuiteSource(setup["suite"], setup["keys"]).take, n, size, setup["options"], setup["gains"],
@@ -175,8 +175,8 @@ def _summary(args, setup: dict, arrays: dict, times: dict, distributed: bool) ->
     """The summary (``--json``'s keys)."""
     import numpy as np
 
-    from ..base.status import STATUS_NAMES, Status
-    from ..sweeps.store import wilson_interval
+    from ..base._status import STATUS_NAMES, Status
+    from ..sweeps._store import wilson_interval
 
     status = arrays["status"]
     reached = status == Status.REACHED

@@ -75,13 +75,13 @@ def resolve_gains(args, scenario, method: str, n_points: int):
     """``(scenario, gains, options, gain_values)`` for ``--gains``: a preset's start pose,
     gains and step options, or a gains file's gains with the default preset's start pose
     and options (ValueError for a bad or mismatched file). ``gain_values`` is the JSON
-    form of the gains (:func:`~softplan_jax.tuning.gains_file.gains_to_dict`; ``rep_max`` null
+    form of the gains (:func:`~softplan_jax.tuning._gains_file.gains_to_dict`; ``rep_max`` null
     = no cap)."""
     import warnings
 
-    from ..planning.planner import check_gains
-    from ..planning.presets import apply_preset
-    from ..tuning.gains_file import gains_to_dict, load_gains
+    from ..planning._planner import check_gains
+    from ..planning._presets import apply_preset
+    from ..tuning._gains_file import gains_to_dict, load_gains
 
     scenario, gains, extra = apply_preset("default" if args.gains_file else args.gains, scenario)
     with warnings.catch_warnings(record=True) as caught:  # the gains' soundness warnings, as warning lines

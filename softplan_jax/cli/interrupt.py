@@ -10,7 +10,7 @@ import signal
 import tempfile
 import threading
 
-from ..base.files import publish
+from ..base._files import publish
 
 __all__ = ["EXIT_INTERRUPTED", "interrupt_guard", "atomic_output", "exit_interrupted", "interrupted_say",
            "interrupted_next_step"]

@@ -54,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--n-points", type=int, default=None, metavar="N",
                      help="N of the N-point model, >= 1 (method points only; default 10)")
     run.add_argument("--gains", default="default", metavar="PRESET|FILE",
-                     help="gain preset (gains, step options and start pose; softplan_jax.planning.presets): paper: "
+                     help="gain preset (gains, step options and start pose; softplan_jax.planning._presets): paper: "
                      "the calibration that reproduces the paper's findings (plain step, start theta 0.1); "
                      "default: the library's (default); or a gains file (JSON, format softplan-gains/1, "
                      "from softplan_jax.save_gains): its gains with the default preset's start pose and "
@@ -322,7 +322,7 @@ def check_plot_format(path: str, option: str = "--plot") -> None:
 
 def check_gains_arg(value: str) -> str | None:
     """The path of ``--gains`` when it names a gains file; None for a preset name."""
-    from ..planning.presets import PRESETS
+    from ..planning._presets import PRESETS
 
     if value in PRESETS:
         return None

@@ -1,13 +1,13 @@
 """``softplan run``: plan one scenario and print a summary.
 
 A static scene (a paper scenario or a JSON scenario file) is planned with the
-compiled rollout (the paper's eq. 9 step; :func:`~softplan_jax.planning.programs.rollout_jit`),
+compiled rollout (the paper's eq. 9 step; :func:`~softplan_jax.planning._programs.rollout_jit`),
 then, where the local planner stalls or runs out of steps, rescued by the
 reachability test and the global search (unless ``--no-fallback``). A moving
 scene (a moving preset, or a JSON file with motion fields) is tracked among its
-moving obstacles (:mod:`softplan_jax.planning.tracking`), and where the goal is
+moving obstacles (:mod:`softplan_jax.planning._tracking`), and where the goal is
 never reached, tracked again along the global search's path at rest
-(:func:`~softplan_jax.search.tracking.track_fallback`; unless ``--no-fallback``). Both write the same
+(:func:`~softplan_jax.search._tracking.track_fallback`; unless ``--no-fallback``). Both write the same
 figures, the same ``--out`` trajectory file and the same report.
 
 jax is imported inside :func:`cmd_run`, after the arguments are parsed, so that
@@ -61,14 +61,14 @@ def _load(args, dtype):
 
 
 def _moving_names():
-    from ..scenarios.moving import MOVING_SCENARIOS
+    from ..scenarios._moving import MOVING_SCENARIOS
 
     return sorted(MOVING_SCENARIOS)
 
 
 def _is_moving_file(path: str) -> bool:
     """The scenario file has motion fields (read once more by _load_moving for the errors)."""
-    from ..scenarios.json_format import is_moving_dict, read_json_file
+    from ..scenarios._json_format import is_moving_dict, read_json_file
 
     try:
         return is_moving_dict(read_json_file(path, "scenario"))
@@ -102,7 +102,7 @@ def cmd_run(args) -> int:
     """``softplan run``: plan a static scene, or track a moving one; the exit code."""
     import jax
 
-    from ..base.compilation_cache import enable_compilation_cache
+    from ..base._compilation_cache import enable_compilation_cache
 
     enable_compilation_cache()  # a second run loads the compiled rollout from disk
     if not args.float32:
@@ -125,12 +125,12 @@ def cmd_run(args) -> int:
 
 
 def _compiled_run(world, gains, options, max_steps: int, seed) -> tuple:
-    """The rollout of one scene through :data:`~softplan_jax.planning.programs.rollout_jit`'s
+    """The rollout of one scene through :data:`~softplan_jax.planning._programs.rollout_jit`'s
     cached program: ``(rollout, compile_time, run_time, loaded)`` (compiled ahead and timed apart;
     ``loaded``: the traced program came from the cache)."""
     import jax
 
-    from ..planning.programs import rollout_jit
+    from ..planning._programs import rollout_jit
 
     t0 = time.perf_counter()
     # Traced program and XLA executable both cached on disk: a second run loads them.
@@ -149,9 +149,9 @@ def _compiling_message(what: str = "") -> None:
 def _static_inputs(args, dtype, actuator_summary: dict) -> tuple:
     """``(scenario, label, gains, options, gain_values)`` of a static scene (InputError: bad input);
     the actuators' segment length limits applied, their rows added to ``actuator_summary``."""
-    from ..planning.options import make_options
-    from ..planning.programs import prng_key
-    from ..planning.records import check_rollout_memory
+    from ..planning._options import make_options
+    from ..planning._programs import prng_key
+    from ..planning._records import check_rollout_memory
 
     try:
         scenario, label = _load(args, dtype)
@@ -167,8 +167,8 @@ def _static_inputs(args, dtype, actuator_summary: dict) -> tuple:
 
 def _cmd_plan(args, dtype) -> int:
     """``softplan run`` on a static scene: plan it, rescue it with the global fallback."""
-    from ..planning.planner import result_from_rollout, unreachable_result
-    from ..scenarios.scenario import unreachable_reason
+    from ..planning._planner import result_from_rollout, unreachable_result
+    from ..scenarios._scenario import unreachable_reason
 
     actuator_summary = {}
     scenario, label, gains, options, gain_values = _static_inputs(args, dtype, actuator_summary)
@@ -185,8 +185,8 @@ def _cmd_plan(args, dtype) -> int:
             scenario, gains, options, int(args.max_steps), args.seed)
         result = result_from_rollout(rollout, scenario)
         escapes, local_steps = int(rollout.escapes), int(rollout.iterations)
-    from ..base.status import Status
-    from ..search.fallback import RESCUED, rescue
+    from ..base._status import Status
+    from ..search._fallback import RESCUED, rescue
 
     if not args.no_fallback and Status.from_label(result.status) in RESCUED:
         print(f"softplan: the local planner ended {result.status}; deciding reachability and searching globally "
@@ -258,11 +258,11 @@ def _moving_inputs(args, dtype, actuator_summary: dict) -> tuple:
     """``(moving, gains, options, preset, extra, gain_values)`` of a moving scene (InputError:
     bad input): the preset's tracking options, then those given on the command line; the
     actuators' segment length limits applied, their rows added to ``actuator_summary``."""
-    from ..planning.options import make_track_options
-    from ..planning.programs import prng_key
-    from ..planning.records import check_rollout_memory
-    from ..scenarios.json_format import load_moving_scenario
-    from ..scenarios.moving import MOVING_OPTIONS, moving_scenario
+    from ..planning._options import make_track_options
+    from ..planning._programs import prng_key
+    from ..planning._records import check_rollout_memory
+    from ..scenarios._json_format import load_moving_scenario
+    from ..scenarios._moving import MOVING_OPTIONS, moving_scenario
 
     try:
         if args.scenario in _moving_names():
@@ -292,7 +292,7 @@ def _moving_inputs(args, dtype, actuator_summary: dict) -> tuple:
 
 def _cmd_track(args, dtype) -> int:
     """``softplan run`` on a moving scene: track its goal among its moving obstacles (softplan_jax.track)."""
-    from ..planning.tracking import result_from_track
+    from ..planning._tracking import result_from_track
 
     actuator_summary = {}
     moving, gains, options, preset, extra, gain_values = _moving_inputs(args, dtype, actuator_summary)
@@ -302,7 +302,7 @@ def _cmd_track(args, dtype) -> int:
     track, compile_time, run_time, loaded = _compiled_run(moving, gains, options, max_steps, args.seed)
     result = result_from_track(track, moving, float(gains.dt))
     if result.status == "max_steps" and not args.no_fallback:
-        from ..search.tracking import track_fallback
+        from ..search._tracking import track_fallback
 
         print("softplan: the goal was never reached: planning the scene at rest with the global search, then "
               "tracking again along its path (--no-fallback: skip) ...", file=sys.stderr, flush=True)

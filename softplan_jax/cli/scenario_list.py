@@ -1,6 +1,6 @@
 """``softplan scenarios``: list the scenes ``softplan run`` knows by name: the paper's
 scenarios with their goals and obstacle curves (the paper's Tables 2-4), and the moving
-presets (:func:`~softplan_jax.scenarios.moving.moving_scenario`)."""
+presets (:func:`~softplan_jax.scenarios._moving.moving_scenario`)."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ def cmd_scenarios(args) -> int:
 
     jax.config.update("jax_enable_x64", True)  # the presets' goals as written
     from ..scenarios import PAPER_SCENARIOS
-    from ..scenarios.moving import MOVING_SCENARIOS, moving_scenario
+    from ..scenarios._moving import MOVING_SCENARIOS, moving_scenario
 
     rows = [{"name": name, "kind": "paper", "goal": list(spec["goal"]), "goal_moves": False,
              "obstacles": len(spec["curves"]), "description": PAPER_DESCRIPTIONS.get(name, "")}

@@ -50,7 +50,7 @@ def cmd_sweep(args) -> int:
     interrupted_say(f"the same command again resumes the sweep in {args.out} after its last complete chunk")
     import jax
 
-    from ..base.compilation_cache import enable_compilation_cache
+    from ..base._compilation_cache import enable_compilation_cache
 
     if distributed:
         initialize_distributed(args)
@@ -66,7 +66,7 @@ def cmd_sweep(args) -> int:
     gains = args.gains
     try:
         if gains_file is not None:
-            from ..tuning.gains_file import load_gains
+            from ..tuning._gains_file import load_gains
 
             gains = load_gains(gains_file, method=args.method, n_points=n_points, dtype=dtype)
         summary = sweep(args.n, args.out, args.seed, chunk=args.chunk, method=args.method, n_points=n_points,
@@ -80,7 +80,7 @@ def cmd_sweep(args) -> int:
         jax.distributed.shutdown()
         return EXIT_OK
     if args.json:
-        from ..sweeps.store import finite_json
+        from ..sweeps._store import finite_json
 
         print(json.dumps(finite_json(summary), indent=2))  # non-finite numbers as null
         return EXIT_OK

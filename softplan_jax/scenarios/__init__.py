@@ -1,10 +1,10 @@
-"""Scenarios: planning problems as pytrees, one job per module (:mod:`.scenario`: the
-:class:`Scenario` type and its constructors; :mod:`.paper`: the paper's three simulations;
-:mod:`.motion` and :mod:`.moving`: moving obstacles and goals, their presets and random
-suite; :mod:`.json_format`: the JSON scenario format; :mod:`.random_suite`: seeded random
+"""Scenarios: planning problems as pytrees, one job per module (:mod:`._scenario`: the
+:class:`Scenario` type and its constructors; :mod:`._paper`: the paper's three simulations;
+:mod:`._motion` and :mod:`._moving`: moving obstacles and goals, their presets and random
+suite; :mod:`._json_format`: the JSON scenario format; :mod:`._random_suite`: seeded random
 suites for the benchmarks)."""
 
-from .json_format import (
+from ._json_format import (
     load_moving_scenario,
     load_scenario,
     moving_from_dict,
@@ -15,9 +15,9 @@ from .json_format import (
     scenario_to_dict,
     write_json_file,
 )
-from .paper import PAPER_RESULTS, PAPER_SCENARIOS, paper_scenario
-from .random_suite import random_scenarios
-from .scenario import Scenario, default_start, make_scenario, obstacle_count, scenario_warnings, stack_scenarios
+from ._paper import PAPER_RESULTS, PAPER_SCENARIOS, paper_scenario
+from ._random_suite import random_scenarios
+from ._scenario import Scenario, default_start, make_scenario, obstacle_count, scenario_warnings, stack_scenarios
 
 __all__ = [
     "Scenario",

@@ -370,7 +370,7 @@ def line(a, b):
 
 
 # ----------------------------------------------------------------------------
-# Moving curves: the rigid motion of softplan_jax.scenarios.motion, written
+# Moving curves: the rigid motion of softplan_jax.scenarios._motion, written
 # independently (the rotation as scipy.linalg.expm of the axis' cross-product
 # matrix, the curve sampled in NumPy), and a brute force over space AND time.
 

@@ -1,15 +1,15 @@
 """Tuning the gains of eq. (9) on a suite of scenes, and gains files (docs: Tuning the gains): what
-is tuned (:mod:`.space`, :class:`GainSpace`); the objective (:mod:`.objective`: Gaussian smoothing
+is tuned (:mod:`._space`, :class:`GainSpace`); the objective (:mod:`._objective`: Gaussian smoothing
 of the rollout score and its unbiased gradient estimate); the tuner :func:`tune_smoothed`
-(:mod:`.tuner`: stochastic gradient descent with optax, whose defaults are the recommended recipe);
-tuned gains as JSON, with the obstacle model they were tuned for (:mod:`.gains_file`); and the
+(:mod:`._tuner`: stochastic gradient descent with optax, whose defaults are the recommended recipe);
+tuned gains as JSON, with the obstacle model they were tuned for (:mod:`._gains_file`); and the
 pathwise-gradient tuner ``tune_gains`` (:mod:`.pathwise`), kept as the baseline of the tuning
 comparisons: it differentiates through the rollout, whose score is piecewise constant in the
 gains, so its gradient sees little of what the smoothed tuner optimises."""
 
 from . import pathwise as pathwise
-from .gains_file import gains_from_dict, gains_to_dict, load_gains, save_gains
-from .objective import (
+from ._gains_file import gains_from_dict, gains_to_dict, load_gains, save_gains
+from ._objective import (
     ObjectiveEstimate,
     ScoreWeights,
     SmoothingSample,
@@ -19,8 +19,8 @@ from .objective import (
     smoothed_objective,
     smoothing_sample,
 )
-from .space import GainSpace
-from .tuner import RECIPE_SPACE, RECIPE_WEIGHTS, TuneResult, recipe_sigma, recipe_start, tune_smoothed
+from ._space import GainSpace
+from ._tuner import RECIPE_SPACE, RECIPE_WEIGHTS, TuneResult, recipe_sigma, recipe_start, tune_smoothed
 
 __all__ = [
     "GainSpace",

@@ -1,6 +1,6 @@
 """Gradient tuning of the gains through whole rollouts (optax), the pathwise baseline of the tuning
 comparisons. :func:`rollout_loss` is differentiable in the gains (the planner step is smooth in
-them, the closest points carry implicit derivatives, :mod:`softplan_jax.geometry.closest`, and the
+them, the closest points carry implicit derivatives, :mod:`softplan_jax.geometry._closest`, and the
 status logic only freezes the state): ``w_path`` times the mean tip error |V_e| over the steps,
 plus ``w_final`` times the final one, plus ``w_clearance`` times a soft penalty
 ``tau softplus((margin - clearance) / tau)`` on the true clearance of every obstacle at every
@@ -18,10 +18,10 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ..planning.options import PlanOptions, make_options, rollout_compiler_options
-from ..planning.planner import check_gains
-from ..planning.programs import rollout
-from ..planning.step import Gains
+from ..planning._options import PlanOptions, make_options, rollout_compiler_options
+from ..planning._planner import check_gains
+from ..planning._programs import rollout
+from ..planning._step import Gains
 from ..scenarios import Scenario
 
 __all__ = ["LossWeights", "rollout_loss", "batch_loss", "tune_gains", "TuningResult"]

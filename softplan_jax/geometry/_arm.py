@@ -1,0 +1,40 @@
+"""The arm model: what the planner asks of the arm's shape. A model gives the configuration the
+closest-point kernel sees, the tip, the Jacobians of arm points and a bound on how far any arm
+point moves along a straight motion in q. :data:`PCC` is the piecewise-constant-curvature arm
+of paper §2.1; a model that bends the arm otherwise provides the same methods."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from ._kinematics import motion_bound, points_jacobian, tip_position
+
+__all__ = ["PCCArm", "PCC"]
+
+
+class PCCArm(NamedTuple):
+    """The piecewise-constant-curvature arm (paper §2.1): its shape is q's arcs.
+
+    A pytree without leaves, so it passes through ``jit`` and ``vmap`` as an argument.
+    """
+
+    def shape(self, q):
+        """The configuration (n', 3) whose arcs the closest-point kernel sees: q itself."""
+        return q
+
+    def tip(self, q):
+        """The tip position (3,) (paper §2.1)."""
+        return tip_position(q)
+
+    def jacobians(self, q, segments, s):
+        """``dP/dq`` (m, 3, 3n) of the shape's points at ``segments`` (m,), fractions ``s`` (m,)
+        (paper §2.2)."""
+        return points_jacobian(q, segments, s)
+
+    def motion_bound(self, q_a, q_b):
+        """A bound () on how far any arm point moves along ``q_a + t (q_b - q_a)``, t in [0, 1]
+        (:func:`~softplan_jax.geometry._kinematics.motion_bound`)."""
+        return motion_bound(q_a, q_b)[-1]
+
+
+PCC = PCCArm()

@@ -1,0 +1,68 @@
+"""Closest-point providers: how a rollout gets the exact closest pair between the arm and every
+obstacle slot at each step. Each provider prepares per-scene data once, starts a state, and
+answers a query at q with the pairs, its next state and the number of (segment, curve) pairs
+that took the full solve of paper §2.3."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+
+from ._closest import SolverOptions
+from ._obstacles import placeholder_closest, true_closest, warm_cells, warm_closest, warm_state
+
+__all__ = ["WarmPairs", "ExactPairs", "NoPairs"]
+
+
+def _curve_pairs(q, scene):
+    """() int32: the (segment, real curve) pairs of a scene."""
+    return q.shape[0] * (jnp.sum(scene.curve_mask) + len(scene.parametric)).astype(jnp.int32)
+
+
+class WarmPairs(NamedTuple):
+    """Each pair carried from step to step, polished and certified the global minimum
+    (:mod:`softplan_jax.geometry._warm_start`); a pair whose certificate fails takes the full
+    solve. The same pairs as :class:`ExactPairs`, fewer solves."""
+
+    solver: SolverOptions
+
+    def prepare(self, scene):
+        """Per-scene data (:func:`~softplan_jax.geometry._obstacles.warm_cells`), once per rollout."""
+        return warm_cells(scene, self.solver)
+
+    def init(self, scene):
+        """The state before the first step."""
+        return warm_state(scene)
+
+    def query(self, q, scene, cells, state, fresh):
+        """``(pairs with a leading axis m, next state, full solves () int32)`` at q."""
+        return warm_closest(q, scene, self.solver, cells, state, fresh)
+
+
+class ExactPairs(NamedTuple):
+    """The full solve of paper §2.3 for every pair at every step."""
+
+    solver: SolverOptions
+
+    def prepare(self, scene):
+        return ()
+
+    def init(self, scene):
+        return ()
+
+    def query(self, q, scene, cells, state, fresh):
+        return true_closest(q, scene, self.solver), state, _curve_pairs(q, scene)
+
+
+class NoPairs(NamedTuple):
+    """No exact pair (the N-point model without the collision checks): zeros of their shape."""
+
+    def prepare(self, scene):
+        return ()
+
+    def init(self, scene):
+        return ()
+
+    def query(self, q, scene, cells, state, fresh):
+        return placeholder_closest(q, scene), state, jnp.zeros((), jnp.int32)
