@@ -5,6 +5,8 @@ The top level holds what a planning script uses (``__all__``); the rest is in
 sub-namespaces, one per layer of the package, read top-down:
 
 * :mod:`softplan_jax.cli` -- the ``softplan`` command;
+* :mod:`softplan_jax.viewer` -- the interactive 3-D view in the browser (viser, the optional extra
+  ``viewer``; imported when a view starts);
 * :mod:`softplan_jax.plotting` -- figures and animations (matplotlib);
 * :mod:`softplan_jax.tuning` -- tuning the gains on a suite, gains files;
 * :mod:`softplan_jax.trajectories` -- timed trajectories of the actuators (TOPP-RA),
@@ -40,6 +42,7 @@ from . import search as search
 from . import sweeps as sweeps
 from . import trajectories as trajectories
 from . import tuning as tuning
+from . import viewer as viewer
 from .base.compilation_cache import disable_compilation_cache, enable_compilation_cache
 from .base.compilation_cache import enable_default_cache as _enable_default_cache
 from .base.status import Status
@@ -59,6 +62,7 @@ from .search.fallback import plan_fallback
 from .search.tracking import track_fallback
 from .trajectories import Trajectory, load_trajectory, save_trajectory, time_parametrize
 from .tuning.gains_file import load_gains, save_gains
+from .viewer.launch import view
 
 # jax's persistent compilation cache on for the planner's programs, unless the user set one or
 # opted out (SOFTPLAN_JAX_NO_CACHE=1; see softplan_jax.base.compilation_cache).
@@ -113,6 +117,8 @@ __all__ = [
     "apply_preset",
     "save_gains",
     "load_gains",
+    # the interactive view in the browser (needs the extra "viewer")
+    "view",
     "enable_compilation_cache",
     "disable_compilation_cache",
     "__version__",

@@ -16,6 +16,8 @@ own scenes from the shell.
     softplan sweep --n N --out DIR [--chunk C] [--seed S] [--method curve|points]
                    [--max-steps N] [--gains PRESET|FILE] [--fallback] [--trajectories K|all]
                    [--force] [--json] [--no-progress] [--float32]
+    softplan view SCENE [--method curve|points] [--n-points N] [--gains PRESET|FILE]
+                        [--max-steps N] [--seed S] [--host HOST] [--port PORT] [--share]
 
 SCENARIO is a paper scenario name (``sim1``, ``sim2``, ``tree``) or the path of
 a JSON scenario file (a file literally named like a paper scenario: write
@@ -61,7 +63,7 @@ arguments, so ``--help`` is fast and float64 (``jax_enable_x64``) can be
 switched on before any array exists.
 
 The command is one module per subcommand: :mod:`.run`, :mod:`.batch`, :mod:`.sweep`,
-:mod:`.fit`, :mod:`.scenario_list` (``softplan scenarios``) and :mod:`.export`;
+:mod:`.fit`, :mod:`.scenario_list` (``softplan scenarios``), :mod:`.export` and :mod:`.view`;
 :mod:`.parser` holds the argument parser and the checks of the arguments,
 :mod:`.trajectory` the ``run --out`` file format and :mod:`.common` what the
 commands share. This module dispatches and turns errors into exit codes.
@@ -80,6 +82,7 @@ from .parser import build_parser
 from .run import cmd_run
 from .scenario_list import cmd_scenarios
 from .sweep import cmd_sweep
+from .view import cmd_view
 
 __all__ = ["main", "console_main"]
 
@@ -121,6 +124,8 @@ def _main(argv) -> int:
             return cmd_batch(args)
         if args.command == "sweep":
             return cmd_sweep(args)
+        if args.command == "view":
+            return cmd_view(args)
         return cmd_export(args)
     except (InputError, ValueError) as err:
         # A ValueError is the library's answer to bad input (a size that cannot fit, a bad seed, ...).
