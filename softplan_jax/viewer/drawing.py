@@ -51,6 +51,13 @@ class SceneDrawing:
         self.n = planner.scene.n_segments
         scene = server.scene
         scene.set_up_direction("+z")
+        # Lights instead of viser's image-based environment map, and no shadows unless asked
+        # for (the panel): in a browser without a GPU (software WebGL) each multiplies the time
+        # to draw a frame (the documentation's viewer page has the measurements).
+        scene.configure_environment_map(None)
+        scene.configure_default_lights(True, cast_shadow=False)
+        scene.add_light_ambient("/light/ambient", intensity=0.6)
+        scene.add_light_hemisphere("/light/sky", intensity=0.8)
         scene.add_grid("/ground", width=6.0, height=6.0, cell_size=0.25, section_size=1.0, position=(0.0, 0.0, 0.0))
         self.curves = {}  # slot -> mesh handle of a polynomial curve (moves in a moving scene)
         self.models = []  # the N-point model's spheres, one mesh per curve

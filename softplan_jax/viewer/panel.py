@@ -1,7 +1,7 @@
 """The viewer's control panel (viser GUI): the plan's outcome (status, iterations, minimum
 clearance, tip error, planner, time to plan), the fallback button of a plan that stopped short,
 the time slider and play button, the goal as numbers, the obstacle model (curve or N points)
-and the toggles for the closest points and the tip path."""
+and the toggles for the closest points, the tip path and shadows."""
 
 from __future__ import annotations
 
@@ -10,14 +10,15 @@ from .live import ShownPlan
 __all__ = ["Panel", "outcome_text"]
 
 
-def outcome_text(shown: ShownPlan, scene_label: str, method: str, plan_time: float | None) -> str:
-    """The panel's Markdown account of a plan."""
+def outcome_text(shown: ShownPlan, scene_label: str, method: str, plan_time: float | None, number: int) -> str:
+    """The panel's Markdown account of a plan (the ``number``-th shown)."""
     status = f"**{shown.status}**" + (f" ({shown.reason.replace('_', ' ')})" if shown.reason else "")
     if not shown.succeeded:
         status += " &mdash; the goal is not reached"
     planner = {"local": "local (potential field, paper eq. 9)", "global": "global search (plan_fallback)",
                "search": "guided by the global search (track_fallback)"}.get(shown.planner, shown.planner)
-    lines = [f"{scene_label} &middot; {method}", f"status: {status}", f"iterations: {shown.iterations}",
+    lines = [f"{scene_label} &middot; {method} &middot; plan {number}", f"status: {status}",
+             f"iterations: {shown.iterations}",
              f"min clearance: {shown.min_clearance:.4f}" + (" (collided)" if shown.collided else ""),
              f"final tip error: {shown.final_error:.4f}", f"planner: {planner}"]
     if shown.source not in ("plan", "fallback"):
@@ -58,6 +59,9 @@ class Panel:
         self.closest.on_update(lambda _: viewer.draw(viewer.step))
         self.path = gui.add_checkbox("tip path", initial_value=True)
         self.path.on_update(self._on_path)
+        self.shadows = gui.add_checkbox("shadows", initial_value=False,
+                                        hint="shadows on the ground (slow to draw in a browser without a GPU)")
+        self.shadows.on_update(lambda _: viewer.server.scene.configure_default_lights(True, bool(self.shadows.value)))
         viewer.drawing.show_model(planner.method, planner.n_points)
 
     @property
@@ -77,7 +81,7 @@ class Panel:
         method = self.viewer.planner.method
         if method == "points":
             method += f" (N = {self.viewer.planner.n_points})"
-        self.outcome.content = outcome_text(shown, self.label, method, self.plan_time)
+        self.outcome.content = outcome_text(shown, self.label, method, self.plan_time, self.viewer.plans)
         self.fallback.disabled = not self.viewer.planner.can_fall_back(shown)
         self._quiet = True
         try:
