@@ -64,6 +64,8 @@ SCRIPTS = {
     "gpu": [["--parts", "plan,defaults", "--out", os.path.join(RESULTS, "gpu_this_machine")]],
     # this version alone; against another: --against PATH (its docstring)
     "suite_speed": [[]],
+    # a headless Chromium on the view of the tree (the system's chromium; .ci/run installs it)
+    "viewer_latency": [[]],
 }
 
 

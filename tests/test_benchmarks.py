@@ -207,7 +207,7 @@ def test_run_all_rejects_unknown_scripts(capsys):
 QUICK_ONLY = ["baselines", "closest", "compile_by_degree", "devices", "engine", "evasion", "fallback_chunk",
               "fallback_compile", "gpu", "numpy_baseline", "package_programs", "paper_presets", "plan_loop",
               "speed_targets", "step_profile", "suite_speed", "sweep_scale", "throughput", "timing", "tuners",
-              "warm_start"]
+              "viewer_latency", "warm_start"]
 
 
 @pytest.mark.bench

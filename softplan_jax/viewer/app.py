@@ -80,7 +80,8 @@ class Viewer:
     Attributes:
       server: the ``viser.ViserServer``. planner: the LivePlanner. shown: the ShownPlan on show.
       plans: how many plans have been shown. latencies: seconds from each goal update (a drag
-        or :meth:`set_goal`) to its new arm's meshes handed to the server and flushed.
+        or :meth:`set_goal`) to its new arm's meshes handed to the server and flushed; of which
+        plan_times: the plan's own seconds.
     """
 
     def __init__(self, planner: LivePlanner, shown: ShownPlan | None = None, *, host: str = "127.0.0.1",
@@ -93,7 +94,8 @@ class Viewer:
         self.server.gui.configure_theme(control_width="medium", show_share_button=False)
         self._lock = threading.RLock()
         self._jobs = _Jobs()
-        self.shown, self.plans, self.latencies, self.step, self.arm_vertices = None, 0, [], 0, []
+        self.shown, self.plans, self.latencies, self.plan_times, self.step = None, 0, [], [], 0
+        self.arm_vertices = []
         self._playing = threading.Event()
         q0 = np.asarray(planner.scene.q0, np.float64)
         self.drawing = SceneDrawing(self.server, planner, planner.goal, planner.backbone(q0))
@@ -180,6 +182,7 @@ class Viewer:
         self.show(shown)
         if kind == "goal":
             self.latencies.append(time.perf_counter() - posted)
+            self.plan_times.append(self.panel.plan_time)
         elif self.plans == 1:  # the closest points' program compiled before it is asked for
             self.planner.closest(shown.q[-1], 0.0 if shown.time is None else float(shown.time[-1]))
 

@@ -69,7 +69,7 @@ _RECEIVED_JS = """
 # frames (the next frame drawn after the new arm arrived); the batch with the new arm is found
 # among the recorded ones.
 _DRAG_JS = """
-async ({wsUrl, protocol, goals, timeoutMs}) => {
+async ({wsUrl, protocol, goals, timeoutMs, pauseMs}) => {
   const enc = new TextEncoder();
   function pack(v, out) {
     if (typeof v === "string") {
@@ -105,6 +105,7 @@ async ({wsUrl, protocol, goals, timeoutMs}) => {
   await new Promise((ok, fail) => { ws.onopen = ok; ws.onerror = fail; });
   const out = [];
   for (const g of goals) {
+    if (pauseMs > 0) await new Promise(r => setTimeout(r, pauseMs));
     const before = planNumber();
     const t0 = performance.now();
     ws.send(new Uint8Array(pack({type: "TransformControlsUpdateMessage", name: "/goal",
@@ -198,9 +199,9 @@ class HeadlessBrowser:
         png = self.page.screenshot(path=path)
         return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
 
-    def drag(self, url: str, goals, timeout: float = 30.0) -> np.ndarray:
+    def drag(self, url: str, goals, pause: float = 0.0, timeout: float = 30.0) -> np.ndarray:
         """Drag the goal to each of ``goals`` (K, 3) over a websocket as the page does, each
-        after the last one's plan was drawn.
+        ``pause`` seconds after the last one's plan was drawn.
 
         Returns:
           (K, 4) seconds from each drag to: the batch of messages with the new arm handed to the
@@ -210,5 +211,6 @@ class HeadlessBrowser:
         import viser
 
         ms = self.page.evaluate(_DRAG_JS, {"wsUrl": "ws" + url[len("http"):], "protocol": f"viser-v{viser.__version__}",
-                                           "goals": np.asarray(goals, float).tolist(), "timeoutMs": timeout * 1e3})
+                                           "goals": np.asarray(goals, float).tolist(), "timeoutMs": timeout * 1e3,
+                                           "pauseMs": pause * 1e3})
         return np.asarray(ms, np.float64) / 1e3

@@ -84,7 +84,7 @@ class SceneDrawing:
             return
         scene = self.server.scene
         self.closest = scene.add_line_segments("/closest/segments", np.zeros((k, 2, 3)), COLORS["clear"],
-                                               thickness=0.25 * self.arm_radius, visible=False)
+                                               thickness=0.4 * self.arm_radius, visible=False)
         pv, pf = sphere_mesh(0.8 * self.arm_radius, rings=6, sides=8)
         self.closest_points = scene.add_batched_meshes_simple(
             "/closest/points", pv, pf, batched_wxyzs=np.tile([1.0, 0, 0, 0], (2 * k, 1)),
