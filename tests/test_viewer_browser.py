@@ -103,3 +103,48 @@ def test_a_drag_from_the_page_replans(served, browser):
     assert times.shape == (2, 4) and np.all(np.diff(times[:, 1:], axis=1) >= 0) and np.all(times > 0)
     assert served.wait_idle(60) and served.plans == plans + 2
     np.testing.assert_allclose(served.shown.goal[-1], goals[-1])
+
+
+def test_served_from_a_jupyter_kernel(browser, tmp_path):
+    """In Jupyter: ``sp.view`` in a kernel serves and returns; the page (here the headless
+    browser, as a tab or the notebook's IFrame would) gets the scene and the panel, and the
+    IFrame cell's HTML points at the view."""
+    import json
+    import sys
+
+    pytest.importorskip("ipykernel", reason="ipykernel is not installed (the dev extra)")
+    from jupyter_client import KernelManager
+    from jupyter_client.kernelspec import KernelSpecManager
+    from session import subprocess_env
+
+    spec = tmp_path / "softplan-viewer-kernel"
+    spec.mkdir()
+    (spec / "kernel.json").write_text(json.dumps({
+        "argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"], "language": "python",
+        "display_name": "softplan viewer test", "env": {k: v for k, v in subprocess_env().items()
+                                                        if k == "PYTHONPATH" or k.startswith("JAX_")}}))
+    km = KernelManager(kernel_name="softplan-viewer-kernel", kernel_spec_manager=KernelSpecManager(
+        kernel_dirs=[str(tmp_path)]))
+    km.start_kernel()
+    kc = km.client()
+    try:
+        kc.start_channels()
+        kc.wait_for_ready(timeout=120)
+        outputs = []
+
+        def run(code):
+            reply = kc.execute_interactive(code, timeout=600, output_hook=lambda m: outputs.append(m["content"]))
+            assert reply["content"]["status"] == "ok", reply["content"]
+
+        run("import softplan_jax as sp\nv = sp.view('tree', port=0, max_steps=200)\nassert v.wait_idle(600)")
+        run("print('URL', v.url)")
+        url = next(o["text"].split("URL ", 1)[1].split()[0] for o in outputs if "URL " in o.get("text", ""))
+        run(f"from IPython.display import IFrame\nIFrame({url!r}, width='100%', height=600)")
+        assert any(url in str(o.get("data", {}).get("text/html", "")) for o in outputs)
+        browser.open(url)  # the module's browser (one Playwright per thread), on the kernel's view now
+        _wait(lambda: len(_arm(browser, 3)) == 3 and "plan 1" in browser.page.text_content("body"), 60,
+              "the kernel's view")
+        run("v.stop()")
+    finally:
+        kc.stop_channels()
+        km.shutdown_kernel(now=True)

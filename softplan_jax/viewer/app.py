@@ -176,9 +176,9 @@ class Viewer:
                            "compile on the first search, about a minute) ...")
             shown = self.planner.fallback()
         else:
-            t0 = time.perf_counter()
+            warm, t0 = self.planner.is_compiled, time.perf_counter()
             shown = self.planner.plan()
-            self.panel.plan_time = time.perf_counter() - t0
+            self.panel.plan_time, self.panel.plan_warm = time.perf_counter() - t0, warm
         self.show(shown)
         if kind == "goal":
             self.latencies.append(time.perf_counter() - posted)

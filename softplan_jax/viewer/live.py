@@ -204,6 +204,11 @@ class LivePlanner:
         else:
             self.world = self.scene = self.scene._replace(goal=jnp.asarray(g, dtype))
 
+    @property
+    def is_compiled(self) -> bool:
+        """Whether the current obstacle model's rollout is compiled in this process already."""
+        return (self.method, self.n_points) in self._programs
+
     def compiled(self) -> tuple:
         """``(options, run)``: the current obstacle model's options and compiled rollout
         (compiled, or loaded from the cache, on the first call for each model)."""

@@ -10,8 +10,10 @@ from .live import ShownPlan
 __all__ = ["Panel", "outcome_text"]
 
 
-def outcome_text(shown: ShownPlan, scene_label: str, method: str, plan_time: float | None, number: int) -> str:
-    """The panel's Markdown account of a plan (the ``number``-th shown)."""
+def outcome_text(shown: ShownPlan, scene_label: str, method: str, plan_time: float | None, number: int,
+                 warm: bool = True) -> str:
+    """The panel's Markdown account of a plan (the ``number``-th shown; ``warm``: its planner was
+    compiled before it)."""
     status = f"**{shown.status}**" + (f" ({shown.reason.replace('_', ' ')})" if shown.reason else "")
     if not shown.succeeded:
         status += " &mdash; the goal is not reached"
@@ -24,7 +26,7 @@ def outcome_text(shown: ShownPlan, scene_label: str, method: str, plan_time: flo
     if shown.source not in ("plan", "fallback"):
         lines.append(f"from: {shown.source}")
     elif plan_time is not None and shown.source == "plan":
-        lines.append(f"planned in {plan_time * 1e3:.0f} ms")
+        lines.append(f"planned in {plan_time * 1e3:.0f} ms" + ("" if warm else " (compiling or loading its planner)"))
     return "  \n".join(lines)
 
 
@@ -35,7 +37,7 @@ class Panel:
         self.viewer = viewer
         gui = viewer.server.gui
         planner = viewer.planner
-        self.plan_time = None
+        self.plan_time, self.plan_warm = None, True
         self._quiet = False
         self.label = getattr(viewer, "scene_label", "scene")
         self.outcome = gui.add_markdown("starting ...")
@@ -81,7 +83,8 @@ class Panel:
         method = self.viewer.planner.method
         if method == "points":
             method += f" (N = {self.viewer.planner.n_points})"
-        self.outcome.content = outcome_text(shown, self.label, method, self.plan_time, self.viewer.plans)
+        self.outcome.content = outcome_text(shown, self.label, method, self.plan_time, self.viewer.plans,
+                                            self.plan_warm)
         self.fallback.disabled = not self.viewer.planner.can_fall_back(shown)
         self._quiet = True
         try:
