@@ -385,14 +385,18 @@ def test_command_bad_input_exits_2_before_serving(tmp_path, capsys, monkeypatch)
         s.bind(("127.0.0.1", port))  # nothing took the port
 
 
-def test_command_skips_a_busy_port_and_stops_on_ctrl_c():
-    """``softplan view tree`` on a busy port: it says so, serves the next one, and Ctrl-C ends it
-    with exit code 130 and one line, the port released."""
+def test_command_skips_a_busy_port_and_stops_on_ctrl_c(planner, tree, tmp_path):
+    """``softplan view run.json`` (a saved trajectory of the tree) on a busy port: it says so,
+    serves the next one, and Ctrl-C ends it with exit code 130 and one line, the port released."""
+    planner.set_goal(np.asarray(tree.goal))
+    planner.plan()
+    saved = str(tmp_path / "run.json")
+    write_trajectory(saved, _record(planner._result, tree))
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        proc = subprocess.Popen([sys.executable, "-m", "softplan_jax.cli", "view", "tree", "--port", str(port),
+        proc = subprocess.Popen([sys.executable, "-m", "softplan_jax.cli", "view", saved, "--port", str(port),
                                  "--max-steps", str(MAX_STEPS)], cwd=REPO, env=subprocess_env(),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
@@ -414,12 +418,12 @@ def test_command_skips_a_busy_port_and_stops_on_ctrl_c():
 
 
 def _read_address(proc, timeout: float) -> str:
-    """The address line of a ``softplan view`` process (its stdout), waiting up to ``timeout`` s."""
+    """The address of ``softplan view run.json`` (its stdout's line), waiting up to ``timeout`` s."""
     found = []
 
     def read():
         for line in proc.stdout:
-            if "is at http://" in line:
+            if "the view of run.json is at http://" in line:
                 found.append(line.rsplit(" ", 1)[1].strip())
                 return
 
