@@ -50,6 +50,8 @@ SCRIPTS = {
     "sweep_scale": [["--only", "sweep"], ["--only", "batch", "--out", os.path.join(RESULTS, "sweep_scale_batch")]],
     # made for one GPU (its docstring); here the single plan and plan_batch's defaults on this machine
     "gpu": [["--parts", "plan,defaults", "--out", os.path.join(RESULTS, "gpu_this_machine")]],
+    # a headless Chromium on the view of the tree (the system's chromium; .ci/run installs it)
+    "viewer_latency": [[]],
 }
 
 # Scripts with more than one part: each part's quick run.

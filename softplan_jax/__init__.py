@@ -1,7 +1,8 @@
 """softplan_jax: a JAX-accelerated, differentiable path planner for soft continuum arms around
 curve-like obstacles (branches, pipes, wires). The top level holds what a planning script uses
 (``__all__``); the rest is in sub-namespaces, one per layer of the package, read top-down:
-:mod:`softplan_jax.cli` (the ``softplan`` command), :mod:`softplan_jax.plotting` (matplotlib),
+:mod:`softplan_jax.cli` (the ``softplan`` command), :mod:`softplan_jax.viewer` (the
+interactive 3-D view in the browser, the optional extra ``viewer``), :mod:`softplan_jax.plotting` (matplotlib),
 :mod:`softplan_jax.tuning` (tuning the gains, gains files), :mod:`softplan_jax.trajectories`
 (timed trajectories of the actuators, TOPP-RA, their files), :mod:`softplan_jax.sweeps` (a seeded
 random suite of any size, planned in chunks in constant memory, resumable),
@@ -28,6 +29,7 @@ from . import search as search
 from . import sweeps as sweeps
 from . import trajectories as trajectories
 from . import tuning as tuning
+from . import viewer as viewer
 from .base._compilation_cache import disable_compilation_cache, enable_compilation_cache
 from .base._compilation_cache import enable_default_cache as _enable_default_cache
 from .base._status import Status
@@ -47,6 +49,7 @@ from .search._fallback import plan_fallback
 from .search._tracking import track_fallback
 from .trajectories import Trajectory, load_trajectory, save_trajectory, time_parametrize
 from .tuning._gains_file import load_gains, save_gains
+from .viewer._launch import view
 
 # jax's persistent compilation cache on for the planner's programs, unless the user set one or
 # opted out (SOFTPLAN_JAX_NO_CACHE=1; see softplan_jax.base._compilation_cache).
@@ -101,6 +104,8 @@ __all__ = [
     "apply_preset",
     "save_gains",
     "load_gains",
+    # the interactive view in the browser (needs the extra "viewer")
+    "view",
     "enable_compilation_cache",
     "disable_compilation_cache",
     "__version__",

@@ -1,8 +1,9 @@
 """What the ``softplan`` subcommands share: the exit codes, :class:`InputError` (bad user input:
 one line ``softplan: error: ...`` on stderr, exit code 2), the package version, warnings on
-stderr, the paper scenarios' names, ``--gains`` resolved and recorded, the ``--plot`` / ``--gif``
-figures, number formats and the printed summary; jax, numpy and matplotlib are imported inside
-the functions that need them, so that ``softplan --help`` is fast."""
+stderr, the scenes named on the command line (:func:`load_world`), ``--gains`` resolved and
+recorded, the ``--plot`` / ``--gif`` figures, number formats and the printed summary; jax, numpy
+and matplotlib are imported inside the functions that need them, so that ``softplan --help`` is
+fast."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import sys
 __all__ = [
     "EXIT_OK", "EXIT_BAD_INPUT", "EXIT_NOT_REACHED", "InputError", "package_version", "warn", "paper_names",
     "fmt_seconds", "fmt_gain_values", "resolve_gains", "gains_report", "write_figures", "report", "check_points_args",
+    "moving_names", "load_world",
 ]
 
 EXIT_OK = 0
@@ -189,3 +191,48 @@ def return_freed_chunks() -> None:
         libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_BYTES)
     except (OSError, AttributeError):  # not glibc (macOS, musl without mallopt, Windows)
         pass
+
+
+def moving_names():
+    """The moving presets' names, sorted."""
+    from ..scenarios._moving import MOVING_SCENARIOS
+
+    return sorted(MOVING_SCENARIOS)
+
+
+def load_world(spec: str, dtype) -> tuple:
+    """A scene named on the command line: a paper scenario, a moving preset, or a JSON scenario
+    file (static, or moving where it has motion fields); its warnings as warning lines.
+
+    Returns:
+      ``(world, preset_options)``: a Scenario or MovingScenario, and the tracking options a
+      moving preset is played with (``MOVING_OPTIONS``; else empty).
+
+    Raises:
+      InputError: an unknown name, a missing, unreadable or malformed file (naming the field).
+    """
+    import warnings
+
+    from ..scenarios import load_moving_scenario, load_scenario, paper_scenario
+    from ..scenarios._json_format import is_moving_dict, read_json_file
+    from ..scenarios._moving import MOVING_OPTIONS, moving_scenario
+
+    if spec in paper_names():
+        return paper_scenario(spec, dtype=dtype), {}
+    if spec in moving_names():
+        return moving_scenario(spec, dtype=dtype), dict(MOVING_OPTIONS[spec])
+    if not os.path.exists(spec):
+        raise InputError(f"unknown scenario {spec!r}: not a paper scenario or moving scene "
+                         f"({', '.join(paper_names() + moving_names())}) and no such file")
+    if os.path.isdir(spec):
+        raise InputError(f"scenario {spec} is a directory, not a JSON file")
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            moving = is_moving_dict(read_json_file(spec, "scenario"))
+            world = (load_moving_scenario if moving else load_scenario)(spec, dtype=dtype)
+    except ValueError as err:
+        raise InputError(str(err)) from None
+    for w in caught:
+        warn(str(w.message))
+    return world, {}

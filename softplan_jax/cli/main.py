@@ -1,6 +1,6 @@
 """The ``softplan`` command (the documentation's "The softplan command"): one module per
 subcommand (:mod:`.run`, :mod:`.batch`, :mod:`.sweep`, :mod:`.fit`, :mod:`.scenario_list`,
-:mod:`.export`), the argument parser and checks in :mod:`.parser`, the ``run --out`` format in
+:mod:`.export`, :mod:`.view`), the argument parser and checks in :mod:`.parser`, the ``run --out`` format in
 :mod:`.trajectory`, what the commands share in :mod:`.common`; this module dispatches and turns
 errors into exit codes (0 done, 2 bad input with one line ``softplan: error: ...``, 3
 ``run --require-reached`` not met, 130 interrupted). jax is imported inside the commands, after
@@ -20,6 +20,7 @@ from .parser import build_parser
 from .run import cmd_run
 from .scenario_list import cmd_scenarios
 from .sweep import cmd_sweep
+from .view import cmd_view
 
 __all__ = ["main", "console_main"]
 
@@ -62,6 +63,8 @@ def _main(argv) -> int:
             return cmd_batch(args)
         if args.command == "sweep":
             return cmd_sweep(args)
+        if args.command == "view":
+            return cmd_view(args)
         return cmd_export(args)
     except (InputError, ValueError) as err:
         # A ValueError is the library's answer to bad input (a size that cannot fit, a bad seed, ...).

@@ -1,5 +1,5 @@
 """The ``softplan`` command line: :func:`build_parser` (the subcommands ``run``,
-``scenarios``, ``export``, ``fit``, ``batch`` and ``sweep`` with their options and help),
+``scenarios``, ``export``, ``fit``, ``batch``, ``sweep`` and ``view`` with their options and help),
 and the checks of the arguments made on the host before any planning (output
 paths, figure formats, ``--gains``, the options of ``run`` and of a
 multi-process ``batch``). A bad argument raises :class:`~.common.InputError`.
@@ -115,6 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_fit_parser(sub)
     _add_batch_parser(sub)
     _add_sweep_parser(sub)
+    _add_view_parser(sub)
     return parser
 
 
@@ -150,6 +151,32 @@ def _add_actuator_options(run) -> None:
                    "and --max-actuator-speed or --max-tip-speed")
     g.add_argument("--plot-actuators", default=None, metavar="PATH",
                    help="write a figure of the actuator lengths, speeds and accelerations against time, with the limits")
+
+
+def _add_view_parser(sub) -> None:
+    """The ``view`` subcommand's arguments."""
+    view = sub.add_parser(
+        "view", help="an interactive 3-D view in the browser: drag the goal, watch the arm replan",
+        description="Serve an interactive 3-D view of a scene in the browser (viser; pip install "
+        "'softplan_jax[viewer]') and print its address: the arm, the obstacles, the goal as a handle to drag "
+        "(every move replans), a time slider, the closest points and clearance, the global fallback.",
+        epilog="Exit codes: 130 stopped by Ctrl-C; 2 bad input (nothing served).")
+    view.add_argument("scene", metavar="SCENE",
+                      help="paper scenario (sim1, sim2, tree), moving scene (tree_sway, tree_fruit, wire_sweep), "
+                      "JSON scenario file, or a trajectory saved by 'softplan run --out' (.json or .npz)")
+    view.add_argument("--method", choices=("curve", "points"), default=None,
+                      help="obstacle model of the plans (default: the trajectory's, else curve)")
+    view.add_argument("--n-points", type=int, default=None, metavar="N", help="N of the N-point model (default 10)")
+    view.add_argument("--gains", default="default", metavar="PRESET|FILE",
+                      help="gain preset (default, paper) or gains file, as for 'softplan run'")
+    view.add_argument("--max-steps", type=int, default=600, metavar="N", help="most planner steps (default 600)")
+    view.add_argument("--seed", type=int, default=0, help="seed of the escapes' random walks (default 0)")
+    view.add_argument("--host", default="127.0.0.1",
+                      help="address to serve on (default 127.0.0.1: this machine only; 0.0.0.0: every interface)")
+    view.add_argument("--port", type=int, default=8080,
+                      help="port, 0..65535 (default 8080; if in use, the next free one, and the command says so)")
+    view.add_argument("--share", action="store_true",
+                      help="also print a public URL through viser's relay (for a remote machine or Colab)")
 
 
 def _add_batch_parser(sub) -> None:

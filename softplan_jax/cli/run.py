@@ -27,6 +27,7 @@ from .common import (
     fmt_gain_values,
     fmt_seconds,
     gains_report,
+    moving_names,
     package_version,
     paper_names,
     report,
@@ -58,12 +59,6 @@ def _load(args, dtype):
         raise InputError(f"cannot read scenario file {args.scenario}: {err.strerror or err}") from None
     except UnicodeDecodeError:
         raise InputError(f"scenario file {args.scenario} is not UTF-8 text (is it a JSON file?)") from None
-
-
-def _moving_names():
-    from ..scenarios._moving import MOVING_SCENARIOS
-
-    return sorted(MOVING_SCENARIOS)
 
 
 def _is_moving_file(path: str) -> bool:
@@ -111,10 +106,10 @@ def cmd_run(args) -> int:
     import jax.numpy as jnp
 
     static_names = paper_names()
-    check_run_args(args, static_names + _moving_names())
+    check_run_args(args, static_names + moving_names())
     check_actuator_args(args)
     dtype = jnp.float32 if args.float32 else jnp.float64
-    if args.scenario in _moving_names() or (args.scenario not in static_names and _is_moving_file(args.scenario)):
+    if args.scenario in moving_names() or (args.scenario not in static_names and _is_moving_file(args.scenario)):
         return _cmd_track(args, dtype)
     for flag, value in (("--anticipation", args.anticipation), ("--hold-tolerance", args.hold_tolerance),
                         ("--no-evasion", args.no_evasion or None), ("--evasion-speed", args.evasion_speed),
@@ -265,7 +260,7 @@ def _moving_inputs(args, dtype, actuator_summary: dict) -> tuple:
     from ..scenarios._moving import MOVING_OPTIONS, moving_scenario
 
     try:
-        if args.scenario in _moving_names():
+        if args.scenario in moving_names():
             moving = moving_scenario(args.scenario, dtype=dtype)
             preset = dict(MOVING_OPTIONS[args.scenario])
         else:
