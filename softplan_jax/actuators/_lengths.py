@@ -1,36 +1,16 @@
 """Actuator lengths of a PCC arm and their inverses: tendons threaded through
 spacer disks along the whole arm, and extensible chambers within each segment.
 
-An actuator sits at distance ``r`` from the backbone at angle ``alpha``,
-measured in a frame carried along the backbone without twist (parallel
-transport, Bishop 1975): a tendon through spacer disks, or a chamber fixed to
-its segment's body, does not turn with the paper's frames, which turn by
-``phi_i`` at every segment (``R_i = Rz(phi_i) Ry(theta_i)``, paper section 2.1).
-Writing the paper's ``R_i = [Rz(phi_i) Ry(theta_i) Rz(-phi_i)] Rz(phi_i)``
-(the bracket: the twist-free rotation of the arc, Webster & Jones 2010), the
-paper's base frame of segment i is the twist-free frame turned by
-``phi_1 + ... + phi_{i-1}`` about the backbone, so segment i bends towards
-the angle ``a_i = phi_1 + ... + phi_i`` of the twist-free frame. On that arc
-(radius ``L_i / theta_i``) an actuator at ``(r, alpha)`` runs on a concentric
-arc of radius ``L_i / theta_i - r cos(alpha - a_i)``, of length
+An actuator at distance ``r`` from the backbone and angle ``alpha`` of the
+twist-free frame runs, on segment i's arc, a length
 
     ``c_i(r, alpha) = L_i - theta_i r cos(alpha - a_i)``          (A1)
 
-(Webster & Jones 2010, eq. 9; valid while ``r |theta_i| < L_i``, the radius
-inside the bending radius). A chamber of segment i has length (A1); a tendon
-of segment i ends at segment i's tip and runs through segments 1..i at its
-own ``(r_i, alpha)``, so its length from the base is the sum of (A1) over
-j <= i. Both are smooth in q (``theta cos(alpha - a)`` has no singularity),
-with Jacobians by ``jax.jacfwd``, finite at ``theta = 0``.
-
-The inverses are linear: with ``(u_i, v_i) = theta_i (cos a_i, sin a_i)``,
-(A1) reads ``L_i - r (u_i cos alpha + v_i sin alpha)``, so each segment's
-``(L_i, r u_i, r v_i)`` solves a k x 3 linear system (exactly for k = 3, by
-least squares for k > 3; tendons segment after segment, the proximal
-segments' share subtracted first), then ``theta_i = |(u_i, v_i)|``,
-``a_i = atan2(v_i, u_i)`` and ``phi_i = a_i - a_{i-1}`` wrapped to [-pi, pi).
-That is the configuration with ``theta_i >= 0`` (and ``a_i = 0`` for a
-straight segment, where the bending direction is undefined).
+with ``a_i = phi_1 + ... + phi_i`` (Webster & Jones 2010, eq. 9; valid while
+``r |theta_i| < L_i``). A chamber of segment i has length (A1); a tendon
+ending at segment i's tip has the sum of (A1) over j <= i. The inverses solve
+(A1), linear in ``(L_i, r theta_i cos a_i, r theta_i sin a_i)``, segment by
+segment. The derivation is on the documentation's actuators page.
 """
 
 from __future__ import annotations

@@ -1,22 +1,11 @@
 """The certificate of a smoothed path: the spline through a plan's waypoints,
 proven collision-free with the package's swept check before it is timed.
 
-The spline leaves the straight motions the planner certified, so each of its
-spans between waypoints is proven clear again. Over a span ``[s_a, s_b]`` the
-spline stays in its axis-aligned bounding box in q (computed exactly: the
-cubic's extrema), and so does every straight chord between two samples of
-the span (the box is convex). Every configuration x of a box of centre ``q_c``
-and half-widths ``w`` is the end of a straight motion from ``q_c`` with
-``|dq_j| <= w_j`` and ``L <= L_c + w_L`` on the way, so
-:func:`~softplan_jax.geometry._kinematics.motion_bound` ``(q_c, q_c + w)``
-bounds how far any arm point of x is from the same point of ``q_c``, and
-:func:`~softplan_jax.geometry._clearance.swept_clear` ``(q_c, q_c + w, ...)``
-proves the whole box clear when the exact clearance at ``q_c`` exceeds that
-bound plus the contact tolerance. A span whose box is not proven is halved,
-up to ``max_depth`` times; a span still not proven is timed along the plan's
-own straight motion instead (the caller's fallback). Sampling the timed
-trajectory at every box end (:class:`~.paths.Piece` ``breaks``) keeps each
-chord inside one proven box.
+Each span of the spline stays in its exact bounding box in q (the cubic's
+extrema); :func:`~softplan_jax.geometry._clearance.swept_clear` from the box's
+centre to a corner proves the whole box clear. A box not proven is halved up
+to ``max_depth`` times; a span still not proven is timed along the plan's own
+straight motion. The argument is on the documentation's actuators page.
 """
 
 from __future__ import annotations
