@@ -276,6 +276,25 @@ def test_point_curve_lower_bound_never_exceeds_the_distance():
     assert exact - 0.01 < point_curve_lower_bound(coeffs, (0.0, 1.0), far) <= exact
 
 
+def test_point_curve_lower_bounds_of_many_curves_equal_each_curves_own():
+    """point_curve_lower_bounds of m curves of mixed degrees, padded to one width, gives each
+    curve's bound from its unpadded coefficients bit for bit (padding columns change nothing),
+    and an empty array for no curves."""
+    from softplan_jax.geometry._point_curve import point_curve_lower_bound, point_curve_lower_bounds
+
+    rng = np.random.default_rng(3)
+    degrees = (0, 1, 2, 4, 8)
+    coeffs = np.zeros((len(degrees), 3, 9))
+    u_range = np.zeros((len(degrees), 2))
+    for i, d in enumerate(degrees):
+        coeffs[i, :, : d + 1] = rng.normal(size=(3, d + 1))
+        u_range[i] = np.sort(rng.uniform(-1.5, 1.5, 2))
+    p = rng.normal(size=3)
+    each = [point_curve_lower_bound(coeffs[i, :, : d + 1], u_range[i], p) for i, d in enumerate(degrees)]
+    np.testing.assert_array_equal(point_curve_lower_bounds(coeffs, u_range, p), each)
+    assert point_curve_lower_bounds(np.zeros((0, 3, 4)), np.zeros((0, 2)), p).shape == (0,)
+
+
 def test_goal_obstacle_hits_skip_only_far_curves():
     """goal_obstacle_hits asks point_obstacle_distances for exact distances only where the bound
     does not clear the radius plus the arm's: the same hits, clearances and exactness as the

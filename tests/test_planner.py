@@ -465,3 +465,24 @@ def test_tune_gains_lowers_the_loss_and_compiles_once(paper):
     assert again.compile_seconds == 0.0
     with pytest.raises(ValueError, match="tune must name"):
         tune_gains(sc, tune=("nope",), progress=False)
+
+
+def test_seed_keys_and_strong_gains_are_the_arrays_jax_would_make():
+    """prng_key of an int seed is jax.random.PRNGKey(seed) (made once per seed: the same
+    values on every call); strong_gains keeps arrays already of the dtype and converts Python
+    floats and weakly typed arrays to strong arrays of the dtype."""
+    from softplan_jax.planning._programs import prng_key, strong_gains
+
+    for seed in (0, 7, 2**40, -3, np.int64(5)):
+        for _ in range(2):
+            np.testing.assert_array_equal(prng_key(seed), jax.random.PRNGKey(int(seed)))
+    with pytest.raises(ValueError, match="out of the range"):
+        prng_key(2**70)
+    strong = sp.default_gains(jnp.float64)
+    mixed = strong._replace(k_att=2.0, d0=jnp.asarray(0.07))
+    out = strong_gains(mixed, jnp.float64)
+    assert out.v_max is strong.v_max
+    for name in ("k_att", "d0"):
+        leaf = getattr(out, name)
+        assert leaf.dtype == jnp.float64 and not leaf.weak_type and float(leaf) == float(getattr(strong, name))
+    assert strong_gains(strong, jnp.float32).k_att.dtype == jnp.float32

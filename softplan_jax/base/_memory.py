@@ -77,9 +77,17 @@ def fmt_bytes(n: float) -> str:
     return f"{int(n)} B"
 
 
+# Bytes below which check_memory does not read the memory available.
+SMALL_REQUEST = 16 * 2**20
+
+
 def check_memory(need: float, field: str, what: str, hint: str, on_device: bool = True) -> None:
     """A ValueError naming ``field`` when ``need`` bytes (an estimate of ``what``) exceed the
-    memory available (:func:`available_memory`); ``hint`` says what to do instead."""
+    memory available (:func:`available_memory`); ``hint`` says what to do instead. A request
+    under :data:`SMALL_REQUEST` passes unread: reading the memory available costs more than a
+    small plan's host work, and a process without that much memory fails before it gets here."""
+    if need < SMALL_REQUEST:
+        return
     avail = available_memory(on_device)
     if avail is not None and need > avail:
         raise ValueError(f"{field} is too large: {what} would need about {fmt_bytes(need)} of memory, "

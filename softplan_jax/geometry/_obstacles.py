@@ -15,7 +15,7 @@ import numpy as np
 
 from ._closest import ClosestPoint, SolverOptions, curve_closest
 from ._curves import curve_points
-from ._point_curve import point_curve_distance, point_curve_lower_bound
+from ._point_curve import point_curve_distance, point_curve_lower_bounds
 from ._point_sets import point_set_closest, points_closest
 from ._warm_start import curve_data, warm_curves
 
@@ -131,22 +131,23 @@ def _concatenate(parts, empty):
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
 
 
-def radius_and_mask(scenario):
-    """Obstacle radius (m,) and mask (m,) bool (False: a padding slot) of every slot."""
-    radius = jnp.concatenate(
+def radius_and_mask(scenario, xp=jnp):
+    """Obstacle radius (m,) and mask (m,) bool (False: a padding slot) of every slot, as
+    arrays of ``xp`` (``numpy`` on the host)."""
+    radius = xp.concatenate(
         [
             scenario.curves.radius,
             scenario.point_radius,
-            jnp.stack([pc.radius for pc in scenario.parametric])
+            xp.stack([pc.radius for pc in scenario.parametric])
             if scenario.parametric
-            else jnp.zeros((0,), scenario.q0.dtype),
+            else xp.zeros((0,), scenario.q0.dtype),
         ]
     )
-    mask = jnp.concatenate(
+    mask = xp.concatenate(
         [
             scenario.curve_mask,
-            jnp.any(scenario.point_mask, axis=-1),
-            jnp.ones((len(scenario.parametric),), bool),
+            xp.any(xp.asarray(scenario.point_mask), axis=-1),  # np.any would call jax's any
+            xp.ones((len(scenario.parametric),), bool),
         ]
     )
     return radius, mask
@@ -314,13 +315,15 @@ def point_obstacle_distances(scenario, p, parametric_samples: int = 2049, beyond
     coeffs = np.asarray(scenario.curves.coeffs, dtype=np.float64)
     u_range = np.asarray(scenario.curves.u_range, dtype=np.float64)
     radius = np.asarray(scenario.curves.radius, dtype=np.float64)
-    for k in np.nonzero(np.asarray(scenario.curve_mask))[0]:
-        d = None if beyond is None else point_curve_lower_bound(coeffs[k], u_range[k], p)
+    real = np.nonzero(np.asarray(scenario.curve_mask))[0]
+    bounds = None if beyond is None else point_curve_lower_bounds(coeffs[real], u_range[real], p)
+    for i, k in enumerate(real):
+        d = None if bounds is None else bounds[i]
         exact = d is None or not d > float(radius[k]) + beyond
         if exact:
             d = point_curve_distance(coeffs[k], u_range[k], p)
         out.append(dict(kind="curve", distance=float(d), radius=float(radius[k]), slot=int(k), exact=exact))
-    for o in obstacle_samples(scenario, parametric_samples):
+    for o in obstacle_samples(scenario, parametric_samples, curves=False):
         if o["kind"] == "points":
             d = float(np.min(np.linalg.norm(o["pts"] - p, axis=-1)))
             out.append(dict(kind="points", distance=d, radius=o["radius"], slot=o["slot"], exact=True))
@@ -332,8 +335,9 @@ def point_obstacle_distances(scenario, p, parametric_samples: int = 2049, beyond
     return out
 
 
-def obstacle_samples(scenario, samples: int) -> list[dict]:
-    """Every real obstacle, sampled for drawing (host side, NumPy), in slot order.
+def obstacle_samples(scenario, samples: int, curves: bool = True) -> list[dict]:
+    """Every real obstacle, sampled for drawing (host side, NumPy), in slot order
+    (``curves`` False: the point sets and parametric curves only).
 
     Returns:
       A list of ``dict(kind="curve" | "points", pts (N, 3), radius float,
@@ -345,7 +349,7 @@ def obstacle_samples(scenario, samples: int) -> list[dict]:
     coeffs = np.asarray(scenario.curves.coeffs, dtype=float)
     u_range = np.asarray(scenario.curves.u_range, dtype=float)
     radius = np.asarray(scenario.curves.radius, dtype=float)
-    for k in np.nonzero(np.asarray(scenario.curve_mask))[0]:
+    for k in np.nonzero(np.asarray(scenario.curve_mask))[0] if curves else ():
         u = np.linspace(u_range[k, 0], u_range[k, 1], samples)
         pts = np.stack([np.polynomial.polynomial.polyval(u, coeffs[k, a]) for a in range(3)], axis=-1)
         obs.append(dict(kind="curve", pts=pts, radius=float(radius[k]), slot=int(k)))

@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.polynomial import polynomial as _poly
 
-__all__ = ["closest_parameters", "project_newton", "point_curve_distance", "point_curve_lower_bound"]
+__all__ = ["closest_parameters", "project_newton", "point_curve_distance", "point_curve_lower_bound",
+           "point_curve_lower_bounds"]
 
 # Samples of the guard grid of point_curve_distance (each polished by Newton).
 _GUARD_SAMPLES = 64
@@ -134,14 +135,28 @@ def point_curve_lower_bound(coeffs, u_range, p, samples: int = 257) -> float:
     bounding its speed, so ``|p - F(u)| >= min_i |p - F(u_i)| - M h / 2``. Lowered by a
     relative 1e-9 for rounding. Cheap (one evaluation of the samples): a curve whose bound
     clears a threshold needs no exact :func:`point_curve_distance`."""
-    coeffs = _trim(np.asarray(coeffs, np.float64))
+    coeffs = np.asarray(coeffs, np.float64)[None]
+    return float(point_curve_lower_bounds(coeffs, np.reshape(u_range, (1, 2)), p, samples)[0])
+
+
+def point_curve_lower_bounds(coeffs, u_range, p, samples: int = 257) -> np.ndarray:
+    """:func:`point_curve_lower_bound` of m curves at once: ``coeffs`` (m, 3, K), ``u_range``
+    (m, 2); returns (m,). Each curve's degree is its own (zero columns of highest degree are
+    padding)."""
+    coeffs = np.asarray(coeffs, np.float64)
     p = np.asarray(p, np.float64).reshape(3)
-    lo, hi = (float(x) for x in np.asarray(u_range, np.float64))
-    u = np.linspace(lo, hi, samples)
-    F = np.stack([_poly.polyval(u, coeffs[a]) for a in range(3)], axis=1)  # (samples, 3)
-    nearest = float(np.min(np.linalg.norm(F - p, axis=1)))
-    k = np.arange(coeffs.shape[1])
-    R = max(abs(lo), abs(hi))
-    speed = float(np.sum(k[1:] * np.linalg.norm(coeffs[:, 1:], axis=0) * R ** (k[1:] - 1)))
-    slack = 0.5 * speed * (hi - lo) / (samples - 1)
-    return nearest - slack - 1e-9 * (1.0 + nearest + slack + float(np.abs(coeffs).sum()) * (1.0 + R) ** k[-1])
+    u_range = np.asarray(u_range, np.float64).reshape(-1, 2)
+    lo, hi = u_range[:, 0], u_range[:, 1]
+    u = np.linspace(lo, hi, samples, axis=-1)  # (m, samples)
+    F = np.stack([_poly.polyval(u, coeffs[:, a].T[..., None], tensor=False) for a in range(3)], axis=-1)
+    nearest = np.min(np.linalg.norm(F - p, axis=-1), axis=-1, initial=np.inf)
+    R = np.maximum(np.abs(lo), np.abs(hi))
+    bounds = np.empty(coeffs.shape[0])
+    for i, c in enumerate(coeffs):  # the speed bound and rounding term over the curve's own degree
+        c = _trim(c)
+        k = np.arange(c.shape[1])
+        speed = float(np.sum(k[1:] * np.linalg.norm(c[:, 1:], axis=0) * R[i] ** (k[1:] - 1)))
+        slack = 0.5 * speed * (hi[i] - lo[i]) / (samples - 1)
+        near = float(nearest[i])
+        bounds[i] = near - slack - 1e-9 * (1.0 + near + slack + float(np.abs(c).sum()) * (1.0 + R[i]) ** k[-1])
+    return bounds

@@ -259,8 +259,8 @@ def unreachable_result(scenario: Scenario, options: PlanOptions, reason: str) ->
     q0 = scenario.q0
     solver = options.solver if options.method == "curve" else DEFAULT_OPTIONS
     clearance = np.asarray(_start_clearance_program(solver)(q0, scenario))
-    _, mask = radius_and_mask(scenario)
-    c = clearance[np.asarray(mask)]
+    _, mask = radius_and_mask(scenario, np)
+    c = clearance[mask]
     tip = np.asarray(tip_position(q0))
     min_c = float(np.min(c, initial=np.inf))
     return PlanResult(
@@ -275,8 +275,7 @@ def result_from_rollout(r: Rollout, scenario: Scenario) -> PlanResult:
     # a slice program for every new step count (docs: Performance, "One scene").
     r = jax.device_get(r)
     it = int(r.iterations)
-    _, mask = radius_and_mask(scenario)
-    mask = np.asarray(mask)
+    _, mask = radius_and_mask(scenario, np)
     return PlanResult(
         reached=bool(r.reached),
         iterations=it,

@@ -7,6 +7,7 @@ points, the fallback and the command line all call them."""
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 
@@ -49,7 +50,18 @@ def rollout(world, gains, options, max_steps: int, key=None, *, driver: str = "s
 def strong_gains(gains, dtype):
     """Gains as arrays of the scenario's dtype, never weakly typed: a gain given as
     a Python float or ``jnp.asarray(0.1)`` (weak) would otherwise compile anew."""
-    return type(gains)(*(v if v is None else jnp.asarray(v, dtype) for v in gains))
+    return type(gains)(*(v if v is None or _strong(v, dtype) else jnp.asarray(v, dtype) for v in gains))
+
+
+def _strong(v, dtype) -> bool:
+    """Whether ``v`` is already a jax array of ``dtype``, not weakly typed (nothing to convert)."""
+    return isinstance(v, jax.Array) and v.dtype == dtype and not v.weak_type
+
+
+@functools.lru_cache(maxsize=256)
+def _seed_key(seed: int, impl, x64: bool, device):
+    """``jax.random.PRNGKey(seed)``, made once per seed and configuration (keys are immutable)."""
+    return jax.random.PRNGKey(seed)
 
 
 def prng_key(seed):
@@ -60,7 +72,8 @@ def prng_key(seed):
         seed = 0
     if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
         try:
-            return jax.random.PRNGKey(int(seed))
+            return _seed_key(int(seed), jax.config.jax_default_prng_impl, jax.config.jax_enable_x64,
+                             jax.config.jax_default_device)
         except (OverflowError, ValueError, TypeError):
             raise ValueError(f"seed {seed} is out of the range of a PRNG seed (a 64-bit signed int)") from None
     dtype = getattr(seed, "dtype", None)

@@ -124,7 +124,7 @@ def result_from_track(r: Track, moving: MovingScenario, dt: float) -> TrackResul
     """Trim one (unbatched) Track to the steps taken, on the host."""
     r = jax.device_get(r)  # NumPy slices below: no slice program compiled per step count
     it = int(r.iterations)
-    _, mask = radius_and_mask(moving.scene)
+    _, mask = radius_and_mask(moving.scene, np)
     rs = int(r.reached_step)
     return TrackResult(
         status=status_name(r.status),

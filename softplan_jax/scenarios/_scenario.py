@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base._validation import as_float_array, check_configuration, check_finite, check_points, check_scale
+from ..base._validation import as_float_array, check_configuration, check_finite, check_points, check_scale, is_concrete
 from ..geometry._curves import ParametricCurve, PolynomialCurve, check_curve_scale, stack_curves
 from ..geometry._obstacles import (  # obstacle_count re-exported: the layout belongs to obstacles
     obstacle_count,
@@ -299,7 +299,8 @@ def check_scenario(scenario, batched: bool | None = None) -> Scenario:
     dtype = scenario.q0.dtype
     for name in ("goal", "points", "point_radius", "arm_radius"):
         check_scale(getattr(scenario, name), f"scenario.{name}", dtype, "values")
-    check_scale(scenario.q0[..., 0], "scenario.q0", dtype, "segment lengths")
+    if is_concrete(scenario.q0):  # a NumPy view: no slice dispatched to the device
+        check_scale(np.asarray(scenario.q0)[..., 0], "scenario.q0", dtype, "segment lengths")
     check_curve_scale(scenario.curves.coeffs, scenario.curves.u_range, scenario.curves.radius, dtype,
                       "scenario.curves")
     return scenario
