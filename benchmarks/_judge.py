@@ -7,9 +7,10 @@ The suites are held out: ``random_scenarios(HELD_OUT_SEED, N)`` and
 ``science.py``, ``safe_step.py``, ``reach.py`` and ``evasion.py``; the default gains and the
 tuning recipe were chosen on seeds 0 (training) and 2 (validation). The audits recompute the
 clearance by brute force, independently of the planner's checks: the runs of each suite with
-the smallest recorded clearance (``AUDITED``, ``AUDITED_MOVING``), the curve model's paper runs and the moving presets
-(static scenes: :func:`~softplan_jax.geometry._clearance.dense_trajectory_clearance`; moving
-scenes: the oracle's ``moving_min_clearance``, the curves moved by SciPy).
+the smallest recorded clearance (``AUDITED``, ``AUDITED_MOVING``), the curve model's paper
+runs and the moving presets (static scenes:
+:func:`~softplan_jax.geometry._clearance.dense_trajectory_clearance`; moving scenes: the
+oracle's ``moving_min_clearance``, the curves moved by SciPy).
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ success, mean iterations, collisions, the paper scenes, the fallback batch),
 with the count of bit-identical arrays, writes ``AFTER.judge.md`` and exits 0
 only if every criterion passes:
 
-    PYTHONPATH=/path/to/previous python benchmarks/baselines.py save before.npz --fallback --suite 1024
+    PYTHONPATH=/path/to/previous python benchmarks/baselines.py save before.npz --fallback --suite 1024  # ~5 min more
     python benchmarks/baselines.py save after.npz --fallback --suite 1024
     python benchmarks/baselines.py judge before.npz after.npz
 
@@ -236,7 +236,7 @@ def main(argv=None) -> int:
     s.add_argument("--fallback", action="store_true", help="also plan_fallback on 48 scenes (~2 min more)")
     s.add_argument("--quick", action="store_true", help="a small set (< 1 min of runs): a smoke test of the tool")
     s.add_argument("--suite", type=int, default=0, metavar="N",
-                   help="also the held-out suites of N scenes and the brute-force audits (judged runs: 1024)")
+                   help="also the held-out suites of N scenes and their brute-force audits (judged: 1024, ~5 min more)")
     c = sub.add_parser("compare", help="compare two saves")
     c.add_argument("a")
     c.add_argument("b")
