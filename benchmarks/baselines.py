@@ -15,6 +15,19 @@ differ within the steps taken or only after a rollout's end.
     python benchmarks/baselines.py compare before.npz after.npz
     python benchmarks/baselines.py --quick    # a small set (the tree, 8 random scenes, one moving preset)
 
+A change allowed to alter results at rounding level is judged by statistics
+instead: ``save --suite 1024`` adds the held-out suites (``_judge.py``: the
+static suite planned with the curve and the 10-point models, the moving suite
+tracked, per-scene outcomes, and brute-force collision audits of the curve
+model), and ``judge BEFORE AFTER`` prints each criterion PASS or FAIL (paired
+success, mean iterations, collisions, the paper scenes, the fallback batch),
+with the count of bit-identical arrays, writes ``AFTER.judge.md`` and exits 0
+only if every criterion passes:
+
+    PYTHONPATH=/path/to/previous python benchmarks/baselines.py save before.npz --fallback --suite 1024  # ~5 min more
+    python benchmarks/baselines.py save after.npz --fallback --suite 1024
+    python benchmarks/baselines.py judge before.npz after.npz
+
 Besides ``OUT.npz``, ``save`` writes ``OUT.md`` and ``OUT.json``: per run,
 its status, iterations and a digest of its arrays (SHA-256 of their bytes), so
 two saves can be told apart at a glance (digests hold for one machine: XLA's
@@ -38,11 +51,11 @@ PER_STEP = ("q", "tip", "clearance", "between", "step_scale", "converged", "fall
             "time", "error")
 
 
-def save(path: str, fallback: bool, quick: bool = False) -> int:
+def save(path: str, fallback: bool, quick: bool = False, suite: int = 0) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from _common import finish_machine, machine_info, machine_lines, write_results
+    from _common import finish_machine, machine_info
 
     import softplan_jax as sp
     from softplan_jax.planning import make_options, make_track_options, rollout_jit
@@ -84,21 +97,36 @@ def save(path: str, fallback: bool, quick: bool = False) -> int:
             for f in ("q", "status", "planner", "min_clearance"):
                 out[f"fallback/{i}/{f}"] = np.asarray(getattr(p, f))
         print(f"fallback: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
+    if suite:
+        from _judge import save_suite
+
+        save_suite(out, suite, quick, lambda msg: print(f"{msg}: {time.perf_counter() - t0:.0f} s", file=sys.stderr,
+                                                         flush=True))
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     np.savez(path, **out)
     print(f"{len(out)} arrays written to {path}")
-    wall = time.perf_counter() - t0
+    _report(path, out, finish_machine(machine), time.perf_counter() - t0, quick, fallback, suite)
+    return 0
+
+
+def _report(path: str, out: dict, machine: dict, wall: float, quick: bool, fallback: bool, suite: int) -> None:
+    """``OUT.md`` and ``OUT.json`` of a save: the command, the suites, the machine, one row per run."""
+    from _common import machine_lines, write_results
+
     runs = summary(out)
-    prefix = path.removesuffix(".npz")
+    flags = f"{' --quick' if quick else ''}{' --fallback' if fallback else ''}{f' --suite {suite}' if suite else ''}"
+    seed = int(out["suite/seed"]) if suite else None
+    held_out = (f"- held-out suites: `random_scenarios({seed}, {suite})` ({int(out['suite/max_steps'])} steps) and "
+                f"`random_moving_scenarios({seed}, {suite})` ({int(out['suite/moving_steps'])} steps)" if suite
+                else "- no held-out suite (`--suite N`)")
     lines = [f"# Baseline arrays{' (QUICK MODE)' if quick else ''}", "",
              f"- {len(out)} arrays of {len(runs)} runs in `{os.path.basename(path)}`, saved in {wall:.0f} s "
-             f"(`python benchmarks/baselines.py save{' --quick' if quick else ''}{' --fallback' if fallback else ''}`)",
-             *machine_lines(finish_machine(machine)), "",
+             f"(`python benchmarks/baselines.py save{flags}`)", held_out, *machine_lines(machine), "",
              "| run | status | iterations | SHA-256 of its arrays (first 16) |", "|---|---|---|---|"]
     lines += [f"| {r['run']} | {r['status']} | {r['iterations']} | `{r['digest']}` |" for r in runs]
-    write_results(prefix, dict(machine=machine, quick=quick, fallback=fallback, arrays=len(out), wall_s=wall,
-                               runs=runs), "\n".join(lines) + "\n")
-    return 0
+    write_results(path.removesuffix(".npz"), dict(machine=machine, quick=quick, fallback=fallback, suite=suite,
+                                                  suite_seed=seed, arrays=len(out), wall_s=wall, runs=runs),
+                  "\n".join(lines) + "\n")
 
 
 def summary(arrays: dict) -> list:
@@ -131,11 +159,13 @@ def summary(arrays: dict) -> list:
     return rows
 
 
-def compare(path_a: str, path_b: str) -> int:
-    a, b = np.load(path_a), np.load(path_b)
+def differences(a, b) -> tuple[int, int, list, list]:
+    """``(bit-identical arrays, arrays in both, names in one only, lines on each that differs)`` of
+    two loaded saves; a per-step array of a rollout says whether it differs within the steps taken."""
     missing = sorted(set(a.files) ^ set(b.files))
+    common = sorted(set(a.files) & set(b.files))
     equal, lines = 0, []
-    for k in sorted(set(a.files) & set(b.files)):
+    for k in common:
         x, y = a[k], b[k]
         if x.shape == y.shape and np.array_equal(x, y, equal_nan=x.dtype.kind == "f"):
             equal += 1
@@ -157,16 +187,47 @@ def compare(path_a: str, path_b: str) -> int:
             n = int(np.sum(x != y))
             d = np.nanmax(np.abs(x.astype(float) - y.astype(float))) if x.dtype.kind in "fiub" else float("nan")
             lines.append(f"  {k}: {n} entries differ, max |diff| {d:.3g}")
-    print(f"{equal} of {len(set(a.files) & set(b.files))} arrays bit-identical" +
-          (f"; {len(missing)} in one file only: {missing[:5]}" if missing else ""))
+    return equal, len(common), missing, lines
+
+
+def identity_line(equal: int, common: int, missing: list) -> str:
+    return f"{equal} of {common} arrays bit-identical" + (
+        f"; {len(missing)} in one file only: {missing[:5]}" if missing else "")
+
+
+def compare(path_a: str, path_b: str) -> int:
+    equal, common, missing, lines = differences(np.load(path_a), np.load(path_b))
+    print(identity_line(equal, common, missing))
     print("\n".join(lines))
     return 0
+
+
+def judge(path_a: str, path_b: str, min_scenes: int) -> int:
+    """Judge save ``path_b`` (after) against ``path_a`` (before): print the report, write
+    ``AFTER.judge.md``; 0 if every criterion passes, else 1."""
+    from _judge import verdict, verdict_table, write_markdown
+
+    a, b = np.load(path_a), np.load(path_b)
+    body, checks = verdict(a, b, min_scenes)
+    equal, common, missing, _ = differences(a, b)
+    passed = all(ok for _, ok, _ in checks)
+    lines = [f"# Judge: `{os.path.basename(path_b)}` against `{os.path.basename(path_a)}`", "",
+             f"- before: `{path_a}`", f"- after: `{path_b}`", f"- {identity_line(equal, common, missing)}",
+             "- not judged here: the closest-point oracle suites (`pytest tests/test_closest.py`, 0 misses)", "",
+             "## Verdict", "", *verdict_table(checks), "",
+             f"**{'PASS' if passed else 'FAIL'}**: {sum(ok for _, ok, _ in checks)} of {len(checks)} criteria pass.",
+             "", *body]
+    print("\n".join(lines))
+    print(f"written to {write_markdown(path_b, lines)}")
+    return 0 if passed else 1
 
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0].startswith("-") and argv[0] not in ("-h", "--help"):
         argv = ["save", *argv]  # no command: save to benchmarks/results/ (quick: results/quick/)
+    from _judge import MIN_SCENES
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     s = sub.add_parser("save", help="run the fixed set and save its arrays (and a summary beside them)")
@@ -174,14 +235,25 @@ def main(argv=None) -> int:
                    help="the .npz to write (default benchmarks/results/baselines.npz; quick: results/quick/)")
     s.add_argument("--fallback", action="store_true", help="also plan_fallback on 48 scenes (~2 min more)")
     s.add_argument("--quick", action="store_true", help="a small set (< 1 min of runs): a smoke test of the tool")
+    s.add_argument("--suite", type=int, default=0, metavar="N",
+                   help="also the held-out suites of N scenes and their brute-force audits (judged: 1024, ~5 min more)")
     c = sub.add_parser("compare", help="compare two saves")
     c.add_argument("a")
     c.add_argument("b")
+    j = sub.add_parser("judge", help="judge AFTER against BEFORE by statistics (exit 0: every criterion passes)")
+    j.add_argument("before")
+    j.add_argument("after")
+    j.add_argument("--min-scenes", type=int, default=MIN_SCENES,
+                   help=f"held-out scenes a suite needs (default {MIN_SCENES:,}, the judged size)")
     args = ap.parse_args(argv)
     if args.cmd == "compare":
         return compare(args.a, args.b)
+    if args.cmd == "judge":
+        return judge(args.before, args.after, args.min_scenes)
+    if args.suite < 0:
+        ap.error(f"--suite must be >= 0, got {args.suite}")
     out = args.out or os.path.join(RESULTS_DIR, "quick" if args.quick else "", "baselines.npz")
-    return save(out, args.fallback, args.quick)
+    return save(out, args.fallback, args.quick, args.suite)
 
 
 if __name__ == "__main__":

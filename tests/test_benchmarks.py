@@ -10,6 +10,11 @@
   (tests/test_batch.py), which the sweep calls.
 * ``benchmarks/run_all.py`` knows every script of the folder, and each has a
   ``--quick`` mode; the scripts' argument checks and pure helpers.
+* ``baselines.py judge`` on made-up saves (no planning): equal saves pass; a
+  success rate moved by more than half a point or by a significant McNemar
+  test, a collision of the curve model, mean iterations off by more than 2 %,
+  the tree beyond 3 steps of 53 and a missing suite each fail their criterion
+  and only theirs.
 * ``random_scenarios``: seeded and deterministic, the requested shapes, each
   entry equal to ``make_scenario`` of its own obstacles, goals reachable (an
   independent least-squares inverse kinematics finds a configuration within
@@ -179,7 +184,8 @@ QUICK_ONLY = [("ab", "ab", []), ("baselines", "baselines", []), ("closest", "clo
 @pytest.mark.parametrize("name, script, extra", QUICK_ONLY, ids=[q[0] for q in QUICK_ONLY])
 def test_quick_run_writes_its_report(tmp_path, name, script, extra):
     prefix = tmp_path / name
-    args = ["save", f"{prefix}.npz", "--quick"] if name == "baselines" else [*extra, "--quick", "--out", str(prefix)]
+    args = (["save", f"{prefix}.npz", "--quick", "--fallback", "--suite", "16"] if name == "baselines"
+            else [*extra, "--quick", "--out", str(prefix)])
     _ok(_run([sys.executable, os.path.join(BENCH, f"{script}.py"), *args]))
     report = json.loads((tmp_path / f"{name}.json").read_text())
     assert report and (tmp_path / f"{name}.md").read_text().startswith("#")
@@ -189,6 +195,11 @@ def test_quick_run_writes_its_report(tmp_path, name, script, extra):
         assert (tmp_path / "baselines.npz").exists() and report["arrays"] > 0
         assert baselines_compare(tmp_path / "baselines.npz", tmp_path / "baselines.npz").startswith(
             f"{report['arrays']} of {report['arrays']} arrays bit-identical")
+        assert report["suite"] == 16 and report["suite_seed"] == 1
+        judged = _run([sys.executable, os.path.join(BENCH, "baselines.py"), "judge", str(tmp_path / "baselines.npz"),
+                       str(tmp_path / "baselines.npz"), "--min-scenes", "16"])
+        _ok(judged)
+        assert "**PASS**: 9 of 9 criteria pass" in judged[1] and (tmp_path / "baselines.judge.md").exists()
 
 
 def baselines_compare(a, b) -> str:
@@ -566,3 +577,124 @@ def test_baselines_compare_tells_steps_taken_from_the_tail(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "2 of 3 arrays bit-identical" in out
     assert "g/q: 1 of 2 rollouts differ within the steps taken; max |diff| 1" in out
+
+
+# ----------------------------------------------------------------------------
+# baselines.py judge, on synthetic saves (no planning)
+
+
+def _judged_save(n=1024, seed=0) -> dict:
+    """The arrays ``save --fallback --suite n`` writes that ``judge`` reads, made up: n scenes per
+    suite, brute-force audits, the paper tree and sim1, a moving preset, 48 fallback scenes."""
+    rng = np.random.default_rng(seed)
+    reached, max_steps = int(sp.Status.REACHED), int(sp.Status.MAX_STEPS)
+    d = {"suite/seed": np.int64(1), "suite/max_steps": np.int64(600), "suite/moving_steps": np.int64(300)}
+    for model, rate in (("curve10", 0.9), ("points10", 0.45), ("moving", 0.83)):
+        ok = rng.random(n) < rate
+        d[f"suite/{model}/status"] = np.where(ok, reached, max_steps).astype(np.int32)
+        d[f"suite/{model}/iterations"] = np.where(ok, rng.integers(40, 300, n), 600).astype(np.int32)
+        d[f"suite/{model}/reached"] = ok
+        d[f"suite/{model}/collided"] = np.zeros(n, bool)
+    for audit in ("suite/curve10", "suite/moving"):
+        d[f"audit/{audit}/scene"] = np.arange(8, dtype=np.int32)
+        d[f"audit/{audit}/brute_clearance"] = rng.uniform(0.01, 0.05, 8)
+    for run, its in (("paper/tree/curve10/default", 53), ("paper/sim1/curve10/default", 66), ("moving/tree_sway", 400)):
+        d.update({f"{run}/status": np.int32(reached), f"{run}/iterations": np.int32(its), f"{run}/collided": np.False_})
+    d.update({f"fallback/{i}/status": np.array("reached") for i in range(48)})
+    return d
+
+
+def _failing(tmp_path, before: dict, after: dict) -> set:
+    """The criteria ``judge`` fails for save ``after`` against ``before``."""
+    import _judge
+
+    np.savez(tmp_path / "before.npz", **before)
+    np.savez(tmp_path / "after.npz", **after)
+    _, checks = _judge.verdict(np.load(tmp_path / "before.npz"), np.load(tmp_path / "after.npz"))
+    assert len(checks) == 9
+    return {name for name, ok, _ in checks if not ok}
+
+
+def _lose(d: dict, model: str, k: int, gained: int = 0) -> dict:
+    """``d`` with the first ``k`` reached scenes of ``model``'s suite at max_steps instead (and the
+    first ``gained`` scenes not reached, reached)."""
+    d = {key: v.copy() for key, v in d.items()}
+    ok = d[f"suite/{model}/reached"]
+    lost, won = np.flatnonzero(ok)[:k], np.flatnonzero(~ok)[:gained]
+    d[f"suite/{model}/status"][lost] = int(sp.Status.MAX_STEPS)
+    d[f"suite/{model}/status"][won] = int(sp.Status.REACHED)
+    ok[lost], ok[won] = False, True
+    return d
+
+
+def test_baselines_judge_passes_equal_saves_and_writes_its_report(tmp_path, capsys):
+    import baselines
+
+    save = _judged_save()
+    np.savez(tmp_path / "a.npz", **save)
+    np.savez(tmp_path / "b.npz", **save)
+    assert baselines.main(["judge", str(tmp_path / "a.npz"), str(tmp_path / "b.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "**PASS**: 9 of 9 criteria pass" in out and "FAIL" not in out
+    assert f"{len(save)} of {len(save)} arrays bit-identical" in out
+    assert (tmp_path / "b.judge.md").read_text().strip() == out.split("\nwritten to ")[0].strip()
+    # The suite must be large enough: 1,024 scenes unless told otherwise.
+    small = _judged_save(n=64)
+    np.savez(tmp_path / "s.npz", **small)
+    assert baselines.main(["judge", str(tmp_path / "s.npz"), str(tmp_path / "s.npz")]) == 1
+    assert baselines.main(["judge", str(tmp_path / "s.npz"), str(tmp_path / "s.npz"), "--min-scenes", "64"]) == 0
+
+
+def test_baselines_judge_success_within_half_a_point_and_mcnemar(tmp_path):
+    before = _judged_save()
+    # 5 of 1,024 scenes lost: -0.49 points, McNemar p = 2 / 2^5 = 0.0625; 6 lost: -0.59 points, p = 0.031.
+    assert _failing(tmp_path, before, _lose(before, "curve10", 5)) == set()
+    assert _failing(tmp_path, before, _lose(before, "curve10", 6)) == {"success, curve10"}
+    assert _failing(tmp_path, before, _lose(before, "moving", 40)) == {"success, moving"}
+    # Lost and gained alike: the rate is the same, McNemar's test sees the 40 discordant scenes as noise.
+    assert _failing(tmp_path, before, _lose(before, "points10", 20, gained=20)) == set()
+    # 20 lost, 13 gained: -0.68 points with p = 0.30: the rate moved too far, though not significantly.
+    assert _failing(tmp_path, before, _lose(before, "points10", 20, gained=13)) == {"success, points10"}
+    assert _failing(tmp_path, _lose(before, "points10", 60), before) == {"success, points10"}
+    # At 1,024 scenes the half point is the stricter bound; on 2,048, 10 lost are -0.49 points and
+    # p = 2 / 2^10: McNemar's test fails them.
+    large = _judged_save(n=2048)
+    assert _failing(tmp_path, large, _lose(large, "curve10", 10)) == {"success, curve10"}
+
+
+def test_baselines_judge_fails_a_collision_of_the_curve_model(tmp_path):
+    before = _judged_save()
+    hit = {k: v.copy() for k, v in before.items()}
+    hit["suite/curve10/collided"][3] = True
+    assert _failing(tmp_path, before, hit) == {"collisions, curve model"}
+    hit = {k: v.copy() for k, v in before.items()}
+    hit["audit/suite/moving/brute_clearance"][0] = -1e-4  # the brute force finds a contact the planner missed
+    assert _failing(tmp_path, before, hit) == {"collisions, curve model"}
+    hit = {k: v.copy() for k, v in before.items()}
+    hit["fallback/7/status"] = np.array("collided")
+    assert _failing(tmp_path, before, hit) == {"collisions, curve model"}
+    # The 10-point model's collisions are its results, not a failure.
+    points = {k: v.copy() for k, v in before.items()}
+    points["suite/points10/collided"][3] = True
+    assert _failing(tmp_path, before, points) == set()
+
+
+def test_baselines_judge_mean_iterations_within_two_percent(tmp_path):
+    before = _judged_save()
+    for scale, failing in ((1.01, set()), (1.05, {"iterations, curve10"}), (0.95, {"iterations, curve10"})):
+        after = {k: v.copy() for k, v in before.items()}
+        its = after["suite/curve10/iterations"]
+        after["suite/curve10/iterations"] = np.round(its * scale).astype(its.dtype)
+        assert _failing(tmp_path, before, after) == failing, scale
+
+
+def test_baselines_judge_paper_scenes_and_missing_parts(tmp_path):
+    before = _judged_save()
+    for its, failing in ((56, set()), (57, {"tree within 3 steps of 53"})):
+        after = dict(before, **{"paper/tree/curve10/default/iterations": np.int32(its)})
+        assert _failing(tmp_path, before, after) == failing, its
+    lost = dict(before, **{"paper/sim1/curve10/default/status": np.int32(sp.Status.STALLED)})
+    assert _failing(tmp_path, before, lost) == {"paper scenes and moving presets still reached"}
+    bare = {k: v for k, v in before.items() if not k.startswith(("suite/", "fallback/"))}
+    assert _failing(tmp_path, before, bare) == {"success, curve10", "success, points10", "success, moving",
+                                                "iterations, curve10", "iterations, points10", "fallback batch"}
