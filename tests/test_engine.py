@@ -272,3 +272,20 @@ def test_tracking_a_static_scene_plans_it_then_holds(paper):
     assert np.all(tracked.error[it:] <= 0.02)
     with pytest.raises(ValueError, match="TrackOptions"):
         run(sp.moving_scenario("tree_sway"), g, make_options("curve"), 5, jax.random.PRNGKey(0))
+
+
+def test_default_lanes_follow_the_batch_and_its_horizon():
+    """A CPU plans on ceil(scenes * LANE_STEPS / max_steps) lanes between MIN_LANES and
+    DEFAULT_LANES; tracking and accelerators keep their widths; without the batch's size
+    the CPU's default."""
+    from softplan_jax.planning._engine import (ACCELERATOR_LANES, DEFAULT_LANES, LANE_STEPS, MIN_LANES,
+                                               TRACK_LANES, default_lanes)
+
+    assert default_lanes("cpu") == DEFAULT_LANES
+    assert default_lanes("cpu", scenes=1024, max_steps=600) == DEFAULT_LANES
+    assert default_lanes("cpu", scenes=256, max_steps=600) == -(-256 * LANE_STEPS // 600) == 32
+    assert default_lanes("cpu", scenes=64, max_steps=600) == MIN_LANES
+    assert default_lanes("cpu", scenes=64, max_steps=150) == 32
+    assert default_lanes("cpu", scenes=100, max_steps=50) == DEFAULT_LANES
+    assert default_lanes("cpu", tracking=True, scenes=64, max_steps=600) == TRACK_LANES
+    assert default_lanes("gpu", scenes=64, max_steps=600) == ACCELERATOR_LANES

@@ -34,19 +34,34 @@ __all__ = ["Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "TRACK_LANES", "DEFAU
 
 DEFAULT_STEP_CHUNK = 8  # steps between two checks of "done": at most 7 steps computed past the end
 DEFAULT_LANES = 64  # scenes planned side by side in a batch on a CPU (docs: Performance)
+LANE_STEPS = 75  # a CPU batch's lanes: ceil(scenes * LANE_STEPS / max_steps), at most DEFAULT_LANES
+MIN_LANES = 8  # ... and at least this many (default_lanes)
 TRACK_LANES = 1024  # ... tracked on a CPU: a tracked scene holds its lane to the horizon
 ACCELERATOR_LANES = 16384  # ... on a GPU or TPU: every scene of a device's share, up to this many
 DEFAULT_QUANTUM = 64  # steps a lane holds a scene while others wait (run_lanes)
 
 
-def default_lanes(platform: str | None = None, tracking: bool = False) -> int:
+def default_lanes(platform: str | None = None, tracking: bool = False, scenes: int | None = None,
+                  max_steps: int | None = None) -> int:
     """The lanes of a batch when none are given (at most the batch): on a CPU
     :data:`DEFAULT_LANES` when planning, :data:`TRACK_LANES` when tracking;
     :data:`ACCELERATOR_LANES` on a GPU or TPU, where a wide vmapped step is nearly
     as fast as a narrow one. ``platform``: a jax platform name ("cpu", "gpu", "cuda",
-    "rocm", "tpu"); None: ``jax.default_backend()``."""
+    "rocm", "tpu"); None: ``jax.default_backend()``.
+
+    Given the batch's ``scenes`` and ``max_steps``, a CPU plans on
+    ``ceil(scenes * LANE_STEPS / max_steps)`` lanes, between :data:`MIN_LANES` and
+    :data:`DEFAULT_LANES`: while a scene runs to ``max_steps``, each other lane plans
+    about ``max_steps / LANE_STEPS`` scenes, so few lanes idle at the batch's end
+    (docs: Performance, "Lanes")."""
     platform = jax.default_backend() if platform is None else platform
-    return ACCELERATOR_LANES if platform != "cpu" else TRACK_LANES if tracking else DEFAULT_LANES
+    if platform != "cpu":
+        return ACCELERATOR_LANES
+    if tracking:
+        return TRACK_LANES
+    if scenes is None or max_steps is None:
+        return DEFAULT_LANES
+    return min(DEFAULT_LANES, max(MIN_LANES, -(-int(scenes) * LANE_STEPS // max(int(max_steps), 1))))
 
 
 class Carry(NamedTuple):
@@ -286,9 +301,9 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int | None
     max_steps, step_chunk, lanes = check_engine_sizes(max_steps, step_chunk, lanes)
     one = jax.tree_util.tree_map(lambda x: x[0], worlds)
     planning = setup(one, options).stop_at_goal
-    lanes = default_lanes(tracking=not planning) if lanes is None else lanes
-    quantum = check_int((DEFAULT_QUANTUM if planning else max_steps + 1) if quantum is None else quantum, "quantum", 1)
     B = jax.tree_util.tree_leaves(worlds)[0].shape[0]
+    lanes = default_lanes(tracking=not planning, scenes=B, max_steps=max_steps) if lanes is None else lanes
+    quantum = check_int((DEFAULT_QUANTUM if planning else max_steps + 1) if quantum is None else quantum, "quantum", 1)
     L = min(lanes, B)
     prepared = jax.vmap(lambda w: prepare(w, options))(worlds)  # once per scene
 

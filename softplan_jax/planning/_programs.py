@@ -107,9 +107,11 @@ def _one(world, gains, options, max_steps: int, key, arm=None) -> Rollout:
 
 def _batch(worlds, gains, options, max_steps: int, keys, mesh=None, lanes=None, arm=None) -> Rollout:
     platform = jax.default_backend() if mesh is None else mesh.devices.flat[0].platform
-    width = default_lanes(platform, tracking=tracks(options)) if lanes is None else lanes
 
-    def laned(worlds, gains, keys):
+    def laned(worlds, gains, keys):  # worlds: this device's share of the batch
+        scenes = jax.tree_util.tree_leaves(worlds)[0].shape[0]
+        width = (default_lanes(platform, tracking=tracks(options), scenes=scenes, max_steps=max_steps)
+                 if lanes is None else lanes)
         return run_lanes(worlds, gains, options, max_steps, keys, lanes=width,
                          step_chunk=plan_options(options).step_chunk, arm=PCC if arm is None else arm)
 
