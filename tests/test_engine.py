@@ -278,8 +278,14 @@ def test_default_lanes_follow_the_batch_and_its_horizon():
     """A CPU plans on ceil(scenes * LANE_STEPS / max_steps) lanes between MIN_LANES and
     DEFAULT_LANES; tracking and accelerators keep their widths; without the batch's size
     the CPU's default."""
-    from softplan_jax.planning._engine import (ACCELERATOR_LANES, DEFAULT_LANES, LANE_STEPS, MIN_LANES,
-                                               TRACK_LANES, default_lanes)
+    from softplan_jax.planning._engine import (
+        ACCELERATOR_LANES,
+        DEFAULT_LANES,
+        LANE_STEPS,
+        MIN_LANES,
+        TRACK_LANES,
+        default_lanes,
+    )
 
     assert default_lanes("cpu") == DEFAULT_LANES
     assert default_lanes("cpu", scenes=1024, max_steps=600) == DEFAULT_LANES
