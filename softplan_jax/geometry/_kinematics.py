@@ -62,12 +62,26 @@ def _rotation(q_i):
     )
 
 
+# Arms of up to this many segments compose their frames in an unrolled Python loop; longer
+# arms in a lax.scan, whose trace (and compile time) does not grow with the number of segments
+# (docs: Performance, "Arms of many segments").
+UNROLL_SEGMENTS = 4
+
+
 def _chain(q):
     """Base frames of all n segments and the tip frame (H_n^0 = prod H_i^{i-1}, paper §2.1).
 
-    A Python loop over the (static, small) number of segments: straight-line
-    code that XLA fuses, cheaper to compile inside the solvers' loops than a scan.
+    Returns:
+      ``(R_bases (n, 3, 3), P_bases (n, 3), R_tip (3, 3), P_tip (3,))``.
     """
+    if q.shape[0] <= UNROLL_SEGMENTS:
+        return _chain_unrolled(q)
+    return _chain_scanned(q)
+
+
+def _chain_unrolled(q):
+    """:func:`_chain` as a Python loop over the segments: straight-line code that XLA fuses,
+    cheaper to compile and run inside the solvers' loops than a scan for a few segments."""
     R = jnp.eye(3, dtype=q.dtype)
     P = jnp.zeros(3, dtype=q.dtype)
     Rs, Ps = [], []
@@ -77,6 +91,25 @@ def _chain(q):
         R_i, P_i = _rotation(q[i]), arc_point_local(q[i], jnp.ones_like(q[i][0]))
         R, P = R @ R_i, P + R @ P_i
     return jnp.stack(Rs), jnp.stack(Ps), R, P
+
+
+def _chain_scanned(q):
+    """:func:`_chain` as a ``lax.scan`` over the segments: one traced segment whatever n.
+
+    The segments' own transforms ``(R_i, P_i)`` are computed side by side (vmap), then
+    composed base to tip, ``(R, P) <- (R R_i, P + R P_i)``.
+    """
+    R_i = jax.vmap(_rotation)(q)
+    P_i = jax.vmap(lambda q_i: arc_point_local(q_i, jnp.ones_like(q_i[0])))(q)
+
+    def compose(frame, segment):
+        R, P = frame
+        R_seg, P_seg = segment
+        return (R @ R_seg, P + R @ P_seg), frame
+
+    base = (jnp.eye(3, dtype=q.dtype), jnp.zeros(3, dtype=q.dtype))
+    (R, P), (R_bases, P_bases) = jax.lax.scan(compose, base, (R_i, P_i))
+    return R_bases, P_bases, R, P
 
 
 # ----------------------------------------------------------------------------
