@@ -515,17 +515,27 @@ def test_many_segments_jacobians(i, s):
     _check_point_jacobian(_many_q(2), i, s)
 
 
-def test_many_segments_points_jacobian_and_gradient_at_straight_arm():
+@pytest.mark.parametrize("straight", [True, False])
+def test_many_segments_points_jacobian(straight):
+    """The planner's Jacobians, segment by segment on a long arm, against the oracle's complex
+    step, on the straight arm (every theta = 0) and a bent one; the tip's gradient too."""
     from softplan_jax.geometry._kinematics import points_jacobian
 
-    q = sp.scenarios.default_start(MANY, 3.0 / MANY)  # every theta = 0
-    q_np = np.asarray(q)
-    segments, s = jnp.array([0, 5, MANY - 1]), jnp.array([0.5, 1.0, 1.0])
+    q_np = np.asarray(sp.scenarios.default_start(MANY, 3.0 / MANY)) if straight else _many_q(4)
+    q = _j(q_np)
+    segments, s = jnp.array([0, 4, 5, MANY - 1, MANY - 1], jnp.int32), jnp.array([0.5, 0.0, 1.0, 0.3, 1.0])
     J = jax.jit(points_jacobian)(q, segments, s)
-    for k in range(3):
-        assert_allclose(J[k], oracle.point_jacobian(q_np, int(segments[k]), float(s[k])), atol=1e-12)
+    assert J.shape == (5, 3, 3 * MANY)
+    for k in range(5):
+        exact = oracle.point_jacobian(q_np, int(segments[k]), float(s[k]))
+        assert_allclose(J[k], exact, atol=1e-13 * max(1.0, np.abs(exact).max()))
     g = jax.jit(jax.grad(lambda q: jnp.sum(sp.tip_position(q) ** 2)))(q)
     assert_allclose(np.asarray(g).ravel(), 2 * oracle.tip_position(q_np) @ oracle.tip_jacobian(q_np), atol=1e-12)
+    # reverse mode through the Jacobians (a rollout loss's gradient) against central differences
+    weights = jnp.asarray(np.random.default_rng(5).normal(size=J.shape))
+    loss = jax.jit(lambda q: jnp.sum(weights * points_jacobian(q, segments, s)))
+    fd = oracle.central_difference(lambda x: np.asarray(loss(_j(x))), q_np, 1e-6)
+    assert_allclose(jax.jit(jax.grad(loss))(q), fd, rtol=1e-6, atol=1e-6)
 
 
 def test_many_segments_float32():

@@ -211,10 +211,12 @@ def tip_jacobian(q):
 
 
 def points_jacobian(q, segments, s):
-    """Jacobians ``J_si = dP_si/dq`` of m arm points in one forward-mode pass (paper §2.2).
+    """Jacobians ``J_si = dP_si/dq`` of m arm points (paper §2.2).
 
-    The frames are computed once, with 3n tangents, instead of once per point;
-    ``s`` is held fixed (the paper's J_si). Used by the planner's eq. (9).
+    ``s`` is held fixed (the paper's J_si). Used by the planner's eq. (9). Up to
+    ``UNROLL_SEGMENTS`` segments, one forward-mode pass through the frames with 3n
+    tangents; longer arms segment by segment (:func:`_points_jacobian_by_segment`),
+    whose cost grows as m n instead of m n^2.
 
     Args:
       q: (n, 3) configuration.
@@ -226,6 +228,8 @@ def points_jacobian(q, segments, s):
     """
     q = check_configuration(q)
     n = q.shape[0]
+    if n > UNROLL_SEGMENTS:
+        return _points_jacobian_by_segment(q, segments, s)
 
     def points(q):
         R_bases, P_bases, _, _ = _chain(q)
@@ -233,6 +237,37 @@ def points_jacobian(q, segments, s):
         return P_bases[segments] + jnp.einsum("kab,kb->ka", R_bases[segments], local)
 
     return jax.jacfwd(points)(q).reshape(segments.shape[0], 3, 3 * n)
+
+
+def _points_jacobian_by_segment(q, segments, s):
+    """:func:`points_jacobian` one segment's columns at a time (vmap over points and segments).
+
+    A point x of segment i is ``P_j + R_j (P_seg_j + R_seg_j y)`` for every j < i, where
+    ``(R_j, P_j)`` is segment j's base frame, ``(R_seg_j, P_seg_j)`` its own transform and
+    ``y`` the point in segment j's tip frame, which q_j does not move. So
+    ``dx/dq_j = R_j d(P_seg_j + R_seg_j y)/dq_j`` for j < i, ``R_i d(arc point at s)/dq_i``
+    for j = i, and 0 for j > i: each a 3x3 forward-mode Jacobian in q_j alone.
+    """
+    n = q.shape[0]
+    R_bases, P_bases, R_tip, P_tip = _chain(q)
+    local = jax.vmap(lambda i, s_k: arc_point_local(q[i], s_k))(segments, s)
+    x = P_bases[segments] + jnp.einsum("kab,kb->ka", R_bases[segments], local)
+    R_tips = jnp.concatenate([R_bases[1:], R_tip[None]])  # segment j's tip frame
+    P_tips = jnp.concatenate([P_bases[1:], P_tip[None]])
+    one = jnp.ones((), q.dtype)
+
+    def block(x_k, i, s_k, j):
+        y = R_tips[j].T @ (x_k - P_tips[j])
+        through = jax.jacfwd(lambda q_j: arc_point_local(q_j, one) + _rotation(q_j) @ y)(q[j])
+        on = jax.jacfwd(lambda q_j: arc_point_local(q_j, s_k))(q[j])
+        own = jnp.where(j < i, through, jnp.where(j == i, on, jnp.zeros_like(on)))
+        return R_bases[j] @ own  # (3, 3): d x / d q_j
+
+    def columns(x_k, i, s_k):
+        return jax.vmap(lambda j: block(x_k, i, s_k, j))(jnp.arange(n, dtype=i.dtype))  # (n, 3, 3)
+
+    J = jax.vmap(columns)(x, segments, s)  # (m, n, 3, 3)
+    return jnp.transpose(J, (0, 2, 1, 3)).reshape(segments.shape[0], 3, 3 * n)
 
 
 def motion_bound(q_a, q_b):
