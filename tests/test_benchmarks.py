@@ -175,7 +175,8 @@ def test_run_all_rejects_unknown_scripts(capsys):
 # in a subprocess.
 QUICK_ONLY = [("ab", "ab", []), ("baselines", "baselines", []), ("closest", "closest", []),
               ("evasion", "evasion", []), ("gpu", "gpu", []), ("paper_presets", "paper_tables", ["--presets"]),
-              ("speed_targets", "speed_targets", []), ("sweep_scale", "sweep_scale", []),
+              ("speed_targets", "speed_targets", []), ("speed_targets_segments", "speed_targets", ["--segments"]),
+              ("sweep_scale", "sweep_scale", []),
               ("throughput", "throughput", []), ("timing", "timing", []), ("tuners", "tuning", ["--tuners"]),
               ("viewer_latency", "viewer_latency", [])]
 

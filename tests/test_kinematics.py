@@ -463,3 +463,87 @@ def test_reverse_mode_finite_at_theta_zero(theta):
     Ht = np.asarray(_hess_q(_j(q), 2, 1.0)).reshape(3, 9, 9)
     fd = oracle.central_difference(oracle.tip_jacobian, q, 1e-5).reshape(3, 9, 9)
     assert_allclose(Ht, fd, atol=2e-8)
+
+
+# --------------------------------------------------------------------------
+# arms of many segments: the frames composed in a lax.scan
+# --------------------------------------------------------------------------
+
+MANY = 12  # above geometry._kinematics.UNROLL_SEGMENTS: the scanned chain
+
+
+def _many_q(seed, n=MANY):
+    """A long arm of short segments, theta = 0 exactly and near it in some rows."""
+    q = random_q(np.random.default_rng(seed), n)
+    q[:, 0] *= 3.0 / n
+    q[::4, 1] = 0.0
+    q[1::4, 1] = 1e-9
+    return q
+
+
+def test_many_segments_take_the_scan():
+    from softplan_jax.geometry import _kinematics as K
+
+    assert K.UNROLL_SEGMENTS < MANY
+
+    def size(n):
+        return len(jax.make_jaxpr(K._chain)(jnp.ones((n, 3))).jaxpr.eqns)
+
+    assert size(MANY) == size(40)  # the trace does not grow with the segments
+    q = _j(_many_q(0))
+    for a, b in zip(K._chain_scanned(q), K._chain_unrolled(q), strict=True):
+        assert_allclose(a, b, atol=1e-15)
+
+
+def test_many_segments_values_match_oracle():
+    q = _many_q(1)
+    qj = _j(q)
+    Rb, Pb = _frames(qj)
+    Rbo, Pbo = oracle.segment_frames(q)
+    assert_allclose(Rb, Rbo, atol=1e-13)
+    assert_allclose(Pb, Pbo, atol=1e-13)
+    assert_allclose(_tip(qj), oracle.tip_position(q), atol=1e-13)
+    for i, s in ((0, 0.3), (5, 0.0), (MANY - 1, 1.0), (MANY - 2, 0.77)):
+        assert_allclose(_point(qj, i, s), oracle.segment_point(q, i, s), atol=1e-13)
+    assert_allclose(_backbone(qj, 3), oracle.backbone_points(q, 3), atol=1e-13)
+
+
+@pytest.mark.parametrize("i,s", [(0, 0.5), (4, 0.0), (7, 1.0), (MANY - 1, 1.0)])
+def test_many_segments_jacobians(i, s):
+    """jacfwd and jacrev through the scan against the oracle's complex step and finite
+    differences, with rows at theta = 0."""
+    _check_point_jacobian(_many_q(2), i, s)
+
+
+@pytest.mark.parametrize("straight", [True, False])
+def test_many_segments_points_jacobian(straight):
+    """The planner's Jacobians, segment by segment on a long arm, against the oracle's complex
+    step, on the straight arm (every theta = 0) and a bent one; the tip's gradient too."""
+    from softplan_jax.geometry._kinematics import points_jacobian
+
+    q_np = np.asarray(sp.scenarios.default_start(MANY, 3.0 / MANY)) if straight else _many_q(4)
+    q = _j(q_np)
+    segments, s = jnp.array([0, 4, 5, MANY - 1, MANY - 1], jnp.int32), jnp.array([0.5, 0.0, 1.0, 0.3, 1.0])
+    J = jax.jit(points_jacobian)(q, segments, s)
+    assert J.shape == (5, 3, 3 * MANY)
+    for k in range(5):
+        exact = oracle.point_jacobian(q_np, int(segments[k]), float(s[k]))
+        assert_allclose(J[k], exact, atol=1e-13 * max(1.0, np.abs(exact).max()))
+    g = jax.jit(jax.grad(lambda q: jnp.sum(sp.tip_position(q) ** 2)))(q)
+    assert_allclose(np.asarray(g).ravel(), 2 * oracle.tip_position(q_np) @ oracle.tip_jacobian(q_np), atol=1e-12)
+    # reverse mode through the Jacobians (a rollout loss's gradient) against central differences
+    weights = jnp.asarray(np.random.default_rng(5).normal(size=J.shape))
+    loss = jax.jit(lambda q: jnp.sum(weights * points_jacobian(q, segments, s)))
+    fd = oracle.central_difference(lambda x: np.asarray(loss(_j(x))), q_np, 1e-6)
+    assert_allclose(jax.jit(jax.grad(loss))(q), fd, rtol=1e-6, atol=1e-6)
+
+
+def test_many_segments_float32():
+    q = _many_q(3)
+    q32 = jnp.asarray(q, dtype=jnp.float32)
+    p = sp.geometry.segment_point(q32, MANY - 1, 0.6)
+    assert p.dtype == jnp.float32
+    assert_allclose(p, oracle.segment_point(q.astype(np.float32).astype(np.float64), MANY - 1, 0.6), atol=2e-5)
+    J = sp.geometry.point_jacobian(q32, MANY - 1, 0.6)
+    assert J.dtype == jnp.float32
+    assert_allclose(J, oracle.point_jacobian(q, MANY - 1, 0.6), atol=1e-4)

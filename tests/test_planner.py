@@ -486,3 +486,32 @@ def test_seed_keys_and_strong_gains_are_the_arrays_jax_would_make():
         leaf = getattr(out, name)
         assert leaf.dtype == jnp.float64 and not leaf.weak_type and float(leaf) == float(getattr(strong, name))
     assert strong_gains(strong, jnp.float32).k_att.dtype == jnp.float32
+
+
+@pytest.mark.slow  # its own rollout program (~15 s compile on 2 CPUs)
+def test_forty_segment_arm_plans_without_collision():
+    """The tree scene with an arm of 40 short segments (total length 3, as the paper's arm;
+    the frames composed in a lax.scan): the plan reaches the goal, and an independent
+    brute-force check (NumPy oracle kinematics on sampled motions, densely sampled
+    obstacles) finds no sampled point of the motion within the arm's radius of an obstacle (sampling can only
+    over-estimate the clearance: a sampled clearance at or below zero is a collision)."""
+    from scipy.spatial import cKDTree
+
+    from softplan_jax.geometry._obstacles import obstacle_samples
+
+    n = 40
+    sc = sp.paper_scenario("tree")
+    sc = sc._replace(q0=sp.scenarios.default_start(n, 3.0 / n), L_min=jnp.full(n, sc.L_min[0]),
+                     L_max=jnp.full(n, sc.L_max[0]))
+    r = sp.plan(sc, max_steps=300)
+    assert r.q.shape == (r.iterations + 1, n, 3)
+    assert r.status == "reached", (r.status, r.final_error)
+    assert not r.collided and r.min_clearance > 0
+    np.testing.assert_allclose(r.tip[-1], oracle.tip_position(np.asarray(r.q[-1])), atol=1e-12)
+    t = np.linspace(0.0, 1.0, 5)[:-1]
+    qs = np.asarray(r.q)
+    moving = (qs[:-1, None] + t[None, :, None, None] * (qs[1:] - qs[:-1])[:, None]).reshape(-1, n, 3)
+    arm = oracle.arm_points_many(np.concatenate([moving, qs[-1:]]), np.linspace(0.0, 1.0, 8)).reshape(-1, 3)
+    for ob in obstacle_samples(sc, 4000):
+        gap = cKDTree(ob["pts"]).query(arm)[0].min() - ob["radius"] - float(sc.arm_radius)
+        assert gap > 0, (ob["slot"], gap)

@@ -62,12 +62,26 @@ def _rotation(q_i):
     )
 
 
+# Arms of up to this many segments compose their frames in an unrolled Python loop; longer
+# arms in a lax.scan, whose trace (and compile time) does not grow with the number of segments
+# (docs: Performance, "Arms of many segments").
+UNROLL_SEGMENTS = 4
+
+
 def _chain(q):
     """Base frames of all n segments and the tip frame (H_n^0 = prod H_i^{i-1}, paper §2.1).
 
-    A Python loop over the (static, small) number of segments: straight-line
-    code that XLA fuses, cheaper to compile inside the solvers' loops than a scan.
+    Returns:
+      ``(R_bases (n, 3, 3), P_bases (n, 3), R_tip (3, 3), P_tip (3,))``.
     """
+    if q.shape[0] <= UNROLL_SEGMENTS:
+        return _chain_unrolled(q)
+    return _chain_scanned(q)
+
+
+def _chain_unrolled(q):
+    """:func:`_chain` as a Python loop over the segments: straight-line code that XLA fuses,
+    cheaper to compile and run inside the solvers' loops than a scan for a few segments."""
     R = jnp.eye(3, dtype=q.dtype)
     P = jnp.zeros(3, dtype=q.dtype)
     Rs, Ps = [], []
@@ -77,6 +91,25 @@ def _chain(q):
         R_i, P_i = _rotation(q[i]), arc_point_local(q[i], jnp.ones_like(q[i][0]))
         R, P = R @ R_i, P + R @ P_i
     return jnp.stack(Rs), jnp.stack(Ps), R, P
+
+
+def _chain_scanned(q):
+    """:func:`_chain` as a ``lax.scan`` over the segments: one traced segment whatever n.
+
+    The segments' own transforms ``(R_i, P_i)`` are computed side by side (vmap), then
+    composed base to tip, ``(R, P) <- (R R_i, P + R P_i)``.
+    """
+    R_i = jax.vmap(_rotation)(q)
+    P_i = jax.vmap(lambda q_i: arc_point_local(q_i, jnp.ones_like(q_i[0])))(q)
+
+    def compose(frame, segment):
+        R, P = frame
+        R_seg, P_seg = segment
+        return (R @ R_seg, P + R @ P_seg), frame
+
+    base = (jnp.eye(3, dtype=q.dtype), jnp.zeros(3, dtype=q.dtype))
+    (R, P), (R_bases, P_bases) = jax.lax.scan(compose, base, (R_i, P_i))
+    return R_bases, P_bases, R, P
 
 
 # ----------------------------------------------------------------------------
@@ -178,10 +211,12 @@ def tip_jacobian(q):
 
 
 def points_jacobian(q, segments, s):
-    """Jacobians ``J_si = dP_si/dq`` of m arm points in one forward-mode pass (paper §2.2).
+    """Jacobians ``J_si = dP_si/dq`` of m arm points (paper §2.2).
 
-    The frames are computed once, with 3n tangents, instead of once per point;
-    ``s`` is held fixed (the paper's J_si). Used by the planner's eq. (9).
+    ``s`` is held fixed (the paper's J_si). Used by the planner's eq. (9). Up to
+    ``UNROLL_SEGMENTS`` segments, one forward-mode pass through the frames with 3n
+    tangents; longer arms segment by segment (:func:`_points_jacobian_by_segment`),
+    whose cost grows as m n instead of m n^2.
 
     Args:
       q: (n, 3) configuration.
@@ -193,6 +228,8 @@ def points_jacobian(q, segments, s):
     """
     q = check_configuration(q)
     n = q.shape[0]
+    if n > UNROLL_SEGMENTS:
+        return _points_jacobian_by_segment(q, segments, s)
 
     def points(q):
         R_bases, P_bases, _, _ = _chain(q)
@@ -200,6 +237,37 @@ def points_jacobian(q, segments, s):
         return P_bases[segments] + jnp.einsum("kab,kb->ka", R_bases[segments], local)
 
     return jax.jacfwd(points)(q).reshape(segments.shape[0], 3, 3 * n)
+
+
+def _points_jacobian_by_segment(q, segments, s):
+    """:func:`points_jacobian` one segment's columns at a time (vmap over points and segments).
+
+    A point x of segment i is ``P_j + R_j (P_seg_j + R_seg_j y)`` for every j < i, where
+    ``(R_j, P_j)`` is segment j's base frame, ``(R_seg_j, P_seg_j)`` its own transform and
+    ``y`` the point in segment j's tip frame, which q_j does not move. So
+    ``dx/dq_j = R_j d(P_seg_j + R_seg_j y)/dq_j`` for j < i, ``R_i d(arc point at s)/dq_i``
+    for j = i, and 0 for j > i: each a 3x3 forward-mode Jacobian in q_j alone.
+    """
+    n = q.shape[0]
+    R_bases, P_bases, R_tip, P_tip = _chain(q)
+    local = jax.vmap(lambda i, s_k: arc_point_local(q[i], s_k))(segments, s)
+    x = P_bases[segments] + jnp.einsum("kab,kb->ka", R_bases[segments], local)
+    R_tips = jnp.concatenate([R_bases[1:], R_tip[None]])  # segment j's tip frame
+    P_tips = jnp.concatenate([P_bases[1:], P_tip[None]])
+    one = jnp.ones((), q.dtype)
+
+    def block(x_k, i, s_k, j):
+        y = R_tips[j].T @ (x_k - P_tips[j])
+        through = jax.jacfwd(lambda q_j: arc_point_local(q_j, one) + _rotation(q_j) @ y)(q[j])
+        on = jax.jacfwd(lambda q_j: arc_point_local(q_j, s_k))(q[j])
+        own = jnp.where(j < i, through, jnp.where(j == i, on, jnp.zeros_like(on)))
+        return R_bases[j] @ own  # (3, 3): d x / d q_j
+
+    def columns(x_k, i, s_k):
+        return jax.vmap(lambda j: block(x_k, i, s_k, j))(jnp.arange(n, dtype=i.dtype))  # (n, 3, 3)
+
+    J = jax.vmap(columns)(x, segments, s)  # (m, n, 3, 3)
+    return jnp.transpose(J, (0, 2, 1, 3)).reshape(segments.shape[0], 3, 3 * n)
 
 
 def motion_bound(q_a, q_b):
