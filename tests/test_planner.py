@@ -486,6 +486,12 @@ def test_seed_keys_and_strong_gains_are_the_arrays_jax_would_make():
         leaf = getattr(out, name)
         assert leaf.dtype == jnp.float64 and not leaf.weak_type and float(leaf) == float(getattr(strong, name))
     assert strong_gains(strong, jnp.float32).k_att.dtype == jnp.float32
+    # Made first inside a jit (tracers), they are not kept: the next calls outside are concrete.
+    seed = 987654321
+    jax.jit(lambda x: x + prng_key(seed)[1].astype(x.dtype) + sp.default_gains(x.dtype).k_att)(
+        jnp.float16(1.0))
+    assert not isinstance(prng_key(seed), jax.core.Tracer)
+    assert not isinstance(sp.default_gains(jnp.float16).k_att, jax.core.Tracer)
 
 
 @pytest.mark.slow  # its own rollout program (~15 s compile on 2 CPUs)

@@ -13,6 +13,7 @@ import numpy as np
 
 __all__ = [
     "get_epsilon",
+    "shared_constant",
     "series_threshold",
     "one_minus_cos_over_x",
     "sin_over_x",
@@ -286,3 +287,22 @@ def when_any(pred, fn, skip, operands, chunk: int | str | None = None):
         return out, jax.tree_util.tree_map(lambda _: True, out)
 
     return gate(pred, operands)
+
+
+# Constants made once per key and the default device: jax arrays are immutable, so every call
+# can share them (shared_constant).
+_SHARED = {}
+_SHARED_MAX = 512
+
+
+def shared_constant(key, make):
+    """``make()``, made once per hashable ``key`` and jax default device and then shared (a
+    pytree of jax arrays, immutable). One made while tracing (it holds a tracer) is returned
+    but never kept; at most ``_SHARED_MAX`` are kept."""
+    key = (key, jax.config.jax_default_device)
+    value = _SHARED.get(key)
+    if value is None:
+        value = make()
+        if len(_SHARED) < _SHARED_MAX and not any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(value)):
+            _SHARED[key] = value
+    return value

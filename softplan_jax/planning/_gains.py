@@ -10,14 +10,13 @@ A :class:`GainFunction` with all-zero profiles is its :class:`Gains` exactly
 
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base._numerics import safe_norm
+from ..base._numerics import safe_norm, shared_constant
 
 __all__ = ["Gains", "GainFunction", "GOAL_GAINS", "default_gains", "repulsion_scale", "goal_scaled"]
 
@@ -152,12 +151,9 @@ def default_gains(dtype=None) -> Gains:
     branch, so the goal lies outside every obstacle's field (d0 = 0.1 stalls
     the tree 0.03 short of its goal).
     """
-    return _default_gains(np.dtype(dtype or jnp.result_type(float)), jax.config.jax_default_device)
+    dtype = np.dtype(dtype or jnp.result_type(float))
+    return shared_constant(("default gains", dtype), lambda: Gains(**{k: jnp.asarray(v, dtype) for k, v in
+                                                                      _DEFAULT_GAINS.items()}))
 
 
-@functools.lru_cache(maxsize=16)
-def _default_gains(dtype, device) -> Gains:
-    """:func:`default_gains` of a dtype, built once per dtype and default device (jax arrays
-    are immutable, so every call can share them)."""
-    vals = dict(k_att=2.0, v_max=0.5, eta=1e-3, d0=0.07, rep_max=1.0, damping=0.05, dt=0.1)
-    return Gains(**{k: jnp.asarray(v, dtype) for k, v in vals.items()})
+_DEFAULT_GAINS = dict(k_att=2.0, v_max=0.5, eta=1e-3, d0=0.07, rep_max=1.0, damping=0.05, dt=0.1)

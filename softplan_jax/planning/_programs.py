@@ -7,7 +7,6 @@ points, the fallback and the command line all call them."""
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 
@@ -16,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..base._compilation_cache import load_or_export, package_jit
+from ..base._numerics import shared_constant
 from ..base._validation import check_bool, check_int
 from ..geometry._arm import PCC
 from ._batching import BATCH_AXIS, Progress, batch_mesh, gather, is_global, pad_batch, round_chunk, shard_batch
@@ -58,10 +58,11 @@ def _strong(v, dtype) -> bool:
     return isinstance(v, jax.Array) and v.dtype == dtype and not v.weak_type
 
 
-@functools.lru_cache(maxsize=256)
-def _seed_key(seed: int, impl, x64: bool, device):
-    """``jax.random.PRNGKey(seed)``, made once per seed and configuration (keys are immutable)."""
-    return jax.random.PRNGKey(seed)
+def _seed_key(seed: int):
+    """``jax.random.PRNGKey(seed)``, made once per seed and configuration (keys are immutable;
+    one made while tracing is a tracer, never kept)."""
+    return shared_constant(("seed key", seed, jax.config.jax_default_prng_impl, jax.config.jax_enable_x64),
+                           lambda: jax.random.PRNGKey(seed))
 
 
 def prng_key(seed):
@@ -72,8 +73,7 @@ def prng_key(seed):
         seed = 0
     if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
         try:
-            return _seed_key(int(seed), jax.config.jax_default_prng_impl, jax.config.jax_enable_x64,
-                             jax.config.jax_default_device)
+            return _seed_key(int(seed))
         except (OverflowError, ValueError, TypeError):
             raise ValueError(f"seed {seed} is out of the range of a PRNG seed (a 64-bit signed int)") from None
     dtype = getattr(seed, "dtype", None)
