@@ -2,7 +2,7 @@
 
 A refactor that moves code must keep results bit-identical. This script saves
 the arrays of: the paper scenes (sim1, sim2, tree) x (curve, 10 points, 100
-points) x (default options, the paper's step and gains), 600 steps; two random
+points) x (default options, the paper's preset: step, gains and start pose), 600 steps; two random
 batches (``plan_batch``: seed 1 curve, seed 2 points, 64 scenes); the three
 moving presets (400 steps) and a tracked batch of 32 random moving scenes; and
 with ``--fallback`` the ``plan_fallback`` results of 48 random scenes. Run it
@@ -68,15 +68,16 @@ def save(path: str, fallback: bool, quick: bool = False, suite: int = 0) -> int:
             if v is not None and f != "moving":
                 out[f"{prefix}/{f}"] = np.asarray(v)
 
-    paper_gains = sp.Gains(**{k: np.float64(v) for k, v in sp.planning.preset("paper").gains.items()})
     scenes = ("tree",) if quick else ("sim1", "sim2", "tree")
     models = (("curve", 10), ("points", 10)) if quick else (("curve", 10), ("points", 10), ("points", 100))
     steps = 200 if quick else 600
-    settings = (("default", {}, sp.default_gains()), ("paper", sp.PAPER_STEP, paper_gains))
     for name in scenes:
-        sc = sp.paper_scenario(name)
+        base = sp.paper_scenario(name)
+        # The paper's preset: its step, gains and start pose (theta 0.1: its plain pseudo-inverse
+        # does not exist at the straight start).
+        settings = (("default", base, sp.default_gains(), {}), ("paper", *sp.apply_preset("paper", base)))
         for method, N in models:
-            for label, kw, gains in settings[:1] if quick else settings:
+            for label, sc, gains, kw in settings[:1] if quick else settings:
                 r = jax.device_get(rollout_jit(sc, gains, make_options(method, N, **kw), steps, 0))
                 put(f"paper/{name}/{method}{N}/{label}", r)
     print(f"paper scenes: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
