@@ -6,7 +6,8 @@ load falls on both alike; without ``--base`` the package runs alone (a smoke run
 (``--only``, default all):
 
 * ``plan``: ``plan(tree)`` at ``max_steps`` = its iterations + 5, 600 and 2,000;
-* ``plan_batch``: ``plan_batch(random_scenarios(1, --batch), max_steps=600)``;
+* ``plan_batch``: ``plan_batch(random_scenarios(1, --batch), max_steps=600)`` (``--chunk C``: in
+  chunks of C scenes; ``--steps T``: max_steps T);
 * ``track_batch``: ``track_batch(random_moving_scenarios(1, --track-batch), max_steps=600)``;
 * ``plan_loop``: ``plan`` over the scenes of ``random_scenarios(1, --loop)`` one at a time
   (a compiled rollout serves them all; what a new step count costs);
@@ -138,8 +139,9 @@ def build_cases(pkgs: dict, args) -> tuple[dict, dict]:
                                                    for v, p in pkgs.items()}
     batch = {v: p.random_scenarios(1, args.batch) for v, p in pkgs.items()}
     if "plan_batch" in args.only or "fallback" in args.only:
-        names["plan_batch"] = f"plan_batch({args.batch} scenes, max_steps 600)"
-        cases[names["plan_batch"]] = {v: (lambda p=p, v=v: p.plan_batch(batch[v], max_steps=600))
+        chunked = f", chunk {args.chunk}" if args.chunk else ""
+        names["plan_batch"] = f"plan_batch({args.batch} scenes, max_steps {args.steps}{chunked})"
+        cases[names["plan_batch"]] = {v: (lambda p=p, v=v: p.plan_batch(batch[v], max_steps=args.steps, chunk=args.chunk))
                                       for v, p in pkgs.items()}
     if "track_batch" in args.only:
         moving = {v: _random_moving(p)(1, args.track_batch) for v, p in pkgs.items()}
@@ -206,6 +208,8 @@ def parse_args(argv=None):
     ap.add_argument("--only", default=",".join(CASES), help=f"comma list of cases (default all: {', '.join(CASES)})")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--batch", type=int, default=1024)
+    ap.add_argument("--chunk", type=int, default=None, help="plan_batch in chunks of this many scenes")
+    ap.add_argument("--steps", type=int, default=600, help="plan_batch's max_steps")
     ap.add_argument("--track-batch", type=int, default=256)
     ap.add_argument("--loop", type=int, default=48, help="scenes of the plan loop")
     ap.add_argument("--fallback", type=int, default=64, help="scenes of the fallback case")
@@ -217,7 +221,7 @@ def parse_args(argv=None):
     bad = sorted(set(args.only) - set(CASES))
     if bad or not args.only:
         ap.error(f"--only: unknown case(s) {bad}; the cases: {', '.join(CASES)}")
-    for name in ("rounds", "batch", "track_batch", "loop", "fallback"):
+    for name in ("rounds", "batch", "track_batch", "loop", "fallback", "steps") + (("chunk",) if args.chunk else ()):
         if getattr(args, name) < 1:
             ap.error(f"--{name.replace('_', '-')} must be >= 1")
     if args.base and not os.path.isfile(os.path.join(args.base, "__init__.py")):
