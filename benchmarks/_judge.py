@@ -30,7 +30,7 @@ STATIC_BRUTE = dict(substeps=2, arm_samples=40, curve_samples=300)  # reach.py's
 SUITE_FIELDS = ("status", "iterations", "reached", "collided", "min_clearance")
 MODELS = (("curve10", "curve"), ("points10", "points"))
 
-# The criteria of the speed issue.
+# The criteria a change of results is judged by (benchmarks/README.md, the judge's section).
 MIN_SCENES = 1024  # held-out scenes of a judged suite
 SUCCESS_POINTS = 0.5  # |success after - success before| in percentage points
 ALPHA = 0.05  # McNemar's exact test: not significant at this level
