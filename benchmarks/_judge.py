@@ -18,7 +18,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
-from stats import paired_bootstrap, paired_table, pct_interval
+from _stats import paired_bootstrap, paired_table, pct_interval
 
 HELD_OUT_SEED = 1
 SUITE_STEPS = 600  # plan_batch's default

@@ -1,7 +1,7 @@
 """The second part of ``paper_tables.py`` (``--presets``): the paper's Tables 2-4 with three
 figures per cell: the paper's printed figure, this library with the "paper" gain preset, this
 library with its defaults; plus the independent NumPy implementation
-(benchmarks/numpy_baseline.py) with the "paper" preset under the paper's rotation convention
+(benchmarks/_numpy_baseline.py) with the "paper" preset under the paper's rotation convention
 (a check of the library) and under Webster & Jones' (the effect of the R_i convention).
 
     python benchmarks/paper_tables.py --presets            # ~10-20 min on 2 cores (the NumPy curve method is slow)
@@ -65,7 +65,7 @@ def _between(nb, q_a, q_b, cp_a, cp_b, curve, radius):
 
 
 def numpy_run(nb, scenario, method, n_points, gains, max_steps, convention, goal_tolerance=1e-2):
-    """The NumPy planner (numpy_baseline.numpy_step) with a collision check at every step
+    """The NumPy planner (_numpy_baseline.numpy_step) with a collision check at every step
     (exact closest points to the real curves) and between steps (see :func:`_between`,
     run when either end is within 0.3 of the curve). -> (status, iterations, min clearance)."""
     sc = nb.to_numpy_scenario(scenario)
@@ -112,7 +112,7 @@ def main(argv=None) -> dict:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    import numpy_baseline as nb
+    import _numpy_baseline as nb
     from _common import RESULTS_DIR, finish_machine, log, machine_info, machine_lines, write_results
 
     import softplan_jax as sp
@@ -140,13 +140,13 @@ def main(argv=None) -> dict:
               "m = out of steps. "
               "Paper: iterations as printed, collision as its text says (— = not stated).",
               f"- NumPy columns run for the models {numpy_methods} (\"not run\" elsewhere, for time)",
-              "- NumPy: `benchmarks/numpy_baseline.py`, the NumPy/SciPy peer (vectorised kinematics, analytic "
+              "- NumPy: `benchmarks/_numpy_baseline.py`, the NumPy/SciPy peer (vectorised kinematics, analytic "
               "Jacobians, exact closest points by scipy least_squares with analytic Jacobians, cKDTree; "
               "~12-20 ms per tree step with the curve method), "
               "'paper' preset, collision checked at the steps and between them (least squares over the motion); "
               "*paper R_i* = Rz(phi) Ry(theta) (paper §2.1, as the "
               "library), *W&J R_i* = Rz(phi) Ry(theta) Rz(-phi) (Webster & Jones 2010), run through "
-              "`numpy_baseline.rotation_convention` (the library's kinematics.py keeps the paper's convention).",
+              "`_numpy_baseline.rotation_convention` (the library's kinematics.py keeps the paper's convention).",
               ""]
         for name in [x for x in scenes if any(r["scene"] == x for r in rows)]:
             L += [f"## {name}", "",

@@ -60,7 +60,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-from stats import paired_bootstrap, pct_interval  # noqa: E402
+from _stats import paired_bootstrap, pct_interval  # noqa: E402
 
 TUNERS = ("tpe", "cma", "grad")
 SPACES = ("const", "fn")

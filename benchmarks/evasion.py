@@ -116,7 +116,7 @@ def main(argv=None):
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
     from _common import FIGURES_DIR, RESULTS_DIR, finish_machine, log, machine_info, machine_lines, write_results
-    from stats import paired_table, pct_interval
+    from _stats import paired_table, pct_interval
 
     import softplan_jax as sp
     from softplan_jax.planning import make_track_options, rollout_batch, rollout_jit
@@ -292,7 +292,7 @@ def _wire(sp, oracle, T, dt, fig_dir, quick):
 def _fallback(sp, oracle, suite, evasive, at_rest, local_rest, T, dt, n_brute):
     """track_fallback on the level's scenes (the tracker with the evasive step, then the search's
     guided runs where it never reached the goal), paired against the evasive tracker alone."""
-    from stats import paired_table
+    from _stats import paired_table
 
     t0 = time.perf_counter()
     res = sp.track_fallback(suite, max_steps=T, progress=True)
@@ -333,7 +333,7 @@ def _figure(table, n, T, fig_dir):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from stats import wilson
+    from _stats import wilson
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=False)
     labels = list(table)

@@ -18,7 +18,7 @@ For every scenario and obstacle model:
   finished rollout is frozen but the scan still does every step's work);
 * **per-call time of the jitted ``planner_step``** — on the checked run's
   states, median over all calls after warm-up (host dispatch included;
-  ``numpy_baseline._time_jax_step``);
+  ``_numpy_baseline._time_jax_step``);
 * **total** — per iteration x iterations (the planner's time to the goal).
 
 The paper's own figures (``softplan_jax.scenarios.PAPER_RESULTS``) stand
@@ -42,10 +42,10 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+import _numpy_baseline as nb  # noqa: E402
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-import numpy_baseline as nb  # noqa: E402
 from _common import (  # noqa: E402
     RESULTS_DIR,
     compile_timed,

@@ -71,7 +71,7 @@ def main(argv=None):
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
     from _common import FIGURES_DIR, RESULTS_DIR, finish_machine, log, machine_info, machine_lines, write_results
-    from stats import paired_table, pct_interval, wilson
+    from _stats import paired_table, pct_interval, wilson
 
     import softplan_jax as sp
 

@@ -42,7 +42,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from stats import fmt_rate, wilson  # noqa: E402  (shared statistics; wilson re-exported for callers)
+from _stats import fmt_rate, wilson  # noqa: E402  (shared statistics; wilson re-exported for callers)
 
 VARIANTS = ("plain", "safe", "default")
 

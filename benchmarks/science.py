@@ -72,7 +72,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-from stats import fmt_rate, mcnemar_exact, paired_bootstrap, wilson  # noqa: E402
+from _stats import fmt_rate, mcnemar_exact, paired_bootstrap, wilson  # noqa: E402
 
 STATUSES = ("reached", "collided", "stalled", "max_steps", "non_finite")
 CODES = {"reached": "r", "collided": "c", "stalled": "s", "max_steps": "m", "non_finite": "n"}

@@ -75,7 +75,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 
-from stats import mcnemar_exact, paired_bootstrap, pct_interval, wilson  # noqa: E402
+from _stats import mcnemar_exact, paired_bootstrap, pct_interval, wilson  # noqa: E402
 
 TUNED = ("d0", "dt", "eta")
 SETTINGS = ("default", "grid", "random", "cma", "cma-g", "gradient", "gradient+", "function")

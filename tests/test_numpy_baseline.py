@@ -1,4 +1,4 @@
-"""The NumPy/SciPy peer (benchmarks/numpy_baseline.py) against the JAX planner,
+"""The NumPy/SciPy peer (benchmarks/_numpy_baseline.py) against the JAX planner,
 against dense brute force and against the closest-point oracle.
 
 Tolerances:
@@ -22,9 +22,9 @@ Tolerances:
 
 from __future__ import annotations
 
+import _numpy_baseline as nb  # benchmarks/ is on sys.path (conftest); importing it changes no jax setting
 import jax.numpy as jnp
 import numpy as np
-import numpy_baseline as nb  # benchmarks/ is on sys.path (conftest); importing it changes no jax setting
 import pytest
 
 import softplan_jax as sp

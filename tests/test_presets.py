@@ -1,7 +1,7 @@
 """Gain presets (softplan_jax.planning._presets) and the CLI's ``--gains`` option.
 
 The paper preset's figures checked here are the ones issue 10 quotes (and an
-independent NumPy implementation, benchmarks/numpy_baseline.py, reproduces:
+independent NumPy implementation, benchmarks/_numpy_baseline.py, reproduces:
 see benchmarks/results/paper_tables.md); the fast tests run short rollouts,
 the full table is a slow test.
 """

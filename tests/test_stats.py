@@ -1,12 +1,12 @@
-"""benchmarks/stats.py against textbook and hand-computed values."""
+"""benchmarks/_stats.py against textbook and hand-computed values."""
 
 from __future__ import annotations
 
 import math
 
+import _stats as stats
 import numpy as np
 import pytest
-import stats
 
 
 @pytest.mark.parametrize(

@@ -3,7 +3,7 @@
 References: :func:`softplan_jax.plan_batch` on the same scenes with the same keys
 (the sweep's table must hold its per-scene outcomes), a plain loop over the tips
 for path lengths, ``jax.random.fold_in`` for the keys, the benchmarks' own Wilson
-interval (benchmarks/stats.py), and an uninterrupted run for a killed and resumed one.
+interval (benchmarks/_stats.py), and an uninterrupted run for a killed and resumed one.
 
 Every planning run shares one compiled program: chunks of 3 scenes padded to 5
 curve slots (degree 2), 200 steps, default options, float64 -- the program of
@@ -25,8 +25,8 @@ import tracemalloc
 import jax
 import numpy as np
 import pytest
+from _stats import wilson
 from session import REPO, free_port, one_device_env, subprocess_env
-from stats import wilson
 
 import softplan_jax as sp
 from softplan_jax.cli import main
