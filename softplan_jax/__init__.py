@@ -11,6 +11,8 @@ random suite of any size, planned in chunks in constant memory, resumable),
 tracking), :mod:`softplan_jax.clouds` (obstacles fitted to point clouds),
 :mod:`softplan_jax.scenarios` (static and moving scenes, the paper's, random suites, the JSON
 format), :mod:`softplan_jax.actuators` (tendon and chamber lengths, their limits),
+:mod:`softplan_jax.rod` (the loaded arm: a rod under gravity and a tip load, its shape as
+constant-curvature pieces, its motion bound),
 :mod:`softplan_jax.geometry` (kinematics, curves, exact closest points, clearance) and
 :mod:`softplan_jax.base` (numerics, input checks, status codes, the compilation cache);
 :mod:`softplan_jax.moving` gathers what moving scenes and tracking need."""
@@ -24,6 +26,7 @@ from . import clouds as clouds
 from . import geometry as geometry
 from . import moving as moving
 from . import planning as planning
+from . import rod as rod
 from . import scenarios as scenarios
 from . import search as search
 from . import sweeps as sweeps
@@ -42,6 +45,7 @@ from .planning._options import PAPER_STEP, PlanOptions, make_options
 from .planning._planner import PlanResult, plan, plan_batch
 from .planning._presets import apply_preset
 from .planning._tracking import track, track_batch
+from .rod import RodModel, loaded_backbone
 from .scenarios import Scenario, load_scenario, make_scenario, paper_scenario, random_scenarios, save_scenario
 from .scenarios._motion import make_moving_scenario
 from .scenarios._moving import moving_scenario
@@ -77,6 +81,9 @@ __all__ = [
     "point_jacobian",
     "closest_point",
     "closest_point_to_points",
+    # the loaded arm (gravity and a tip load)
+    "RodModel",
+    "loaded_backbone",
     # planning (paper eq. 9)
     "Gains",
     "GainFunction",

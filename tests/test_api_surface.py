@@ -25,6 +25,8 @@ PUBLIC = [
     # obstacles and the arm
     "PolynomialCurve", "ParametricCurve", "line_segment", "segment_point", "tip_position", "point_jacobian",
     "closest_point", "closest_point_to_points",
+    # the loaded arm
+    "RodModel", "loaded_backbone",
     # planning (paper eq. 9)
     "Gains", "GainFunction", "default_gains", "PAPER_STEP", "PlanOptions", "make_options", "PlanResult", "Status",
     "plan", "plan_batch", "plan_fallback",
@@ -44,6 +46,7 @@ NAMESPACES = {
     "geometry": "motion_bound", "scenarios": "stack_scenarios", "clouds": "fit_curves", "planning": "rollout_jit",
     "search": "reachability", "sweeps": "sweep", "tuning": "tune_smoothed", "moving": "MovingScenario",
     "plotting": "plot_snapshots", "cli": "main", "actuators": "tendon_lengths", "trajectories": "time_parametrize",
+    "rod": "loaded_pieces",
     "viewer": "view",
 }
 
@@ -215,7 +218,7 @@ def test_import_adds_no_import_hook_and_dir_is_the_face():
 
 # Layers from the top floor down; a module may import from its own layer or any layer below.
 LAYERS = ["cli", "viewer", "plotting", "tuning", "sweeps", "trajectories", "search", "planning", "clouds", "scenarios",
-          "actuators", "geometry", "base", "testing"]
+          "actuators", "rod", "geometry", "base", "testing"]
 TOP_LEVEL = {"softplan_jax", "softplan_jax.moving"}  # the faces, above every layer
 MAX_LINES = 500
 

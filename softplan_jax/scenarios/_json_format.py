@@ -18,6 +18,7 @@ from ..base._files import write_text
 from ..base._memory import check_memory
 from ..base._validation import check_scale
 from ..geometry._curves import PolynomialCurve, line_segment
+from ._material_block import material_from_dict
 from ._scenario import Scenario, default_start, make_scenario
 
 __all__ = [
@@ -39,7 +40,7 @@ _TOP_KEYS = {"format", "arm", "goal", "obstacles", "name", "description", "metad
 _MOTION_KEYS = {"pivot": (3,), "axis": (3,), "amplitude": (), "omega": (), "phase": (), "shift": (3,),
                 "velocity": (3,)}
 _GOAL_PATH_KEYS = {"times", "points", "attach"}
-_ARM_KEYS = {"segments", "start", "radius", "length_limits"}
+_ARM_KEYS = {"segments", "start", "radius", "length_limits", "material"}  # material: scenarios/_material_block.py
 _FORMAT = "softplan-scenario/1"
 # Arrays per segment that planning an arm allocates at once, in units of its q0 row (a bound
 # for the memory check of arm.segments, not an exact count).
@@ -229,6 +230,8 @@ def _parse_arm(arm):
     n = arm.get("segments", 3)
     if not isinstance(n, int) or isinstance(n, bool) or n < 1:
         raise _err("arm.segments", f"must be an integer >= 1, got {_short(n)}")
+    if "material" in arm:  # the loaded arm's material: checked here, read by scenarios._material
+        material_from_dict(arm["material"], n)
     try:
         # The planner's per-step arrays grow with n (Jacobians (3, 3n) per obstacle and step).
         check_memory(8.0 * 3 * n * _SEGMENT_BYTES_FACTOR, "arm.segments", f"an arm of {n} segments",
