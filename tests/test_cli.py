@@ -32,7 +32,7 @@ SUMMARY_FIELDS = {
     "status", "iterations",
     "max_steps", "reached", "collided", "min_clearance", "final_error", "goal_tolerance", "compile_time_s", "run_time_s",
     "time_per_step_s", "plot", "gif", "out", "program_from_cache",
-    "planner", "reason", "global_start", "best_error", "fallback", "fallback_time_s", "extension",
+    "planner", "reason", "global_start", "best_error", "fallback", "fallback_time_s", "extension", "arm_model",
 }
 
 
@@ -89,6 +89,7 @@ def test_run_json_summary(capsys):
     assert s["compile_time_s"] > 0 and s["run_time_s"] > 0
     assert s["time_per_step_s"] == pytest.approx(s["run_time_s"] / s["iterations"])
     assert s["plot"] is None and s["gif"] is None
+    assert s["arm_model"] == {"kind": "pcc"}
 
 
 def test_export_then_run_file(sim1_file, tmp_path, capsys):

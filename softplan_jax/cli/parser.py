@@ -12,6 +12,7 @@ import math
 import os
 
 from .common import InputError, package_version, warn
+from .gravity import add_gravity_options
 from .trajectory import TRAJECTORY_FORMATS
 
 __all__ = ["build_parser", "check_output_path", "check_plot_format", "check_gains_arg", "check_run_args",
@@ -101,6 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "also 'held', the tip back on the goal at the end); every other status fails, "
                      "'lost', 'max_steps', 'stalled', 'collided', 'unreachable' included")
     _add_actuator_options(run)
+    add_gravity_options(run)
 
     scen = sub.add_parser("scenarios", help="list the paper scenarios",
                           description="List the paper's scenarios (names for 'softplan run').")

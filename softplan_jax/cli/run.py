@@ -35,6 +35,7 @@ from .common import (
     warn,
     write_figures,
 )
+from .gravity import model_report, model_rows, resolve_model
 from .parser import check_run_args
 from .trajectory import TRAJECTORY_FORMAT, trajectory_record, write_trajectory
 
@@ -110,6 +111,9 @@ def cmd_run(args) -> int:
     check_actuator_args(args)
     dtype = jnp.float32 if args.float32 else jnp.float64
     if args.scenario in moving_names() or (args.scenario not in static_names and _is_moving_file(args.scenario)):
+        if any(x is not None for x in (args.weight, args.stiffness, args.torsional_stiffness, args.tip_load)):
+            raise InputError("the loaded arm (--weight, --stiffness, ...) plans static scenes only; "
+                             f"{args.scenario} moves")
         return _cmd_track(args, dtype)
     for flag, value in (("--anticipation", args.anticipation), ("--hold-tolerance", args.hold_tolerance),
                         ("--no-evasion", args.no_evasion or None), ("--evasion-speed", args.evasion_speed),
@@ -136,14 +140,36 @@ def _compiled_run(world, gains, options, max_steps: int, seed) -> tuple:
     return rollout, compile_time, time.perf_counter() - t0, loaded
 
 
+def _loaded_run(model):
+    """:func:`_compiled_run` for the loaded arm (a :class:`~softplan_jax.rod.LoadedArm` of
+    ``model``): the first call compiles and runs, the second runs; compile time = their difference."""
+    import jax
+
+    from ..planning._programs import rollout_jit
+    from ..rod._arm import LoadedArm
+
+    def run(world, gains, options, max_steps: int, seed) -> tuple:
+        arm = LoadedArm(model)
+        t0 = time.perf_counter()
+        jax.block_until_ready(rollout_jit(world, gains, options, max_steps, seed, arm=arm))
+        first = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        rollout = jax.block_until_ready(rollout_jit(world, gains, options, max_steps, seed, arm=arm))
+        run_time = time.perf_counter() - t0
+        return rollout, max(first - run_time, 0.0), run_time, False
+
+    return run
+
+
 def _compiling_message(what: str = "") -> None:
     print(f"softplan: preparing the planner{what} (compiled the first time a scene shape and option set is "
           "planned, loaded from the cache after) ...", file=sys.stderr, flush=True)
 
 
 def _static_inputs(args, dtype, actuator_summary: dict) -> tuple:
-    """``(scenario, label, gains, options, gain_values)`` of a static scene (InputError: bad input);
-    the actuators' segment length limits applied, their rows added to ``actuator_summary``."""
+    """``(scenario, label, gains, options, gain_values, model)`` of a static scene (InputError: bad
+    input; ``model``: None or the loaded arm's RodModel); the actuators' segment length limits
+    applied, their rows added to ``actuator_summary``."""
     from ..planning._options import make_options
     from ..planning._programs import prng_key
     from ..planning._records import check_rollout_memory
@@ -157,7 +183,16 @@ def _static_inputs(args, dtype, actuator_summary: dict) -> tuple:
         prng_key(args.seed)  # a seed out of range: bad input before anything compiles
     except ValueError as err:
         raise InputError(str(err)) from None
-    return scenario, label, gains, options, gain_values
+    model = resolve_model(args, None if args.scenario in paper_names() else args.scenario)
+    if model is not None:
+        from ..planning._planner import arm_model, check_start_carried
+
+        try:
+            arm_model(model, scenario.q0.shape[0])
+            check_start_carried(scenario.q0, model)
+        except ValueError as err:
+            raise InputError(str(err)) from None
+    return scenario, label, gains, options, gain_values, model
 
 
 def _cmd_plan(args, dtype) -> int:
@@ -166,7 +201,7 @@ def _cmd_plan(args, dtype) -> int:
     from ..scenarios._scenario import unreachable_reason
 
     actuator_summary = {}
-    scenario, label, gains, options, gain_values = _static_inputs(args, dtype, actuator_summary)
+    scenario, label, gains, options, gain_values, model = _static_inputs(args, dtype, actuator_summary)
     times = dict(compile_time_s=0.0, run_time_s=0.0, fallback_time_s=0.0, program_from_cache=False)
     escapes = local_steps = 0
     reason = unreachable_reason(scenario)
@@ -175,15 +210,18 @@ def _cmd_plan(args, dtype) -> int:
               file=sys.stderr, flush=True)
         result = unreachable_result(scenario, options, reason)
     else:
-        _compiling_message()
-        rollout, times["compile_time_s"], times["run_time_s"], times["program_from_cache"] = _compiled_run(
+        _compiling_message("" if model is None else " for the loaded arm")
+        run = _compiled_run if model is None else _loaded_run(model)
+        rollout, times["compile_time_s"], times["run_time_s"], times["program_from_cache"] = run(
             scenario, gains, options, int(args.max_steps), args.seed)
         result = result_from_rollout(rollout, scenario)
         escapes, local_steps = int(rollout.escapes), int(rollout.iterations)
     from ..base._status import Status
     from ..search._fallback import RESCUED, rescue
 
-    if not args.no_fallback and Status.from_label(result.status) in RESCUED:
+    if model is not None and not args.no_fallback and Status.from_label(result.status) in RESCUED:
+        warn("the global fallback certifies PCC paths: it does not run for the loaded arm")
+    elif not args.no_fallback and Status.from_label(result.status) in RESCUED:
         print(f"softplan: the local planner ended {result.status}; deciding reachability and searching globally "
               "(its programs compile once, about a minute; later runs load them from the cache) ...",
               file=sys.stderr, flush=True)
@@ -191,6 +229,8 @@ def _cmd_plan(args, dtype) -> int:
         result = rescue(scenario, [result], options, seed=args.seed)[0]
         times["fallback_time_s"] = time.perf_counter() - t0
     summary = _plan_summary(args, label, scenario, options, gain_values, result, escapes, times)
+    summary["arm_model"] = model_report(model)
+    summary["fallback"] = summary["fallback"] and model is None
     summary["time_per_step_s"] = times["run_time_s"] / max(local_steps, 1)
     summary.update(actuator_summary)
     traj = time_run(args, scenario, result, options, summary)  # before any output: nothing written if it fails
@@ -202,6 +242,7 @@ def _cmd_plan(args, dtype) -> int:
         + (f" ({result.reason})" if result.reason else "")
         + "\n"
         f"min true clearance {result.min_clearance:.3f}, final tip error {result.final_error:.3f}"
+        + ("" if model is None else " (the loaded arm; drawn: the commanded PCC shapes)")
     )
     write_figures(args, summary, lambda plotting: plotting.plot_snapshots(scenario, result, title=title),
                   lambda plotting, path: plotting.animate(scenario, result, path, title=title.split("\n")[0]))
@@ -411,7 +452,8 @@ def _text_summary(s: dict) -> str:
         ("status", s["status"] + (f" ({s['reason']})" if s["reason"] else "")),
         ("planner", ("local (potential field, paper eq. 9)" if s["planner"] == "local" else
                      f"global: the local path to step {s['global_start']}, then the certified global search")
-         + ("" if s["fallback"] else "; fallback off (--no-fallback)")),
+         + ("" if s["fallback"] else "; fallback off (the loaded arm)"
+            if s.get("arm_model", {}).get("kind") == "loaded" else "; fallback off (--no-fallback)")),
         ("iterations", f"{s['iterations']} (max steps {s['max_steps']} of the local planner)"),
         ("reached", "yes" if s["reached"] else "no"),
         ("collided", "yes" if s["collided"] else "no"),
@@ -426,6 +468,7 @@ def _text_summary(s: dict) -> str:
         ("time per step", f"{fmt_seconds(s['time_per_step_s'])} "
          "(run time / steps taken: the planner stops within a few steps of the end)"),
     ]
+    rows += model_rows(s)
     rows += summary_rows(s)
     if s["plot"]:
         rows.append(("plot", s["plot"]))

@@ -1,7 +1,10 @@
 """The arm model: what the planner asks of the arm's shape. A model gives the configuration the
 closest-point kernel sees, the tip, the Jacobians of arm points and a bound on how far any arm
-point moves along a straight motion in q. :data:`PCC` is the piecewise-constant-curvature arm
-of paper §2.1; a model that bends the arm otherwise provides the same methods."""
+point moves along a straight motion in q, its shape's rows, and the scene widened by how far
+the shape may be off the arm.
+:data:`PCC` is the piecewise-constant-curvature arm of paper §2.1; a model that bends the arm
+otherwise (:class:`~softplan_jax.rod._arm.LoadedArm`) provides the same methods, and ``at(q)``,
+the model posed at q, whose methods the planner's step calls with that q."""
 
 from __future__ import annotations
 
@@ -17,6 +20,21 @@ class PCCArm(NamedTuple):
 
     A pytree without leaves, so it passes through ``jit`` and ``vmap`` as an argument.
     """
+
+    # Its shape at any q is q's arcs, so the between-step search may sample them.
+    searchable = True
+
+    def at(self, q):
+        """The arm posed at q: itself (nothing to solve)."""
+        return self
+
+    def rows(self, n: int) -> int:
+        """The rows of :meth:`shape` for an arm of n segments: n."""
+        return n
+
+    def widened(self, scene):
+        """The scene as the kernel's shape must see it: as it is (the shape is the arm)."""
+        return scene
 
     def shape(self, q):
         """The configuration (n', 3) whose arcs the closest-point kernel sees: q itself."""

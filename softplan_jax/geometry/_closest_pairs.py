@@ -31,9 +31,9 @@ class WarmPairs(NamedTuple):
         """Per-scene data (:func:`~softplan_jax.geometry._obstacles.warm_cells`), once per rollout."""
         return warm_cells(scene, self.solver)
 
-    def init(self, scene):
-        """The state before the first step."""
-        return warm_state(scene)
+    def init(self, scene, rows=None):
+        """The state before the first step, for a shape of ``rows`` segments (None: the scene's arm)."""
+        return warm_state(scene, rows)
 
     def query(self, q, scene, cells, state, fresh):
         """``(pairs with a leading axis m, next state, full solves () int32)`` at q."""
@@ -48,7 +48,7 @@ class ExactPairs(NamedTuple):
     def prepare(self, scene):
         return ()
 
-    def init(self, scene):
+    def init(self, scene, rows=None):
         return ()
 
     def query(self, q, scene, cells, state, fresh):
@@ -61,7 +61,7 @@ class NoPairs(NamedTuple):
     def prepare(self, scene):
         return ()
 
-    def init(self, scene):
+    def init(self, scene, rows=None):
         return ()
 
     def query(self, q, scene, cells, state, fresh):

@@ -219,10 +219,10 @@ def warm_cells(scenario, solver: SolverOptions):
     )
 
 
-def warm_state(scenario):
-    """The warm start's state before the first step: u* = 0 (m_g, n) per curve stack
-    (unused: the first step solves every pair in full)."""
-    n = scenario.q0.shape[0]
+def warm_state(scenario, rows=None):
+    """The warm start's state before the first step: u* = 0 (m_g, n) per curve stack, n the
+    arm's segments or ``rows`` (unused: the first step solves every pair in full)."""
+    n = scenario.q0.shape[0] if rows is None else rows
     return tuple(
         jnp.zeros((curves.u_range.shape[0], n), scenario.q0.dtype) for curves, _ in _curve_groups(scenario)
     )

@@ -101,8 +101,9 @@ def closest_pairs(plan):
     return ExactPairs(plan.solver) if exact else NoPairs()
 
 
-def init_carry(world, options, key) -> Carry:
-    """The carry at step 0 (q_0 = the scene's start)."""
+def init_carry(world, options, key, arm=PCC) -> Carry:
+    """The carry at step 0 (q_0 = the scene's start); ``arm``: the arm model, whose shape's
+    rows the closest-point provider's state follows."""
     su = setup(world, options)
     scene = su.scene
     _, mask = radius_and_mask(scene)
@@ -122,7 +123,7 @@ def init_carry(world, options, key) -> Carry:
         escapes=jnp.zeros((), jnp.int32),
         walk_left=jnp.zeros((), jnp.int32),
         walk_velocity=jnp.zeros((3,), dtype),
-        warm=closest_pairs(su.plan).init(scene),
+        warm=closest_pairs(su.plan).init(scene, arm.rows(q0.shape[0])),
         certified=jnp.zeros((), bool),
     )
     return tie(carry0, q0)  # under vmap (a batch), the carry is batched from the start (see tie)
@@ -143,7 +144,7 @@ def _clearances(w, carry, q, truth, running, t, sc):
     if not w.plan.check_collisions:
         nan = jnp.full(mask.shape, jnp.nan, q.dtype)
         return nan, nan, jnp.zeros(mask.shape, bool), jnp.zeros((), bool), jnp.zeros((), bool)
-    c = clearance_of(truth, w.scene)
+    c = clearance_of(truth, sc)
     cb, searched = w.between(carry, q, truth, c, running, t, sc)
     cb = jnp.where(carry.first | ~mask, c, cb)
     nan = jnp.any(jnp.isnan(c)) | jnp.any(jnp.isnan(cb))
@@ -203,11 +204,13 @@ def make_step(world, gains, options, max_steps: int, prepared=None, arm=PCC):
     def step(carry: Carry, k):
         q = carry.q
         t = k.astype(dtype) * gains.dt if su.track else None
+        posed = arm.at(q)  # the arm model at q (one equilibrium solve for a loaded arm)
         sc, cells = w.at(t)
-        truth, warm_next, fallbacks = pairs.query(arm.shape(q), sc, cells, carry.warm, carry.first)
+        sc = posed.widened(sc)
+        truth, warm_next, fallbacks = pairs.query(posed.shape(q), sc, cells, carry.warm, carry.first)
         running = carry.status == Status.RUNNING
         c, cb, searched, nan, hit = _clearances(w, carry, q, truth, running, t, sc)
-        V_e = sc.goal - arm.tip(q)
+        V_e = sc.goal - posed.tip(q)
         err = safe_norm(V_e)
         since, stalled, escape = _stall(carry, err, su)
         status = _judge(su, carry, err, stalled, escape, nan, hit)
@@ -216,7 +219,7 @@ def make_step(world, gains, options, max_steps: int, prepared=None, arm=PCC):
         key, walk_velocity, walk_left, escapes, since = _walk(carry, stepping & escape, since, gains, plan, dtype)
         # An escape's random walk replaces the attraction (paper eq. 9's F_e).
         F_e = jnp.where(walk_left > 0, walk_velocity, w.attraction(V_e, t))
-        q_next, alpha, too_fast, evasive = w.step(q, sc, truth, c, t, F_e, stepping)
+        q_next, alpha, too_fast, evasive = w.step(q, sc, truth, c, t, F_e, stepping, posed)
         finite = jnp.all(jnp.isfinite(q_next))
         status = jnp.where(stepping & too_fast, Status.TOO_FAST, status)
         status = jnp.where(stepping & ~too_fast & ~finite, Status.NONFINITE, status).astype(jnp.int32)
@@ -229,7 +232,7 @@ def make_step(world, gains, options, max_steps: int, prepared=None, arm=PCC):
             walk_velocity=walk_velocity, warm=warm_next, certified=evasive & moved)
         converged = jnp.all(jnp.where(w.mask, truth.converged, True))
         alpha = jnp.where(moved, alpha, 0.0).astype(dtype)
-        record = Record(q, arm.tip(q), c, cb, alpha, converged, fallbacks, searched)
+        record = Record(q, posed.tip(q), c, cb, alpha, converged, fallbacks, searched)
         if su.track:
             record = record._replace(goal=sc.goal, time=t, error=err, evasive=evasive & moved)
         return new, record
@@ -253,7 +256,7 @@ def run(world, gains, options, max_steps: int, key, *, driver: str = "chunks",
         differentiable). Both give the same arrays.
     """
     step = make_step(world, gains, options, max_steps, arm=arm)
-    carry0 = init_carry(world, options, key)
+    carry0 = init_carry(world, options, key, arm)
     T1 = max_steps + 1
     if driver == "scan":
         final, records = jax.lax.scan(step, carry0, jnp.arange(T1))
@@ -317,7 +320,7 @@ def run_lanes(worlds, gains, options, max_steps: int, keys, *, lanes: int | None
 
     # kept: each scene's carry: its first until it starts, its last once suspended (until it resumes)
     # or finished; k_kept: the step it resumes at (0: not started).
-    kept0 = jax.vmap(lambda w, key: init_carry(w, options, key))(worlds, keys)
+    kept0 = jax.vmap(lambda w, key: init_carry(w, options, key, arm))(worlds, keys)
     k_kept0 = jnp.zeros((B,), jnp.int32)
     idx0 = jnp.arange(L, dtype=jnp.int32)
     lane0, k0 = take(idx0, kept0, k_kept0)

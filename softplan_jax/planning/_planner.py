@@ -21,6 +21,9 @@ from ..geometry._clearance import contact_tolerance
 from ..geometry._closest import DEFAULT_OPTIONS
 from ..geometry._kinematics import tip_jacobian, tip_position
 from ..geometry._obstacles import clearance_of, radius_and_mask, true_closest
+from ..rod._arm import LoadedArm
+from ..rod._equilibrium import solve_equilibrium, unconverged_error
+from ..rod._model import RodModel, segment_material
 from ..scenarios import Scenario
 from ..scenarios._scenario import check_scenario, unreachable_reason
 from ._engine import check_engine_sizes
@@ -152,7 +155,7 @@ def check_gains(gains: Gains | GainFunction | None, dtype, n_segments: int | Non
 
 
 def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
-         max_steps: int = 600, seed=0, *, device=None, **options) -> PlanResult:
+         max_steps: int = 600, seed=0, *, device=None, model=None, **options) -> PlanResult:
     """Plan a path for one scenario (jitted rollout; compiles once per padded
     scenario shape, method and option set).
 
@@ -174,6 +177,12 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
         (jax's default device itself, with the scenario on it, runs the same
         compiled program as None). Batches belong on the accelerator
         (:func:`plan_batch`). Results on another device agree to rounding.
+      model: None (the PCC arm of paper §2.1) or a :class:`~softplan_jax.rod.RodModel`: the
+        arm sags under its weight and tip load (:class:`~softplan_jax.rod.LoadedArm`). The
+        clearances, the tip and eq. (9)'s Jacobians are then the loaded arm's, the safe step
+        uses the loaded motion bound (it does not move where that bound does not close), and
+        an equilibrium that does not converge ends the plan with status "non_finite".
+        Static scenes only.
       **options: further :class:`PlanOptions` fields (step, safe_fraction,
         escapes, goal_tolerance, repulsion, stall_window, solver, ...).
 
@@ -191,23 +200,46 @@ def plan(scenario: Scenario, method: str = "curve", n_points: int = 10, gains: G
     if dev is None or _already_there(scenario, dev):
         # jax's default device already: no device context and no device_put, which
         # would each key another compilation of the same program.
-        return _plan_here(scenario, method, n_points, gains, max_steps, seed, options)
+        return _plan_here(scenario, method, n_points, gains, max_steps, seed, options, model)
     # Everything on the chosen device from here: the checks too (each small op on an
     # accelerator would be a round trip).
     with jax.default_device(dev):
-        return _plan_here(jax.device_put(scenario, dev), method, n_points, gains, max_steps, seed, options)
+        return _plan_here(jax.device_put(scenario, dev), method, n_points, gains, max_steps, seed, options, model)
 
 
-def _plan_here(scenario, method, n_points, gains, max_steps, seed, options) -> PlanResult:
+def arm_model(model, n_segments: int):
+    """The arm model of a plan: None (the PCC arm) for ``model=None``, else the
+    :class:`~softplan_jax.rod.LoadedArm` of a :class:`~softplan_jax.rod.RodModel`, its
+    per-segment fields checked against ``n_segments``. ValueError for anything else."""
+    if model is None:
+        return None
+    if not isinstance(model, RodModel):
+        raise ValueError(f"model must be None (the PCC arm) or a softplan_jax.RodModel, got {type(model).__name__}")
+    segment_material(model, n_segments, jnp.float64)
+    return LoadedArm(model)
+
+
+def check_start_carried(q0, model) -> None:
+    """ValueError where the loaded arm has no stable equilibrium at the start pose q0 (the rod
+    cannot carry the load there: nothing to plan from)."""
+    shape = solve_equilibrium(q0, model)
+    if not bool(shape.converged):
+        raise unconverged_error(shape.residual, shape.iterations, model)
+
+
+def _plan_here(scenario, method, n_points, gains, max_steps, seed, options, model=None) -> PlanResult:
     """:func:`plan` after the scenario's checks, on jax's default device."""
     T = check_engine_sizes(max_steps)[0]
     opts = make_options(method, n_points, **options)
     g = check_gains(gains, scenario.q0.dtype, scenario.q0.shape[0], scenario.q0)
     prng_key(seed)  # a bad seed is a ValueError before anything compiles
+    arm = arm_model(model, scenario.q0.shape[0])
+    if arm is not None:
+        check_start_carried(scenario.q0, model)
     reason = unreachable_reason(scenario)
     if reason:
         return unreachable_result(scenario, opts, reason)
-    r = rollout_jit(scenario, g, opts, T, seed)
+    r = rollout_jit(scenario, g, opts, T, seed, arm=arm)
     return result_from_rollout(r, scenario)
 
 
@@ -291,7 +323,7 @@ def result_from_rollout(r: Rollout, scenario: Scenario) -> PlanResult:
 
 def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
                max_steps: int = 600, seed=0, *, chunk: int | None = None, devices=None, progress: bool = False,
-               lanes: int | None = None, **options) -> Rollout:
+               lanes: int | None = None, model=None, **options) -> Rollout:
     """Plan a batch of scenarios: vmapped and jitted, sharded over the local
     devices, in chunks of one shape.
 
@@ -322,6 +354,8 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
         on a GPU); a lane whose scene finished takes the next scene of its chunk
         (:func:`softplan_jax.planning._engine.run_lanes`), so a chunk's cost follows
         the steps its scenes take.
+      model: None (the PCC arm) or a :class:`~softplan_jax.rod.RodModel`, one for every
+        scene (as :func:`plan`).
       Other arguments as :func:`plan`.
 
     Returns:
@@ -346,5 +380,6 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
     opts = make_options(method, n_points, **options)
     dtype = scenarios.q0.dtype
     g = strong_gains(check_gains(gains, dtype, scenarios.q0.shape[-2]), dtype)
+    arm = arm_model(model, scenarios.q0.shape[-2])
     return rollout_batch.in_chunks(scenarios, g, opts, max_steps, seed, chunk=chunk, devices=devices,
-                                   progress=progress, lanes=lanes)
+                                   progress=progress, lanes=lanes, arm=arm)

@@ -170,18 +170,22 @@ class RolloutProgram:
         key = batch_keys(seed, scenes) if self._batched else prng_key(seed)
         return world, strong_gains(gains, q0.dtype), options, max_steps, key
 
-    def run(self, *args, mesh=None, lanes=None) -> Rollout:
+    def run(self, *args, mesh=None, lanes=None, arm=None) -> Rollout:
         """The compiled rollout on normalised arguments (:meth:`args`); a batch program also
-        takes its device ``mesh`` (None: one device) and ``lanes``. Inside the user's own jit, a
+        takes its device ``mesh`` (None: one device) and ``lanes``; ``arm``: the arm model
+        (None: the PCC arm; :mod:`softplan_jax.geometry._arm`). Inside the user's own jit, a
         plain jit of the rollout."""
         extra = (mesh, lanes) if self._batched else ()
-        return self._program(args[2])(*args, *extra)
+        if arm is None:
+            return self._program(args[2])(*args, *extra)
+        return self._program(args[2])(*args, *extra, arm=arm)
 
-    def __call__(self, world, gains, options, max_steps: int, seed=0, devices=None, lanes=None) -> Rollout:
+    def __call__(self, world, gains, options, max_steps: int, seed=0, devices=None, lanes=None,
+                 arm=None) -> Rollout:
         if not self._batched:
-            return self.run(*self.args(world, gains, options, max_steps, seed))
+            return self.run(*self.args(world, gains, options, max_steps, seed), arm=arm)
         args, mesh, pad = self._sharded(world, gains, options, max_steps, seed, devices, lanes)
-        r = self.run(*args, mesh=mesh, lanes=lanes)
+        r = self.run(*args, mesh=mesh, lanes=lanes, arm=arm)
         if pad:
             r = jax.tree_util.tree_map(lambda x: x[: start_configuration(world).shape[0]], r)
         return r
@@ -254,11 +258,12 @@ class RolloutProgram:
         return run_loaded, loaded
 
     def in_chunks(self, worlds, gains, options, max_steps: int, seed=0, *, chunk: int | None = None, devices=None,
-                  progress: bool = False, lanes: int | None = None, label: str = "plan_batch") -> Rollout:
+                  progress: bool = False, lanes: int | None = None, label: str = "plan_batch", arm=None) -> Rollout:
         """A batch (a stacked Scenario with PlanOptions, or a stacked MovingScenario with
         TrackOptions; checked gains) in chunks of ``chunk`` scenes of one shape (None: one
         call), each chunk one call of this batch program; a line per chunk on stderr with
-        ``progress``. Arrays on the host (NumPy) when there are several chunks."""
+        ``progress``; ``arm``: the arm model (None: PCC). Arrays on the host (NumPy) when there
+        are several chunks."""
         T, _, lanes = check_engine_sizes(max_steps, 1, lanes)
         if chunk is not None:
             check_int(chunk, "chunk", 1)
@@ -270,11 +275,11 @@ class RolloutProgram:
         n_chunks = math.ceil(batch / size)
         bar = Progress(n_chunks, batch, 1 if mesh is None else mesh.size, label=label) if progress else None
         if n_chunks == 1 and bar is None and not is_global(mesh):
-            return self(worlds, gains, options, T, seed, devices=devices, lanes=lanes)
-        return _chunked(self, worlds, gains, options, T, batch_keys(seed, batch), mesh, size, lanes, bar)
+            return self(worlds, gains, options, T, seed, devices=devices, lanes=lanes, arm=arm)
+        return _chunked(self, worlds, gains, options, T, batch_keys(seed, batch), mesh, size, lanes, bar, arm)
 
 
-def _chunked(program, worlds, gains, options, T, keys, mesh, size, lanes, bar) -> Rollout:
+def _chunked(program, worlds, gains, options, T, keys, mesh, size, lanes, bar, arm=None) -> Rollout:
     """:meth:`RolloutProgram.in_chunks` for several chunks (or a progress bar, or several
     processes): chunk i + 1 is dispatched before chunk i is fetched, so the devices stay busy
     while the host copies."""
@@ -290,7 +295,7 @@ def _chunked(program, worlds, gains, options, T, keys, mesh, size, lanes, bar) -
             (s, k), g_dev = jax.device_put(part), gains  # jax arrays, as rollout_batch's: one jit signature
         else:
             (s, k), g_dev = shard_batch(mesh, part, gains)
-        return program.run(s, g_dev, options, T, k, mesh=mesh, lanes=lanes)
+        return program.run(s, g_dev, options, T, k, mesh=mesh, lanes=lanes, arm=arm)
 
     def collect(a, r):
         nonlocal out, done

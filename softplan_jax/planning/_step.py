@@ -96,12 +96,14 @@ def field_velocity(q, scenario: Scenario, gains: Gains, truth: ClosestPoint, opt
     own obstacle model (exact for the curve method), +inf for padding slots.
     """
     n = q.shape[0]
+    arm = arm.at(q)
     V_e = scenario.goal - arm.tip(q)
     gains = goal_scaled(gains, V_e)  # a GainFunction's dependence on the goal distance (else as given)
-    cps = model_closest(arm.shape(q), scenario, truth, options.method, options.n_points, options.points_per_segment)
+    shape = arm.shape(q)
+    cps = model_closest(shape, scenario, truth, options.method, options.n_points, options.points_per_segment)
     radius, mask = radius_and_mask(scenario)
-    # J_e (the tip: s = 1 of the last segment) and every J_sj in one pass.
-    segments = jnp.concatenate([jnp.array([n - 1], jnp.int32), cps.segment])
+    # J_e (the tip: s = 1 of the shape's last segment) and every J_sj in one pass.
+    segments = jnp.concatenate([jnp.array([shape.shape[0] - 1], jnp.int32), cps.segment])
     s = jnp.concatenate([jnp.ones((1,), q.dtype), cps.s])
     J = arm.jacobians(q, segments, s)
     # Padding slots get a full-rank stand-in Jacobian [I 0] (their force is zero): with

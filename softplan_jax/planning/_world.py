@@ -50,6 +50,8 @@ class StaticWorld:
         q, searched (:func:`~softplan_jax.geometry._clearance.between_steps`) only where the
         motion bound does not prove it clear (``PlanOptions.swept_proof``)."""
         first, q_a, truth_a = carry.first, carry.q_prev, carry.truth_prev
+        if not self.arm.searchable:  # the shape is not q's arcs: the arm's motion bound proves the motion
+            return carry.c_prev - self.arm.motion_bound(q_a, q), jnp.zeros(self.mask.shape, bool)
         if self.plan.swept_proof:
             proven = swept_clear(q_a, q, truth_a, carry.c_prev, self.contact)
             searched = self.mask & ~first & running & ~proven
@@ -57,11 +59,11 @@ class StaticWorld:
         searched = self.mask & ~first & running
         return between_steps(q_a, q, truth_a, truth, sc, self.radius_sum), searched
 
-    def step(self, q, sc, truth, c, t, F_e, stepping):
+    def step(self, q, sc, truth, c, t, F_e, stepping, arm):
         """``(q_next, alpha, too_fast, evasive)``: paper eq. (9) with the attraction ``F_e``,
-        the Euler step, scaled by the safe step."""
-        q_full, field_c = step_target(q, sc, self.gains, truth, self.plan, F_e, arm=self.arm)
-        q_next, alpha, too_fast = scaled_step(q, q_full, field_c, self.plan, arm=self.arm)
+        the Euler step, scaled by the safe step; ``arm``: the arm model posed at q."""
+        q_full, field_c = step_target(q, sc, self.gains, truth, self.plan, F_e, arm=arm)
+        q_next, alpha, too_fast = scaled_step(q, q_full, field_c, self.plan, arm=arm)
         return q_next, alpha, too_fast, jnp.zeros((), bool)
 
 
@@ -121,13 +123,14 @@ class MovingWorld(StaticWorld):
         cb = jnp.minimum(jnp.minimum(carry.c_prev, c), jnp.where(searched, found, jnp.inf))
         return cb, searched
 
-    def step(self, q, sc, truth, c, t, F_e, stepping):
+    def step(self, q, sc, truth, c, t, F_e, stepping, arm):
         """The field sees each curve inflated by its look-ahead; the safe step gets the true
-        clearance less the obstacles' travel; the evasive step where no scale is proven safe."""
+        clearance less the obstacles' travel; the evasive step where no scale is proven safe.
+        ``arm``: the arm model posed at q."""
         curves = sc.curves.with_radius(sc.curves.radius + self.lead[: self.m_c])
         field = sc._replace(curves=curves)
-        q_full, field_c = step_target(q, field, self.gains, truth, self.plan, F_e, self.lead, arm=self.arm)
-        q_next, alpha, too_fast = scaled_step(q, q_full, field_c, self.plan, self.travel, arm=self.arm)
+        q_full, field_c = step_target(q, field, self.gains, truth, self.plan, F_e, self.lead, arm=arm)
+        q_next, alpha, too_fast = scaled_step(q, q_full, field_c, self.plan, self.travel, arm=arm)
         evasive = jnp.zeros((), bool)
         if self.evades:
             want = stepping & too_fast

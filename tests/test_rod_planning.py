@@ -1,0 +1,180 @@
+"""Planning with the loaded arm (``sp.plan(..., model=RodModel)``): the recorded clearances are
+lower bounds of the loaded arm's, at every step and during every motion, checked by a brute
+force on densely sampled equilibria (``loaded_backbone`` at 33 points per segment, at the steps
+and 4 instants between them) against the obstacles sampled at 2,001 points (a sampled clearance
+is never below the true one, so the checks hold at any resolution); the implicit
+Jacobians of the posed arm against the solve's own forward-mode Jacobian; the input boundary.
+Compiling the loaded rollout takes tens of seconds: the plans are in the slow tier."""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import softplan_jax as sp
+from softplan_jax.geometry._obstacles import obstacle_samples
+from softplan_jax.rod import LoadedArm, RodModel, loaded_backbone, loaded_points_jacobian, piece_location
+
+POINTS = 33  # backbone samples per segment of the brute force
+BETWEEN = 4  # instants sampled strictly between consecutive steps
+SAMPLES = 2001  # points per obstacle curve
+
+
+@functools.cache
+def _backbones(model_key):
+    model = RodModel(*model_key[:3], model_key[3])
+    return jax.jit(jax.vmap(lambda q: loaded_backbone(q, model, POINTS)))
+
+
+def brute_clearance(qs, scenario, model_key):
+    """(K,) the smallest sampled clearance of the loaded arm at each configuration qs[k],
+    arm radius and obstacle radius subtracted (never below the true clearance)."""
+    P = np.asarray(_backbones(model_key)(jnp.asarray(qs)))  # (K, n, POINTS, 3)
+    assert np.all(np.isfinite(P)), "an equilibrium along the path did not converge"
+    P = P.reshape(len(qs), -1, 3)
+    out = np.full(len(qs), np.inf)
+    for obs in obstacle_samples(scenario, SAMPLES):
+        O = obs["pts"]
+        for a in range(0, len(P), 16):  # 16 configurations at a time (memory)
+            d2 = np.sum((P[a : a + 16, :, None, :] - O[None, None]) ** 2, axis=-1)
+            d = np.sqrt(np.min(d2, axis=(1, 2)))
+            out[a : a + 16] = np.minimum(out[a : a + 16], d - float(scenario.arm_radius) - obs["radius"])
+    return out
+
+
+def along_path(q):
+    """The configurations at the steps and BETWEEN instants strictly between consecutive steps."""
+    t = np.linspace(0.0, 1.0, BETWEEN + 2)[1:-1]
+    mid = q[:-1, None] + t[None, :, None, None] * (q[1:] - q[:-1])[:, None]
+    return q, mid.reshape(-1, *q.shape[1:])
+
+
+MODEL_KEY = (6.0, 4.0, 0.3, (0.0, 0.0, -0.05))  # EI, GJ, w, tip load: the straight tree arm's tip sags 0.3
+
+
+@pytest.mark.slow
+def test_a_loaded_plan_stays_clear_of_the_branches_by_a_brute_force():
+    scenario = sp.paper_scenario("tree")
+    model = RodModel(*MODEL_KEY[:3], MODEL_KEY[3])
+    r = sp.plan(scenario, model=model)
+    assert r.status == "reached", r.status
+    q = np.asarray(r.q)
+    at_steps, between = along_path(q)
+    c_steps = brute_clearance(at_steps, scenario, MODEL_KEY)
+    # The recorded clearance (pieces, less their gap) is a lower bound of the loaded arm's.
+    recorded = np.min(np.asarray(r.clearance), axis=1)
+    assert np.all(c_steps >= recorded - 1e-9), np.min(c_steps - recorded)
+    # During each motion the loaded arm stays clear: the sampled equilibria between steps stay
+    # above the plan's minimum clearance over the motion (a lower bound from the motion bound).
+    c_between = brute_clearance(between, scenario, MODEL_KEY)
+    assert not r.collided and r.min_clearance > 0.0
+    assert np.min(c_between) >= r.min_clearance - 1e-9, (np.min(c_between), r.min_clearance)
+    # the tip the plan reports is the loaded tip
+    tips = np.asarray(_backbones(MODEL_KEY)(jnp.asarray(q[-1:])))[0, -1, -1]
+    np.testing.assert_allclose(np.asarray(r.tip)[-1], tips, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_a_loaded_plan_in_float32():
+    scenario = sp.paper_scenario("tree", dtype=jnp.float32)
+    r = sp.plan(scenario, model=RodModel(*MODEL_KEY[:3], MODEL_KEY[3]))
+    assert r.q.dtype == np.float32 and r.status == "reached" and r.min_clearance > 0.0
+
+
+@pytest.mark.slow
+def test_the_posed_arm_jacobians_are_the_solves():
+    model = RodModel(*MODEL_KEY[:3], MODEL_KEY[3])
+    arm = LoadedArm(model)
+    q = jnp.asarray(np.array([[1.0, 0.6, 0.2], [0.9, -0.8, 1.9], [1.1, 1.2, -2.5]]))
+    pieces, s = jnp.array([0, 3, 6, 11]), jnp.array([0.0, 0.4, 0.9, 1.0])
+    J = np.asarray(arm.at(q).jacobians(q, pieces, s))
+    i, f = piece_location(pieces, s, arm.pieces)
+    np.testing.assert_allclose(J, np.asarray(loaded_points_jacobian(q, model, i, f, arm.steps)), atol=1e-10)
+
+
+@pytest.mark.slow
+def test_plan_batch_with_a_model_plans_each_scene_as_plan_does():
+    model = RodModel(*MODEL_KEY[:3], MODEL_KEY[3])
+    scenes = sp.random_scenarios(3, 2)
+    batch = sp.plan_batch(scenes, model=model, max_steps=40)
+    for b in range(2):
+        one = sp.plan(jax.tree_util.tree_map(lambda x, b=b: x[b], scenes), model=model, max_steps=40)
+        assert int(batch.iterations[b]) == one.iterations
+        # A batch agrees with single plans to rounding, which a rollout can amplify (plan_batch's
+        # docstring; the PCC arm's scene 0 parts by 0.02 after step 21): the first 16 steps.
+        np.testing.assert_allclose(np.asarray(batch.q[b])[:16], one.q[:16], atol=1e-8)
+        np.testing.assert_allclose(np.asarray(batch.tip[b])[:16], one.tip[:16], atol=1e-8)
+
+
+def test_a_bad_model_is_a_value_error():
+    scenario = sp.paper_scenario("tree")
+    with pytest.raises(ValueError, match="model must be None"):
+        sp.plan(scenario, model=(1.0, 1.0, 0.1))
+    with pytest.raises(ValueError, match="bending_stiffness"):
+        sp.plan(scenario, model=RodModel(np.ones(2), 1.0, 0.1))
+    with pytest.raises(ValueError, match="model must be"):
+        LoadedArm("stiff")
+    # an upright arm crushed by its payload past Euler's load: no equilibrium to start from
+    with pytest.raises(ValueError, match="did not converge"):
+        sp.plan(scenario, model=RodModel(1.0, 1.0, 0.0, (0.0, 0.0, -0.5)))
+    with pytest.raises(ValueError, match="pieces_per_segment"):
+        LoadedArm(RodModel(1.0, 1.0, 0.1), 0)
+
+
+def _cli(capsys, *argv):
+    from softplan_jax.cli import main
+
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (("--weight", "0.3"), "needs both --weight and --stiffness"),
+    (("--weight", "0.3", "--stiffness", "-1"), "bending_stiffness must be > 0"),
+    (("--weight", "nan", "--stiffness", "1"), "weight_per_length must be finite"),
+    (("--weight", "0.3", "--stiffness", "1", "--tip-load", "1,2"), "three numbers"),
+    (("--pcc", "--weight", "0.3"), "--pcc plans with the PCC arm"),
+])
+def test_cli_refuses_a_bad_loaded_arm(capsys, argv, message):
+    code, _, err = _cli(capsys, "run", "tree", *argv)
+    assert code == 2
+    assert message in err
+
+
+def test_cli_refuses_a_loaded_arm_in_a_moving_scene(capsys):
+    code, _, err = _cli(capsys, "run", "tree_sway", "--weight", "0.3", "--stiffness", "6")
+    assert code == 2 and "static scenes only" in err
+
+
+def test_cli_refuses_a_bad_material_block(tmp_path, capsys):
+    import json
+
+    path = tmp_path / "tree.json"
+    assert _cli(capsys, "export", "tree", path)[0] == 0
+    data = json.loads(path.read_text())
+    data["arm"]["material"] = {"bending_stiffness": 0.0, "torsional_stiffness": 1.0, "weight_per_length": 0.3}
+    path.write_text(json.dumps(data))
+    code, _, err = _cli(capsys, "run", path)
+    assert code == 2 and "bending_stiffness" in err
+
+
+@pytest.mark.slow
+def test_cli_plans_the_loaded_arm_of_a_material_block(tmp_path, capsys):
+    import json
+
+    from softplan_jax.scenarios._material import save_scenario_material
+
+    path = tmp_path / "tree_loaded.json"
+    save_scenario_material(sp.paper_scenario("tree"), RodModel(*MODEL_KEY[:3], MODEL_KEY[3]), path)
+    code, out, _ = _cli(capsys, "run", path, "--json")
+    assert code == 0
+    summary = json.loads(out)
+    assert summary["arm_model"] == {"kind": "loaded", "bending_stiffness": 6.0, "torsional_stiffness": 4.0,
+                                    "weight_per_length": 0.3, "tip_load": [0.0, 0.0, -0.05]}
+    assert summary["status"] == "reached" and not summary["collided"] and summary["fallback"] is False
+    # --pcc: the same file planned with the PCC arm
+    code, out, _ = _cli(capsys, "run", path, "--json", "--pcc")
+    assert json.loads(out)["arm_model"] == {"kind": "pcc"}
