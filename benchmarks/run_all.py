@@ -52,6 +52,8 @@ SCRIPTS = {
     "gpu": [["--parts", "plan,defaults", "--out", os.path.join(RESULTS, "gpu_this_machine")]],
     # a headless Chromium on the view of the tree (the system's chromium; .ci/run installs it)
     "viewer_latency": [[]],
+    # the loaded arm: PCC plans under load and the load-aware planner (about an hour on 2 cores)
+    "loaded": [["--seed", "1", "--n", "1000", "--between", "0"]],
 }
 
 # Scripts with more than one part: each part's quick run.

@@ -178,7 +178,7 @@ QUICK_ONLY = [("ab", "ab", []), ("baselines", "baselines", []), ("closest", "clo
               ("speed_targets", "speed_targets", []), ("speed_targets_segments", "speed_targets", ["--segments"]),
               ("sweep_scale", "sweep_scale", []),
               ("throughput", "throughput", []), ("timing", "timing", []), ("tuners", "tuning", ["--tuners"]),
-              ("viewer_latency", "viewer_latency", [])]
+              ("viewer_latency", "viewer_latency", []), ("loaded", "loaded", [])]
 
 
 @pytest.mark.bench
