@@ -101,5 +101,8 @@ def model_rows(s: dict) -> list:
         return []
     if m["kind"] == "pcc":
         return [("arm model", "PCC (piecewise constant curvature, paper §2.1)")]
-    return [("arm model", f"loaded rod: EI {m['bending_stiffness']} N m^2, GJ {m['torsional_stiffness']} N m^2, "
-             f"weight {m['weight_per_length']} N/m, tip load {m['tip_load']} N (gravity along -z)")]
+    def fmt(x):
+        return f"[{', '.join(f'{v:.4g}' for v in x)}]" if isinstance(x, list) else f"{x:.4g}"
+
+    return [("arm model", f"loaded rod: EI {fmt(m['bending_stiffness'])} N m^2, GJ {fmt(m['torsional_stiffness'])} "
+             f"N m^2, weight {fmt(m['weight_per_length'])} N/m, tip load {fmt(m['tip_load'])} N (gravity along -z)")]
