@@ -26,11 +26,12 @@ commanded PCC shape as a ghost, the loaded shape, the branches.
 
 Usage::
 
-    python benchmarks/loaded.py --seed 1 --n 1000          # the held-out report
-    python benchmarks/loaded.py --quick                    # smoke run into results/quick/
+    python benchmarks/loaded.py --seed 1 --n 1000 --between 0   # the committed report (about an hour)
+    python benchmarks/loaded.py --cost                          # the cost of a step, alone
+    python benchmarks/loaded.py --quick                         # smoke run into results/quick/
 
 Writes ``benchmarks/results/loaded_seed<seed>_n<n>.{md,json}`` and
-``results/figures/loaded_tree.png``.
+``results/figures/loaded_tree.png`` (``--cost``: ``results/loaded_cost.{md,json}``).
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ from ._pieces import piece_location, pieces_from_shape, pieces_steps
 __all__ = ["LoadedArm", "DEFAULT_PIECES"]
 
 # Constant-curvature pieces per segment of the kernel's shape: the proven gap shrinks about as
-# 1/p^2 and the kernel's cost grows as p (docs: The loaded arm, "Pieces and their gap").
+# 1/p^2 and the kernel's cost grows as p (docs: The loaded arm, "The gap").
 DEFAULT_PIECES = 4
 
 
@@ -65,12 +65,15 @@ class LoadedArm:
         return _PosedArm(self, q, solve_shape(q, self.model, self.steps))
 
     def shape(self, q):
+        """The pieces (n p, 3) at q (:meth:`_PosedArm.shape`; one solve)."""
         return self.at(q).shape(q)
 
     def tip(self, q):
+        """The loaded tip (3,) at q (one solve)."""
         return self.at(q).tip(q)
 
     def jacobians(self, q, segments, s):
+        """``dP/dq`` of the loaded points (:meth:`_PosedArm.jacobians`; one solve)."""
         return self.at(q).jacobians(q, segments, s)
 
     def motion_bound(self, q_a, q_b):
