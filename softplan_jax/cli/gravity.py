@@ -80,18 +80,11 @@ def resolve_model(args, scenario_path: str | None):
 
 def model_report(model) -> dict:
     """The summary's ``arm_model`` entry: "pcc", or the loaded rod's material (lists per segment)."""
-    import numpy as np
+    from ..scenarios._material_block import material_to_dict
 
     if model is None:
         return {"kind": "pcc"}
-
-    def plain(x):
-        arr = np.asarray(x, np.float64)
-        return arr.tolist() if arr.ndim else float(arr)
-
-    return {"kind": "loaded", "bending_stiffness": plain(model.bending_stiffness),
-            "torsional_stiffness": plain(model.torsional_stiffness),
-            "weight_per_length": plain(model.weight_per_length), "tip_load": plain(model.tip_load)}
+    return {"kind": "loaded", **material_to_dict(model)}
 
 
 def model_rows(s: dict) -> list:
