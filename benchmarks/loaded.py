@@ -28,6 +28,7 @@ Usage::
 
     python benchmarks/loaded.py --seed 1 --n 1000 --between 0   # the committed report (about an hour)
     python benchmarks/loaded.py --cost                          # the cost of a step, alone
+    python benchmarks/loaded.py --moving --n 256 --levels medium  # tracking moving scenes
     python benchmarks/loaded.py --quick                         # smoke run into results/quick/
 
 Writes ``benchmarks/results/loaded_seed<seed>_n<n>.{md,json}`` and
@@ -246,6 +247,118 @@ def tree_figure(path: str, gamma: float) -> None:
     plt.close(fig)
 
 
+def audit_moving(qs, times, iterations, movings, model, between: int, chunk: int = 256):
+    """:func:`audit` on moving scenes: the loaded arm at each configuration against the scene's
+    curves at that instant (steps at their times, ``between`` instants between steps with the
+    curves moved to the instant's time). Per scene: the smallest sampled clearance and whether an
+    equilibrium failed."""
+    import jax
+    import jax.numpy as jnp
+
+    import softplan_jax as sp
+    from softplan_jax.scenarios._motion import scenario_at
+
+    u = jnp.linspace(0.0, 1.0, OBSTACLE_SAMPLES)
+
+    def one(q, b, t):
+        mv = jax.tree_util.tree_map(lambda x: x[b], movings)
+        curves = scenario_at(mv, t).curves
+        lo, hi = curves.u_range[:, :1], curves.u_range[:, 1:]
+        uu = lo + (hi - lo) * u[None]  # (M, S)
+        powers = uu[..., None] ** jnp.arange(curves.coeffs.shape[-1])  # (M, S, K)
+        O = jnp.einsum("mak,msk->msa", curves.coeffs, powers)  # (M, S, 3), power basis
+        P = sp.loaded_backbone(q, model, POINTS).reshape(-1, 3)
+        d2 = jnp.sum((P[:, None, None, :] - O[None]) ** 2, axis=-1)  # (A, M, S)
+        c = jnp.sqrt(jnp.min(d2, axis=(0, 2))) - curves.radius - mv.scene.arm_radius
+        return jnp.min(jnp.where(mv.scene.curve_mask, c, jnp.inf)), jnp.all(jnp.isfinite(P))
+
+    clearance = jax.jit(lambda Q, b, t: jax.lax.map(lambda g: jax.vmap(one)(*g), (
+        Q.reshape(-1, 32, *Q.shape[1:]), b.reshape(-1, 32), t.reshape(-1, 32))))
+    tau = np.linspace(0.0, 1.0, between + 2)[:-1]
+    Qs, Ts, owner = [], [], []
+    for b in range(len(iterations)):
+        k = int(iterations[b]) + 1
+        q, t = np.asarray(qs[b][:k]), np.asarray(times[b][:k])
+        Qs += [(q[:-1, None] + tau[None, :, None, None] * (q[1:] - q[:-1])[:, None]).reshape(-1, *q.shape[1:]), q[-1:]]
+        Ts += [(t[:-1, None] + tau[None, :] * (t[1:] - t[:-1])[:, None]).reshape(-1), t[-1:]]
+        owner.append(np.full(len(Qs[-2]) + 1, b))
+    Q, T, owner = np.concatenate(Qs), np.concatenate(Ts), np.concatenate(owner)
+    K = len(Q)
+    pad = -K % chunk
+    Q, T, owner_p = (np.concatenate([x, np.repeat(x[-1:], pad, axis=0)]) for x in (Q, T, owner))
+    c, ok = np.empty(len(Q)), np.empty(len(Q), bool)
+    for k, a in enumerate(range(0, len(Q), chunk)):
+        part = (jnp.asarray(x[a : a + chunk]) for x in (Q, owner_p, T))
+        ca, oka = clearance(*part)
+        c[a : a + chunk], ok[a : a + chunk] = np.asarray(ca).reshape(-1), np.asarray(oka).reshape(-1)
+        if (k + 1) % 40 == 0:
+            log(f"  audited {a + chunk}/{len(Q)} configurations")
+    c, ok = c[:K], ok[:K]
+    out = np.full(len(iterations), np.inf)
+    np.minimum.at(out, owner, np.where(ok, c, np.inf))
+    failed = np.zeros(len(iterations), bool)
+    np.logical_or.at(failed, owner, ~ok)
+    return out, failed
+
+
+def moving_report(args, levels) -> int:
+    """Tracking on random moving scenes: the PCC tracker's paths commanded to the loaded arm,
+    and the load-aware tracker, audited with the curves at every instant; paired, with intervals."""
+    import jax
+
+    import softplan_jax as sp
+
+    prefix = output_paths(f"loaded_moving_seed{args.seed}_n{args.n}", args.quick, args.out)[0]
+    movings = sp.moving.random_moving_scenarios(args.seed, args.n)
+    hold = sp.planning.TrackOptions().hold_tolerance
+    kw = dict(max_steps=args.max_steps, chunk=args.chunk, progress=True)
+    log(f"PCC tracker on {args.n} moving scenes (seed {args.seed})")
+    t0 = time.perf_counter()
+    pcc = jax.device_get(sp.track_batch(movings, **kw))
+    log(f"  {time.perf_counter() - t0:.1f} s")
+    goal_end = lambda r: np.asarray(r.goal)[np.arange(args.n), np.asarray(r.iterations)]
+    stopped = [int(s) for s in (sp.Status.COLLIDED, sp.Status.NONFINITE, sp.Status.TOO_FAST, sp.Status.START_COLLIDED)]
+    ran_out = lambda r: ~np.isin(np.asarray(r.status), stopped)  # ran to its horizon
+    lines = [f"# Tracking with the loaded arm: {args.n} random moving scenes (seed {args.seed})", "",
+             f"`python benchmarks/loaded.py --moving --seed {args.seed} --n {args.n} --levels {','.join(levels)} "
+             f"--max-steps {args.max_steps} --chunk {args.chunk} --between {args.between}` (audit: the equilibria at "
+             f"every step and {args.between} instants between, the curves moved to each instant, {POINTS} points per "
+             f"segment, curves at {OBSTACLE_SAMPLES} points). Load as the static report: w = {WEIGHT} N/m, "
+             f"EI = w L^3 / gamma, GJ = 2 EI / 3.", "",
+             "| load | PCC track touches under load | PCC track holds the goal under load | load-aware tracker holds "
+             "the goal | load-aware touches | load-aware ends too_fast | paired: only load-aware / only PCC (McNemar) |",
+             "|---|---|---|---|---|---|---|"]
+    report = dict(seed=args.seed, n=args.n, max_steps=args.max_steps, levels={})
+    for name in levels:
+        model = model_of(GAMMAS[name])
+        log(f"load level {name}: the load-aware tracker")
+        t0 = time.perf_counter()
+        r = jax.device_get(sp.track_batch(movings, model=model, **kw))
+        log(f"  {time.perf_counter() - t0:.1f} s; auditing both trackers' paths")
+        c_pcc, f_pcc = audit_moving(pcc.q, pcc.time, pcc.iterations, movings, model, args.between)
+        c_load, f_load = audit_moving(r.q, r.time, r.iterations, movings, model, args.between)
+        last = np.asarray(pcc.q)[np.arange(args.n), np.asarray(pcc.iterations)]
+        tips = np.asarray(jax.jit(jax.vmap(lambda q, m=model: sp.loaded_backbone(q, m, 2)[-1, -1]))(last))
+        touch_pcc, touch_load = (c_pcc <= 0) | f_pcc, (c_load <= 0) | f_load
+        ok_pcc = (np.linalg.norm(tips - goal_end(pcc), axis=-1) <= hold) & ~touch_pcc & ran_out(pcc)
+        ok_load = (np.asarray(r.error)[np.arange(args.n), np.asarray(r.iterations)] <= hold) & ~touch_load & ran_out(r)
+        too_fast = np.asarray(r.status) == int(sp.Status.TOO_FAST)
+        tab = paired_table(ok_load, ok_pcc)
+        lines.append(f"| {name} (gamma {GAMMAS[name]}) | {fmt_rate(int(touch_pcc.sum()), args.n)} | "
+                     f"{fmt_rate(int(ok_pcc.sum()), args.n)} | {fmt_rate(int(ok_load.sum()), args.n)} | "
+                     f"{fmt_rate(int(touch_load.sum()), args.n)} | {fmt_rate(int(too_fast.sum()), args.n)} | "
+                     f"{tab['only_x']} / {tab['only_y']} (p = {tab['mcnemar_p']:.2g}) |")
+        report["levels"][name] = dict(c_pcc=c_pcc, c_loaded=c_load, ok_pcc=ok_pcc, ok_loaded=ok_load,
+                                      status=np.asarray(r.status))
+    lines += ["", f"Holds the goal: the loaded arm's tip within the hold tolerance ({hold}) of the goal at the last "
+              "step, no touch by the audit, and (load-aware) the rollout ran to its horizon. The PCC tracker without "
+              f"load holds {fmt_rate(int(np.sum(np.asarray(pcc.held_to_end))), args.n)} (held from its first reach "
+              "to the end). Rates with 95 % Wilson intervals."]
+    write_results(prefix, report, "\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
 def step_cost(repeats: int = 7) -> list[str]:
     """The cost of a step of one plan of the tree, PCC against loaded (the medium level), in one
     process, interleaved: ``repeats`` warm plans of each, per step taken (min and median)."""
@@ -287,6 +400,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="results prefix (default results/loaded_seed<seed>_n<n>)")
     ap.add_argument("--cost", action="store_true",
                     help="only the cost of a step (one plan of the tree, PCC against loaded), into results/loaded_cost")
+    ap.add_argument("--moving", action="store_true",
+                    help="tracking on random moving scenes (track_batch), into results/loaded_moving_seed<seed>_n<n>")
     args = ap.parse_args(argv)
     levels = [x for x in args.levels.split(",") if x]
     for x in levels:
@@ -299,6 +414,8 @@ def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)
     import softplan_jax as sp
 
+    if args.moving:
+        return moving_report(args, levels)
     if args.cost:
         prefix = output_paths("loaded_cost", args.quick, args.out)[0]
         lines = ["# The cost of a loaded step", "", "`python benchmarks/loaded.py --cost`", "",

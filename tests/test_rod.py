@@ -11,6 +11,7 @@ import pytest
 
 import softplan_jax as sp
 from softplan_jax.rod import (
+    LoadedArm,
     RodModel,
     load_number,
     loaded_backbone,
@@ -82,28 +83,33 @@ def test_jacobian_matches_finite_differences_and_reverse_mode():
     rng = np.random.default_rng(4)
     seg = jnp.array([0, 1, 2, 2])
     fr = jnp.array([0.5, 0.25, 0.75, 1.0])
-    for q in (random_q(rng), random_q(rng, straight=True)):
-        J = np.asarray(loaded_points_jacobian(q, MODEL, seg, fr))
+    Js, q0 = [], random_q(rng, straight=True)
+    for q in (q0, random_q(rng)):
+        Js.append(J := np.asarray(loaded_points_jacobian(q, MODEL, seg, fr)))
         assert np.all(np.isfinite(J))
         f = lambda x: np.asarray(loaded_points(x.reshape(3, 3), MODEL, seg, fr)).reshape(-1)
         x0, h = q.reshape(-1), 1e-6
         fd = np.stack([(f(x0 + h * e) - f(x0 - h * e)) / (2 * h) for e in np.eye(9)], axis=-1).reshape(4, 3, 9)
         np.testing.assert_allclose(J, fd, rtol=0, atol=1e-6)
-    # reverse mode through the implicit solve agrees with forward mode
-    g = jax.grad(lambda x: jnp.sum(loaded_points(x, MODEL, seg, fr) ** 2))(jnp.asarray(q))
-    Jq = np.asarray(loaded_points_jacobian(q, MODEL, seg, fr))
+    # The posed arm of the planner (LoadedArm.at) gives the same Jacobian, by the
+    # implicit-function theorem on its own solve (pieces 2, 5, 11, 11 at s = 0, 0, 0, 1 are
+    # the fractions above with 4 pieces per segment).
+    arm = LoadedArm(MODEL)
+    pieces, s = jnp.array([2, 5, 11, 11]), jnp.array([0.0, 0.0, 0.0, 1.0])
+    np.testing.assert_array_equal(np.stack(piece_location(pieces, s, arm.pieces)), np.stack([seg, fr]))
+    posed = jax.jit(jax.vmap(lambda q_: arm.at(q_).jacobians(q_, pieces, s)))(jnp.asarray(np.stack([q0, q])))
+    np.testing.assert_allclose(np.asarray(posed), np.stack(Js), rtol=0, atol=1e-10)
+    # Reverse mode through the implicit solve, in q and in the material (one program):
+    # against forward mode in q, and central differences in EI.
+    def objective(x, EI):
+        model = RodModel(EI, MODEL.torsional_stiffness, MODEL.weight_per_length, MODEL.tip_load)
+        return jnp.sum(loaded_points(x, model, seg, fr) ** 2)
+
+    g_q, g_EI = jax.jit(jax.grad(objective, argnums=(0, 1)))(jnp.asarray(q), 9.0)
     pts = np.asarray(loaded_points(q, MODEL, seg, fr))
-    np.testing.assert_allclose(np.asarray(g).reshape(-1), 2 * np.einsum("ka,kaj->j", pts, Jq), atol=1e-8)
-
-
-@pytest.mark.slow
-def test_gradient_in_the_material():
-    q = random_q(np.random.default_rng(5))
-    seg, fr = jnp.array([2]), jnp.array([1.0])
-    tip_z = lambda EI: loaded_points(q, RodModel(EI, 6.0, 0.3, (0.02, -0.01, -0.1)), seg, fr)[0, 2]
-    g = float(jax.grad(tip_z)(9.0))
-    fd = (float(tip_z(9.0 + 1e-5)) - float(tip_z(9.0 - 1e-5))) / 2e-5
-    np.testing.assert_allclose(g, fd, rtol=1e-5)
+    np.testing.assert_allclose(np.asarray(g_q).reshape(-1), 2 * np.einsum("ka,kaj->j", pts, J), atol=1e-8)
+    fd = (float(objective(jnp.asarray(q), 9.0 + 1e-5)) - float(objective(jnp.asarray(q), 9.0 - 1e-5))) / 2e-5
+    np.testing.assert_allclose(float(g_EI), fd, rtol=1e-5)
 
 
 @pytest.mark.slow

@@ -89,9 +89,7 @@ def model_report(model) -> dict:
 
 def model_rows(s: dict) -> list:
     """The text summary's row of the arm model."""
-    m = s.get("arm_model")
-    if m is None:  # a moving scene: the PCC arm, not reported
-        return []
+    m = s["arm_model"]
     if m["kind"] == "pcc":
         return [("arm model", "PCC (piecewise constant curvature, paper §2.1)")]
     def fmt(x):

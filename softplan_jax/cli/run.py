@@ -111,9 +111,6 @@ def cmd_run(args) -> int:
     check_actuator_args(args)
     dtype = jnp.float32 if args.float32 else jnp.float64
     if args.scenario in moving_names() or (args.scenario not in static_names and _is_moving_file(args.scenario)):
-        if any(x is not None for x in (args.weight, args.stiffness, args.torsional_stiffness, args.tip_load)):
-            raise InputError("the loaded arm (--weight, --stiffness, ...) plans static scenes only; "
-                             f"{args.scenario} moves")
         return _cmd_track(args, dtype)
     for flag, value in (("--anticipation", args.anticipation), ("--hold-tolerance", args.hold_tolerance),
                         ("--no-evasion", args.no_evasion or None), ("--evasion-speed", args.evasion_speed),
@@ -142,14 +139,15 @@ def _compiled_run(world, gains, options, max_steps: int, seed) -> tuple:
 
 def _loaded_run(model):
     """:func:`_compiled_run` for the loaded arm (a :class:`~softplan_jax.rod.LoadedArm` of
-    ``model``): the first call compiles and runs, the second runs; compile time = their difference."""
+    ``model``; static or moving ``world``): the first call compiles and runs, the second runs;
+    compile time = their difference."""
     import jax
 
+    from ..planning._planner import arm_model
     from ..planning._programs import rollout_jit
-    from ..rod._arm import LoadedArm
 
     def run(world, gains, options, max_steps: int, seed) -> tuple:
-        arm = LoadedArm(model)
+        arm = arm_model(model, getattr(world, "scene", world).q0.shape[0])
         t0 = time.perf_counter()
         jax.block_until_ready(rollout_jit(world, gains, options, max_steps, seed, arm=arm))
         first = time.perf_counter() - t0
@@ -183,21 +181,28 @@ def _static_inputs(args, dtype, actuator_summary: dict) -> tuple:
         prng_key(args.seed)  # a seed out of range: bad input before anything compiles
     except ValueError as err:
         raise InputError(str(err)) from None
-    model = resolve_model(args, None if args.scenario in paper_names() else args.scenario)
+    model = _checked_model(args, None if args.scenario in paper_names() else args.scenario, scenario.q0)
+    return scenario, label, gains, options, gain_values, model
+
+
+def _checked_model(args, path, q0):
+    """The run's arm model (:func:`~softplan_jax.cli.gravity.resolve_model`: None for the PCC
+    arm), checked against the arm and to carry its load at the start pose q0 (InputError)."""
+    model = resolve_model(args, path)
     if model is not None:
         from ..planning._planner import arm_model, check_start_carried
 
         try:
-            arm_model(model, scenario.q0.shape[0])
-            check_start_carried(scenario.q0, model)
+            arm_model(model, q0.shape[0])
+            check_start_carried(q0, model)
         except ValueError as err:
             raise InputError(str(err)) from None
-    return scenario, label, gains, options, gain_values, model
+    return model
 
 
 def _cmd_plan(args, dtype) -> int:
     """``softplan run`` on a static scene: plan it, rescue it with the global fallback."""
-    from ..planning._planner import result_from_rollout, unreachable_result
+    from ..planning._planner import arm_model, result_from_rollout, unreachable_result
     from ..scenarios._scenario import unreachable_reason
 
     actuator_summary = {}
@@ -208,7 +213,7 @@ def _cmd_plan(args, dtype) -> int:
     if reason:  # proven on the host: nothing to plan
         print(f"softplan: the goal is proven unreachable ({reason.replace('_', ' ')}); nothing to plan",
               file=sys.stderr, flush=True)
-        result = unreachable_result(scenario, options, reason)
+        result = unreachable_result(scenario, options, reason, arm_model(model, scenario.q0.shape[0]))
     else:
         _compiling_message("" if model is None else " for the loaded arm")
         run = _compiled_run if model is None else _loaded_run(model)
@@ -332,12 +337,16 @@ def _cmd_track(args, dtype) -> int:
 
     actuator_summary = {}
     moving, gains, options, preset, extra, gain_values = _moving_inputs(args, dtype, actuator_summary)
+    model = _checked_model(args, None if args.scenario in moving_names() else args.scenario, moving.scene.q0)
     max_steps = int(args.max_steps)
-    _compiling_message(f" for a moving scene, tracked for {max_steps} steps ({max_steps * float(gains.dt):g} s "
-                       "of the scene's own time, not the wait)")
-    track, compile_time, run_time, loaded = _compiled_run(moving, gains, options, max_steps, args.seed)
+    _compiling_message(f" for a moving scene{'' if model is None else ' and the loaded arm'}, tracked for "
+                       f"{max_steps} steps ({max_steps * float(gains.dt):g} s of the scene's own time, not the wait)")
+    run = _compiled_run if model is None else _loaded_run(model)
+    track, compile_time, run_time, loaded = run(moving, gains, options, max_steps, args.seed)
     result = result_from_track(track, moving, float(gains.dt))
-    if result.status == "max_steps" and not args.no_fallback:
+    if result.status == "max_steps" and not args.no_fallback and model is not None:
+        warn("the global fallback certifies PCC paths: it does not run for the loaded arm")
+    elif result.status == "max_steps" and not args.no_fallback:
         from ..search._tracking import track_fallback
 
         print("softplan: the goal was never reached: planning the scene at rest with the global search, then "
@@ -345,7 +354,8 @@ def _cmd_track(args, dtype) -> int:
         result = track_fallback(moving, args.method, args.n_points, gains, max_steps, args.seed, **preset, **extra)
     summary = _track_summary(args, options, gain_values, result, float(gains.dt), dtype)
     summary.update(compile_time_s=compile_time, program_from_cache=loaded, run_time_s=run_time,
-                   time_per_step_s=run_time / max(result.iterations, 1), **actuator_summary)
+                   time_per_step_s=run_time / max(result.iterations, 1), arm_model=model_report(model),
+                   **actuator_summary)
     traj = time_run(args, moving.scene, result, options.plan, summary)  # before any output
     title = (f"{args.scenario} (moving) — {args.method} method"
              + (f" (N = {args.n_points})" if args.method == "points" else "") + f" — {result.status}")
@@ -431,6 +441,7 @@ def _track_text(summary: dict, result, options) -> str:
          + (" (traced program loaded from the cache)" if summary["program_from_cache"] else "")),
         ("run time", f"{fmt_seconds(summary['run_time_s'])} for {result.iterations} steps"),
     ]
+    rows += model_rows(summary)
     rows += summary_rows(summary)
     rows += [(k, summary[k]) for k in ("plot", "gif", "out") if summary[k]]
     width = max(len(k) for k, _ in rows)

@@ -236,9 +236,9 @@ def _plan_here(scenario, method, n_points, gains, max_steps, seed, options, mode
     arm = arm_model(model, scenario.q0.shape[0])
     if arm is not None:
         check_start_carried(scenario.q0, model)
-    reason = unreachable_reason(scenario)
+    reason = unreachable_reason(scenario)  # its proofs hold for the loaded arm too (inextensible)
     if reason:
-        return unreachable_result(scenario, opts, reason)
+        return unreachable_result(scenario, opts, reason, arm)
     r = rollout_jit(scenario, g, opts, T, seed, arm=arm)
     return result_from_rollout(r, scenario)
 
@@ -284,16 +284,31 @@ def _start_clearance_program(solver):
     return package_jit(clearance)
 
 
-def unreachable_result(scenario: Scenario, options: PlanOptions, reason: str) -> PlanResult:
+@functools.cache
+def _loaded_start_program(solver):
+    def start(arm, q, scenario):
+        posed = arm.at(q)
+        sc = posed.widened(scenario)
+        return clearance_of(true_closest(posed.shape(q), sc, solver), sc), posed.tip(q)
+
+    return package_jit(start)
+
+
+def unreachable_result(scenario: Scenario, options: PlanOptions, reason: str, arm=None) -> PlanResult:
     """The result of a scene whose goal is proven unreachable (``reason``: "beyond_reach" or
     "goal_in_obstacle"), without planning: the start pose alone (iterations 0), its exact
-    clearance (the true closest points, as a rollout's record), status "unreachable"."""
+    clearance (the true closest points, as a rollout's record), status "unreachable". ``arm``:
+    None (the PCC arm) or a loaded arm (:func:`arm_model`), whose tip and clearance (a lower
+    bound, as its rollouts record) are reported."""
     q0 = scenario.q0
     solver = options.solver if options.method == "curve" else DEFAULT_OPTIONS
-    clearance = np.asarray(_start_clearance_program(solver)(q0, scenario))
+    if arm is None:
+        clearance = np.asarray(_start_clearance_program(solver)(q0, scenario))
+        tip = np.asarray(tip_position(q0))
+    else:
+        clearance, tip = (np.asarray(x) for x in _loaded_start_program(solver)(arm, q0, scenario))
     _, mask = radius_and_mask(scenario, np)
     c = clearance[mask]
-    tip = np.asarray(tip_position(q0))
     min_c = float(np.min(c, initial=np.inf))
     return PlanResult(
         reached=False, iterations=0, collided=bool(min_c <= contact_tolerance(options, q0.dtype)),

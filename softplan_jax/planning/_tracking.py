@@ -20,7 +20,7 @@ from ..base._status import status_name
 from ..geometry._obstacles import radius_and_mask
 from ..scenarios._motion import MovingScenario, goal_at
 from ._options import make_track_options
-from ._planner import check_gains
+from ._planner import arm_model, check_gains, check_start_carried
 from ._programs import rollout_batch, rollout_jit, strong_gains
 from ._records import Rollout
 from ._step import Gains
@@ -96,7 +96,7 @@ def _check_moving(moving, batched: bool):
 
 
 def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
-          max_steps: int = 600, seed=0, **options) -> TrackResult:
+          max_steps: int = 600, seed=0, *, model=None, **options) -> TrackResult:
     """Track the goal of one MovingScenario for ``max_steps`` steps (``max_steps dt``
     seconds; jitted, compiles once per shape and option set).
 
@@ -104,6 +104,9 @@ def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gai
       moving: a :class:`~softplan_jax.scenarios._motion.MovingScenario`.
       method, n_points, gains, seed, **options: as :func:`~softplan_jax.plan`.
       max_steps: steps of the horizon (the rollout does not stop at the goal).
+      model: None (the PCC arm) or a :class:`~softplan_jax.rod.RodModel`: the loaded arm
+        tracks, its clearance and motion bounds proving every step as for :func:`~softplan_jax.plan`
+        (it takes no evasive step: where no step is proven safe, the rollout ends "too_fast").
       **options: :class:`TrackOptions` fields (hold_tolerance, feedforward,
         search_substeps, anticipation, evasion, evasion_speed, barrier_gain,
         evasion_pieces) and :class:`~softplan_jax.PlanOptions`
@@ -111,12 +114,16 @@ def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gai
 
     Returns:
       :class:`TrackResult`.
+
+    Raises:
+      ValueError: bad input; a ``model`` that cannot carry its load at the start pose.
     """
     _check_moving(moving, batched=False)
     opts = make_track_options(method, n_points, **options)
     dtype = moving.scene.q0.dtype
     g = strong_gains(check_gains(gains, dtype, moving.n_segments), dtype)
-    r = rollout_jit(moving, g, opts, max_steps, seed)
+    arm = _loaded_arm(model, moving.scene.q0)
+    r = rollout_jit(moving, g, opts, max_steps, seed, arm=arm)
     return result_from_track(r, moving, float(g.dt))
 
 
@@ -151,7 +158,7 @@ def result_from_track(r: Track, moving: MovingScenario, dt: float) -> TrackResul
 
 def track_batch(movings: MovingScenario, method: str = "curve", n_points: int = 10, gains: Gains | None = None,
                 max_steps: int = 600, seed=0, *, chunk: int | None = None, progress: bool = False,
-                lanes: int | None = None, **options) -> Track:
+                lanes: int | None = None, model=None, **options) -> Track:
     """Track a stack of moving scenarios (vmapped, jitted once, in chunks of one shape).
 
     Arguments as :func:`track` and :func:`~softplan_jax.plan_batch` (``chunk``:
@@ -159,16 +166,26 @@ def track_batch(movings: MovingScenario, method: str = "curve", n_points: int = 
     stderr; ``lanes``: scenes stepped side by side, see
     :func:`~softplan_jax.planning._engine.run_lanes`; None: the whole batch up to
     :data:`~softplan_jax.planning._engine.TRACK_LANES` (1,024) on a CPU, as every tracked scene
-    holds its lane to the horizon). Returns a batched :class:`Track`
-    (an engine Rollout with the tracking fields) of NumPy arrays.
+    holds its lane to the horizon; ``model``: as :func:`track`, one for every scene). Returns a
+    batched :class:`Track` (an engine Rollout with the tracking fields) of NumPy arrays.
     """
     _check_moving(movings, batched=True)
     opts = make_track_options(method, n_points, **options)
     dtype = movings.scene.q0.dtype
     g = strong_gains(check_gains(gains, dtype, movings.n_segments), dtype)
+    arm = arm_model(model, movings.n_segments)
     r = rollout_batch.in_chunks(movings, g, opts, max_steps, seed, chunk=chunk, progress=progress, lanes=lanes,
-                                devices=1, label="track_batch")
+                                devices=1, label="track_batch", arm=arm)
     return jax.device_get(r)
+
+
+def _loaded_arm(model, q0):
+    """The arm model of one tracked scene (:func:`~softplan_jax.planning._planner.arm_model`),
+    its start pose checked to carry the load."""
+    arm = arm_model(model, q0.shape[0])
+    if arm is not None:
+        check_start_carried(q0, model)
+    return arm
 
 
 def goal_trajectory(moving: MovingScenario, times):

@@ -82,8 +82,9 @@ class MovingWorld(StaticWorld):
         self.m_c = su.scene.curves.coeffs.shape[0]
         n = su.track.search_substeps
         self.substeps = jnp.arange(1, n + 1, dtype=su.scene.q0.dtype) / (n + 1)
-        # The evasive step needs the true clearance (check_collisions) and the safe step.
-        self.evades = su.track.evasion and su.plan.check_collisions and su.plan.step == "safe"
+        # The evasive step needs the true clearance (check_collisions) and the safe step; it
+        # plans PCC arcs, so an arm whose shape is not q's arcs does not evade.
+        self.evades = su.track.evasion and su.plan.check_collisions and su.plan.step == "safe" and arm.searchable
 
     def at(self, t):
         sc = scenario_at(self.world, t)
@@ -108,7 +109,11 @@ class MovingWorld(StaticWorld):
     def between(self, carry, q, truth, c, running, t, sc):
         """Proven clear where the clearance at the motion's start, less the arm's motion bound and
         the obstacle's travel, stays above the contact tolerance (or where the evasive step
-        proved the motion in time); elsewhere searched at ``search_substeps`` instants."""
+        proved the motion in time); elsewhere searched at ``search_substeps`` instants. An arm
+        whose shape is not q's arcs (``arm.searchable`` False) is not searched: its record is
+        that lower bound itself, ``c_prev - travel - motion_bound``."""
+        if not self.arm.searchable:  # the arm's motion bound and the obstacles' travel prove the motion
+            return carry.c_prev - self.travel - self.arm.motion_bound(carry.q_prev, q), jnp.zeros(self.mask.shape, bool)
         proven = swept_clear(carry.q_prev, q, carry.truth_prev, carry.c_prev - self.travel, self.contact)
         proven = proven | carry.certified
         searched = self.mask & ~carry.first & running & ~proven

@@ -35,7 +35,7 @@ from ..base._compilation_cache import package_jit
 from ..base._numerics import solve_small
 from ..base._validation import check_configuration, check_int, is_concrete
 from ._lie import se3_bracket, se3_exp
-from ._model import RodModel, segment_material
+from ._model import RodModel, per_segment, segment_material
 
 __all__ = [
     "LoadedShape",
@@ -316,7 +316,13 @@ _solve_jit = package_jit(solve_shape, None, static_argnames=("steps",))
 
 
 def _solve_entry(q, model, steps):
+    if is_concrete(q) and _concrete_model(model):
+        return _solve_jit(q, per_segment(model, q.shape[0], q.dtype), steps)
     return (_solve_jit if is_concrete(q) else solve_shape)(q, model, steps)
+
+
+def _concrete_model(model) -> bool:
+    return all(is_concrete(x) for x in jax.tree_util.tree_leaves(model))
 
 
 def check_inputs(q, model, steps):
@@ -391,8 +397,9 @@ def loaded_points(q, model: RodModel, segments, fractions, steps: int = DEFAULT_
     if fractions.ndim != 1 or segments.shape != fractions.shape:
         raise ValueError(f"segments and fractions must be (m,) arrays of one length; got {segments.shape} and "
                          f"{fractions.shape}")
-    concrete = is_concrete(q) and is_concrete(fractions) and is_concrete(segments) and all(
-        is_concrete(x) for x in jax.tree_util.tree_leaves(model))
+    concrete = is_concrete(q) and is_concrete(fractions) and is_concrete(segments) and _concrete_model(model)
+    if concrete:
+        model = per_segment(model, q.shape[0], q.dtype)
     pts, converged, res, it = (_points_jit if concrete else _points)(q, model, segments, fractions, steps)
     if is_concrete(converged) and not bool(converged):
         raise unconverged_error(res, it, model)
@@ -415,7 +422,9 @@ def loaded_points_jacobian(q, model: RodModel, segments, fractions, steps: int =
     q, steps = check_inputs(q, model, steps)
     fractions = jnp.asarray(fractions, q.dtype)
     segments = jnp.asarray(segments).astype(jnp.int32)
-    concrete = is_concrete(q) and is_concrete(fractions) and all(is_concrete(x) for x in jax.tree_util.tree_leaves(model))
+    concrete = is_concrete(q) and is_concrete(fractions) and _concrete_model(model)
+    if concrete:
+        model = per_segment(model, q.shape[0], q.dtype)
     return (_points_jacobian_jit if concrete else _points_jacobian)(q, model, segments, fractions, steps)
 
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..base._validation import check_scale, is_concrete
 
-__all__ = ["RodModel", "segment_material"]
+__all__ = ["RodModel", "segment_material", "per_segment"]
 
 _FIELDS = ("bending_stiffness", "torsional_stiffness", "weight_per_length", "tip_load")
 
@@ -100,3 +100,11 @@ def segment_material(model: RodModel, n: int, dtype):
     if F.shape != (3,):
         raise ValueError(f"RodModel.tip_load must have shape (3,), got {F.shape}")
     return (*out, F.astype(dtype))
+
+
+def per_segment(model: RodModel, n: int, dtype) -> RodModel:
+    """The model with every field given per segment: ``(n,)`` NumPy arrays in ``dtype`` and the
+    tip load ``(3,)`` (:func:`segment_material`), so that one compiled program serves a model of
+    scalars and one of per-segment values alike (a jitted function keys its programs on the
+    shapes of its arguments). ValueError as :func:`segment_material`."""
+    return RodModel(*(np.asarray(x) for x in segment_material(model, n, dtype)))
