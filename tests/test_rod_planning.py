@@ -196,7 +196,7 @@ def test_the_cli_tracks_a_moving_scene_with_the_loaded_arm(capsys):
                         "--torsional-stiffness", "4", "--tip-load", "0,0,-0.05", "--max-steps", TRACK_STEPS, "--json")
     summary = json.loads(out)
     assert code == 0 and summary["status"] == "reached" and not summary["collided"]
-    assert summary["arm_model"]["kind"] == "loaded" and summary["evasive_steps"] == 0
+    assert summary["arm_model"]["kind"] == "loaded" and summary["evasive_steps"] == 0 and summary["evasion"] is False
 
 
 def test_track_refuses_a_bad_model():

@@ -356,6 +356,7 @@ def _cmd_track(args, dtype) -> int:
     summary.update(compile_time_s=compile_time, program_from_cache=loaded, run_time_s=run_time,
                    time_per_step_s=run_time / max(result.iterations, 1), arm_model=model_report(model),
                    **actuator_summary)
+    summary["evasion"] = summary["evasion"] and model is None  # the loaded arm takes no evasive step
     traj = time_run(args, moving.scene, result, options.plan, summary)  # before any output
     title = (f"{args.scenario} (moving) — {args.method} method"
              + (f" (N = {args.n_points})" if args.method == "points" else "") + f" — {result.status}")
@@ -426,7 +427,8 @@ def _track_text(summary: dict, result, options) -> str:
         ("method", method),
         ("gains", summary["gains"]),
         ("step", f"{summary['step']}, look-ahead {summary['anticipation_s']:g} s, "
-                 + (f"{result.evasive_steps} evasive step(s)" if options.evasion else "no evasion")),
+                 + (f"{result.evasive_steps} evasive step(s)" if summary["evasion"] else
+                    "no evasion" + (" (the loaded arm)" if summary["arm_model"]["kind"] == "loaded" else ""))),
         ("dtype", summary["dtype"]),
         ("status", result.status),
         ("steps", f"{result.iterations} of {summary['max_steps']} ({summary['horizon_s']:g} s of simulated time)"),
