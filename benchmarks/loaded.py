@@ -351,7 +351,8 @@ def moving_report(args, levels) -> int:
         report["levels"][name] = dict(c_pcc=c_pcc, c_loaded=c_load, ok_pcc=ok_pcc, ok_loaded=ok_load,
                                       status=np.asarray(r.status))
     lines += ["", f"Holds the goal: the loaded arm's tip within the hold tolerance ({hold}) of the goal at the last "
-              "step, no touch by the audit, and (load-aware) the rollout ran to its horizon. The PCC tracker without "
+              "step, no touch by the audit, and the rollout ran to its horizon (no collision, non-finite or "
+              "too_fast ending). The PCC tracker without "
               f"load holds {fmt_rate(int(np.sum(np.asarray(pcc.held_to_end))), args.n)} (held from its first reach "
               "to the end). Rates with 95 % Wilson intervals."]
     write_results(prefix, report, "\n".join(lines) + "\n")
