@@ -2,8 +2,9 @@
 lower bounds of the loaded arm's, at every step and during every motion, checked by a brute
 force on densely sampled equilibria (``loaded_backbone`` at 33 points per segment, at the steps
 and 4 instants between them) against the obstacles sampled at 2,001 points (a sampled clearance
-is never below the true one, so the checks hold at any resolution); the implicit
-Jacobians of the posed arm against the solve's own forward-mode Jacobian; the input boundary.
+is never below the true one, so the checks hold at any resolution), for a tracked moving scene
+with the branches at each instant too; the input boundary. (The posed arm's implicit Jacobians
+are checked in test_rod.py, beside the solve's.)
 Compiling the loaded rollout takes tens of seconds: the plans are in the slow tier."""
 
 import functools
