@@ -17,9 +17,10 @@ import numpy as np
 
 from ..base._compilation_cache import package_jit
 from ..base._status import Status, status_name
+from ..geometry._arm import PCC
 from ..geometry._clearance import contact_tolerance
 from ..geometry._closest import DEFAULT_OPTIONS
-from ..geometry._kinematics import tip_jacobian, tip_position
+from ..geometry._kinematics import tip_jacobian
 from ..geometry._obstacles import clearance_of, radius_and_mask, true_closest
 from ..rod._arm import LoadedArm
 from ..rod._equilibrium import solve_equilibrium, unconverged_error
@@ -277,15 +278,7 @@ def plan_device(device=None):
 
 
 @functools.cache
-def _start_clearance_program(solver):
-    def clearance(q, scenario):
-        return clearance_of(true_closest(q, scenario, solver), scenario)
-
-    return package_jit(clearance)
-
-
-@functools.cache
-def _loaded_start_program(solver):
+def _start_program(solver):
     def start(arm, q, scenario):
         posed = arm.at(q)
         sc = posed.widened(scenario)
@@ -302,11 +295,7 @@ def unreachable_result(scenario: Scenario, options: PlanOptions, reason: str, ar
     bound, as its rollouts record) are reported."""
     q0 = scenario.q0
     solver = options.solver if options.method == "curve" else DEFAULT_OPTIONS
-    if arm is None:
-        clearance = np.asarray(_start_clearance_program(solver)(q0, scenario))
-        tip = np.asarray(tip_position(q0))
-    else:
-        clearance, tip = (np.asarray(x) for x in _loaded_start_program(solver)(arm, q0, scenario))
+    clearance, tip = (np.asarray(x) for x in _start_program(solver)(PCC if arm is None else arm, q0, scenario))
     _, mask = radius_and_mask(scenario, np)
     c = clearance[mask]
     min_c = float(np.min(c, initial=np.inf))

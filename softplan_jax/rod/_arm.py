@@ -14,7 +14,7 @@ import jax.numpy as jnp
 
 from ..base._numerics import solve_small
 from ..base._validation import check_int
-from ._equilibrium import LoadedShape, integrate, point_on, solve_shape, step_data
+from ._equilibrium import LoadedShape, integrate, point_on, segment_nodes, solve_shape, step_data
 from ._model import RodModel
 from ._motion import loaded_motion_bound
 from ._pieces import piece_location, pieces_from_shape, pieces_steps
@@ -133,8 +133,7 @@ def _implicit_jacobian(q, model, m0, segments, fractions, steps: int):
     def points_and_tip_moment(m, q_):
         data, F = step_data(q_, model, steps)
         Rs, ps, ms = integrate(m, data, F)
-        idx = jnp.arange(n)[:, None] * steps + jnp.arange(steps + 1)[None, :]
-        shape = LoadedShape(ps[idx], Rs[idx], ms[idx], m, True, 0.0, 0)
+        shape = segment_nodes(Rs, ps, ms, m, True, 0.0, 0, n, steps)
         pts = jax.vmap(lambda i, f: point_on(shape, q_, model, steps, i, f))(segments, fractions)
         return pts, ms[-1]
 

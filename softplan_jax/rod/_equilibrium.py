@@ -303,11 +303,14 @@ def solve_shape(q, model: RodModel, steps: int) -> LoadedShape:
     # equilibrium (the residual is +inf where the full load was not reached).
     converged = (res <= _tolerance(q.dtype)) & jnp.all(jnp.isfinite(ps))
 
-    def nodes(x):  # (S + 1, ...) -> (n, steps + 1, ...): each segment's nodes, shared ends repeated
-        idx = jnp.arange(n)[:, None] * steps + jnp.arange(steps + 1)[None, :]
-        return x[idx]
+    return segment_nodes(Rs, ps, ms, m0, converged, res, it.astype(jnp.int32), n, steps)
 
-    return LoadedShape(nodes(ps), nodes(Rs), nodes(ms), m0, converged, res, it.astype(jnp.int32))
+
+def segment_nodes(Rs, ps, ms, m0, converged, residual, iterations, n: int, steps: int) -> LoadedShape:
+    """The :class:`LoadedShape` of an integration's nodes (S + 1, ...): each segment's
+    ``steps + 1`` nodes (a segment's last node repeated as the next one's first)."""
+    idx = jnp.arange(n)[:, None] * steps + jnp.arange(steps + 1)[None, :]
+    return LoadedShape(ps[idx], Rs[idx], ms[idx], m0, converged, residual, iterations)
 
 
 # Called on concrete arrays, the solve runs as one compiled program per shape (jit at the entry
@@ -316,12 +319,13 @@ _solve_jit = package_jit(solve_shape, None, static_argnames=("steps",))
 
 
 def _solve_entry(q, model, steps):
-    if is_concrete(q) and _concrete_model(model):
+    if is_concrete(q) and model_is_concrete(model):
         return _solve_jit(q, per_segment(model, q.shape[0], q.dtype), steps)
     return (_solve_jit if is_concrete(q) else solve_shape)(q, model, steps)
 
 
-def _concrete_model(model) -> bool:
+def model_is_concrete(model) -> bool:
+    """Every leaf of the model concrete (no tracer): the entry points may then jit."""
     return all(is_concrete(x) for x in jax.tree_util.tree_leaves(model))
 
 
@@ -397,7 +401,7 @@ def loaded_points(q, model: RodModel, segments, fractions, steps: int = DEFAULT_
     if fractions.ndim != 1 or segments.shape != fractions.shape:
         raise ValueError(f"segments and fractions must be (m,) arrays of one length; got {segments.shape} and "
                          f"{fractions.shape}")
-    concrete = is_concrete(q) and is_concrete(fractions) and is_concrete(segments) and _concrete_model(model)
+    concrete = is_concrete(q) and is_concrete(fractions) and is_concrete(segments) and model_is_concrete(model)
     if concrete:
         model = per_segment(model, q.shape[0], q.dtype)
     pts, converged, res, it = (_points_jit if concrete else _points)(q, model, segments, fractions, steps)
@@ -422,7 +426,7 @@ def loaded_points_jacobian(q, model: RodModel, segments, fractions, steps: int =
     q, steps = check_inputs(q, model, steps)
     fractions = jnp.asarray(fractions, q.dtype)
     segments = jnp.asarray(segments).astype(jnp.int32)
-    concrete = is_concrete(q) and is_concrete(fractions) and _concrete_model(model)
+    concrete = is_concrete(q) and is_concrete(fractions) and model_is_concrete(model)
     if concrete:
         model = per_segment(model, q.shape[0], q.dtype)
     return (_points_jacobian_jit if concrete else _points_jacobian)(q, model, segments, fractions, steps)

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 from ..base._compilation_cache import package_jit
 from ..base._numerics import safe_norm
 from ..base._validation import check_int, is_concrete
-from ._equilibrium import DEFAULT_STEPS, LoadedShape, check_inputs, solve_shape, unconverged_error
+from ._equilibrium import DEFAULT_STEPS, LoadedShape, check_inputs, model_is_concrete, solve_shape, unconverged_error
 from ._model import RodModel, per_segment, segment_material
 
 __all__ = ["loaded_pieces", "pieces_from_shape", "piece_location", "pieces_steps"]
@@ -155,7 +155,7 @@ def loaded_pieces(q, model: RodModel, pieces_per_segment: int, steps: int | None
     p = check_int(pieces_per_segment, "pieces_per_segment", 1)
     steps = pieces_steps(p, steps)
     q, steps = check_inputs(q, model, steps)
-    concrete = is_concrete(q) and all(is_concrete(x) for x in jax.tree_util.tree_leaves(model))
+    concrete = is_concrete(q) and model_is_concrete(model)
     if concrete:  # one program whether the model's fields are scalars or per segment
         model = per_segment(model, q.shape[0], q.dtype)
     Q, gap, converged, res, it = (_pieces_jit if concrete else _pieces)(q, model, p, steps)
