@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 import softplan_jax as sp
+from softplan_jax.geometry._arm import PCC
 from softplan_jax.search import _tree as global_planner
 from softplan_jax.search._fallback import _fallback_jit, _search_starts
 from softplan_jax.search._reach import _goal_configurations_jit
@@ -85,16 +86,17 @@ def test_goal_configurations_and_the_fallback_hold_one_exact_solve(monkeypatch):
             return real(*args, **kwargs)
         return solve
 
-    monkeypatch.setattr(reach_module, "clearances", counting(reach_module.clearances))
-    monkeypatch.setattr(machine, "clearances", counting(machine.clearances))
+    monkeypatch.setattr(reach_module, "posed_clearances", counting(reach_module.posed_clearances))
+    monkeypatch.setattr(machine, "posed_clearances", counting(machine.posed_clearances))
     s = scene()
     jax.make_jaxpr(lambda s, key, q: reach_module.goal_configurations(s, key, q, OPTS))(s, jax.random.PRNGKey(0), s.q0)
     assert len(sites) == 1
-    sites.clear()
     args = _fallback_args(s, np.asarray(s.q0)[None])  # a local "path" of the start alone
-    jax.make_jaxpr(lambda *a: global_planner.reach_and_search_batch(*a, OPTS, sp.geometry.SolverOptions(), 1e-6))(
-        *_stack(args))
-    assert len(sites) == 1
+    for arm in (PCC, sp.rod.LoadedArm(sp.RodModel(6.0, 4.0, 0.3))):  # the loaded arm's too
+        sites.clear()
+        jax.make_jaxpr(lambda *a, arm=arm: global_planner.reach_and_search_batch(
+            *a, OPTS, sp.geometry.SolverOptions(), 1e-6, arm))(*_stack(args))
+        assert len(sites) == 1
 
 
 @pytest.mark.slow
@@ -269,7 +271,7 @@ def test_fallback_program_runs_reachabilitys_ik(decided, rescued):  # rescued: c
         s = jax.tree_util.tree_map(lambda x, b=b: x[b], batch)
         proof = r.reason[b] in ("beyond_reach", "goal_in_obstacle")
         args = _fallback_args(s, np.asarray(s.q0)[None], proof=proof)  # reachability's extra start: q0
-        ik, out = jax.device_get(fn(*_stack(args)))
+        ik, out = jax.device_get(fn(PCC, *_stack(args)))
         want = (r.q_goal[b], r.certified[b], r.clearance[b], r.tip_error[b], r.best_error[b])
         if b == 0:  # certified at once
             assert r.certified[b, 0]
@@ -292,9 +294,9 @@ def test_search_lanes_run_independently(rescued):
     s, local, _ = rescued
     args = _fallback_args(s, local.q)
     fn = _fallback_jit(OPTS, sp.geometry.SolverOptions(), 1e-6)
-    one = jax.device_get(fn(*_stack(args))[1])
+    one = jax.device_get(fn(PCC, *_stack(args))[1])
     idle = (*args[:3], True, *args[4:6], jax.random.PRNGKey(4))  # proven unreachable: no search
-    two = jax.device_get(fn(*_stack(idle, args))[1])
+    two = jax.device_get(fn(PCC, *_stack(idle, args))[1])
     assert bool(one.found[0]) and bool(two.found[1]) and not bool(two.found[0])
     assert int(two.iterations[0]) == 0 and int(two.steps[0]) == 0
     for f in ("start", "steps", "iterations", "nodes", "path_nodes"):

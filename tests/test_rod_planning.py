@@ -3,8 +3,9 @@ lower bounds of the loaded arm's, at every step and during every motion, checked
 force on densely sampled equilibria (``loaded_backbone`` at 33 points per segment, at the steps
 and 4 instants between them) against the obstacles sampled at 2,001 points (a sampled clearance
 is never below the true one, so the checks hold at any resolution), for a tracked moving scene
-with the branches at each instant too; the input boundary. (The posed arm's implicit Jacobians
-are checked in test_rod.py, beside the solve's.)
+with the branches at each instant too, and for a path of the global fallback; the input
+boundary. (The posed arm's implicit Jacobians, its tip's included, are checked in test_rod.py,
+beside the solve's.)
 Compiling the loaded rollout takes tens of seconds: the plans are in the slow tier."""
 
 import functools
@@ -137,6 +138,45 @@ def test_a_bad_model_is_a_value_error():
         sp.plan(scenario, model=RodModel(1.0, 1.0, 0.0, (0.0, 0.0, -0.5)))
     with pytest.raises(ValueError, match="pieces_per_segment"):
         LoadedArm(RodModel(1.0, 1.0, 0.1), 0)
+    with pytest.raises(ValueError, match="model must be None"):
+        sp.plan_fallback(scenario, model="heavy")
+    from softplan_jax.search._fallback import rescue
+
+    with pytest.raises(ValueError, match="model must be None"):  # before any result is read
+        rescue(scenario, [], sp.PlanOptions(), model=(6.0, 4.0, 0.3))
+
+
+@pytest.mark.slow
+def test_the_fallback_rescues_the_loaded_arm_and_its_path_stays_clear_by_a_brute_force(tmp_path, capsys):
+    # softplan run (rescue with the model, as plan_fallback) on the tree, its local plan cut at 10
+    # steps (the brute-force test's program): the loaded arm's IK certifies a goal configuration
+    # and the search a path, every motion proven by the loaded arm's clearance (pieces less their
+    # gap) and its motion bound.
+    import json
+
+    out = tmp_path / "rescued.npz"
+    code, text, _ = _cli(capsys, "run", "tree", "--weight", "0.3", "--stiffness", "6", "--torsional-stiffness", "4",
+                         "--tip-load", "0,0,-0.05", "--max-steps", "10", "--json", "--out", out)
+    summary = json.loads(text)
+    assert code == 0 and summary["status"] == "reached" and summary["planner"] == "global", summary["reason"]
+    assert summary["arm_model"]["kind"] == "loaded" and summary["fallback"] is True and summary["global_start"] <= 10
+    scenario, model = sp.paper_scenario("tree"), RodModel(*MODEL_KEY[:3], MODEL_KEY[3])
+    r = np.load(out)
+    q = r["q"]
+    at_steps, between = along_path(q)
+    c_steps = brute_clearance(at_steps, scenario, MODEL_KEY)
+    recorded = np.min(r["clearance"], axis=1)
+    assert np.all(c_steps >= recorded - 1e-9), np.min(c_steps - recorded)
+    # Between steps: each motion's lower bound, its start's recorded clearance less the loaded
+    # motion bound, which the safe step keeps above twice the contact tolerance.
+    bound = np.asarray(jax.jit(jax.vmap(LoadedArm(model).motion_bound))(jnp.asarray(q[:-1]), jnp.asarray(q[1:])))
+    c_between = brute_clearance(between, scenario, MODEL_KEY).reshape(len(q) - 1, BETWEEN)
+    assert np.all(c_between >= (recorded[:-1] - bound)[:, None] - 1e-9)
+    assert np.all(recorded[:-1] - bound > 0.0) and not summary["collided"] and summary["min_clearance"] > 0.0
+    # the reported tip is the loaded tip, on the goal
+    tip = np.asarray(_backbones(MODEL_KEY)(jnp.asarray(q[-1:])))[0, -1, -1]
+    np.testing.assert_allclose(r["tip"][-1], tip, atol=1e-9)
+    assert np.linalg.norm(tip - np.asarray(scenario.goal)) < sp.PlanOptions().goal_tolerance
 
 
 def _cli(capsys, *argv):
@@ -211,6 +251,8 @@ def test_track_refuses_a_bad_model():
         sp.track(moving, model=RodModel(1.0, 1.0, 0.0, (0.0, 0.0, -0.5)))
     with pytest.raises(ValueError, match="bending_stiffness"):
         sp.track_batch(stack_moving_scenarios([moving, moving]), model=RodModel(np.ones(2), 1.0, 0.1))
+    with pytest.raises(ValueError, match="model must be None"):  # the tracker's fallback passes it on
+        sp.track_fallback(moving, model="heavy")
 
 
 def test_cli_refuses_a_bad_material_block(tmp_path, capsys):
@@ -238,7 +280,7 @@ def test_cli_plans_the_loaded_arm_of_a_material_block(tmp_path, capsys):
     summary = json.loads(out)
     assert summary["arm_model"] == {"kind": "loaded", "bending_stiffness": 6.0, "torsional_stiffness": 4.0,
                                     "weight_per_length": 0.3, "tip_load": [0.0, 0.0, -0.05]}
-    assert summary["status"] == "reached" and not summary["collided"] and summary["fallback"] is False
+    assert summary["status"] == "reached" and not summary["collided"] and summary["fallback"] is True
     # --pcc: the same file planned with the PCC arm
     code, out, _ = _cli(capsys, "run", path, "--json", "--pcc")
     assert json.loads(out)["arm_model"] == {"kind": "pcc"}

@@ -224,18 +224,16 @@ def _cmd_plan(args, dtype) -> int:
     from ..base._status import Status
     from ..search._fallback import RESCUED, rescue
 
-    if model is not None and not args.no_fallback and Status.from_label(result.status) in RESCUED:
-        warn("the global fallback certifies PCC paths: it does not run for the loaded arm")
-    elif not args.no_fallback and Status.from_label(result.status) in RESCUED:
+    if not args.no_fallback and Status.from_label(result.status) in RESCUED:
+        compiles = "about a minute" if model is None else "about a minute and a half for the loaded arm"
         print(f"softplan: the local planner ended {result.status}; deciding reachability and searching globally "
-              "(its programs compile once, about a minute; later runs load them from the cache) ...",
+              f"(its programs compile once, {compiles}; later runs load them from the cache) ...",
               file=sys.stderr, flush=True)
         t0 = time.perf_counter()
-        result = rescue(scenario, [result], options, seed=args.seed)[0]
+        result = rescue(scenario, [result], options, seed=args.seed, model=model)[0]
         times["fallback_time_s"] = time.perf_counter() - t0
     summary = _plan_summary(args, label, scenario, options, gain_values, result, escapes, times)
     summary["arm_model"] = model_report(model)
-    summary["fallback"] = summary["fallback"] and model is None
     summary["time_per_step_s"] = times["run_time_s"] / max(local_steps, 1)
     summary.update(actuator_summary)
     traj = time_run(args, scenario, result, options, summary)  # before any output: nothing written if it fails
@@ -344,14 +342,13 @@ def _cmd_track(args, dtype) -> int:
     run = _compiled_run if model is None else _loaded_run(model)
     track, compile_time, run_time, loaded = run(moving, gains, options, max_steps, args.seed)
     result = result_from_track(track, moving, float(gains.dt))
-    if result.status == "max_steps" and not args.no_fallback and model is not None:
-        warn("the global fallback certifies PCC paths: it does not run for the loaded arm")
-    elif result.status == "max_steps" and not args.no_fallback:
+    if result.status == "max_steps" and not args.no_fallback:
         from ..search._tracking import track_fallback
 
         print("softplan: the goal was never reached: planning the scene at rest with the global search, then "
               "tracking again along its path (--no-fallback: skip) ...", file=sys.stderr, flush=True)
-        result = track_fallback(moving, args.method, args.n_points, gains, max_steps, args.seed, **preset, **extra)
+        result = track_fallback(moving, args.method, args.n_points, gains, max_steps, args.seed, model=model,
+                                **preset, **extra)
     summary = _track_summary(args, options, gain_values, result, float(gains.dt), dtype)
     summary.update(compile_time_s=compile_time, program_from_cache=loaded, run_time_s=run_time,
                    time_per_step_s=run_time / max(result.iterations, 1), arm_model=model_report(model),
@@ -465,8 +462,7 @@ def _text_summary(s: dict) -> str:
         ("status", s["status"] + (f" ({s['reason']})" if s["reason"] else "")),
         ("planner", ("local (potential field, paper eq. 9)" if s["planner"] == "local" else
                      f"global: the local path to step {s['global_start']}, then the certified global search")
-         + ("" if s["fallback"] else "; fallback off (the loaded arm)"
-            if s.get("arm_model", {}).get("kind") == "loaded" else "; fallback off (--no-fallback)")),
+         + ("" if s["fallback"] else "; fallback off (--no-fallback)")),
         ("iterations", f"{s['iterations']} (max steps {s['max_steps']} of the local planner)"),
         ("reached", "yes" if s["reached"] else "no"),
         ("collided", "yes" if s["collided"] else "no"),

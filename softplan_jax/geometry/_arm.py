@@ -1,7 +1,7 @@
 """The arm model: what the planner asks of the arm's shape. A model gives the configuration the
-closest-point kernel sees, the tip, the Jacobians of arm points and a bound on how far any arm
-point moves along a straight motion in q, its shape's rows, and the scene widened by how far
-the shape may be off the arm.
+closest-point kernel sees, the tip, the Jacobians of arm points and of the tip, a bound on how
+far any arm point moves along a straight motion in q, its shape's rows, and the scene widened by
+how far the shape may be off the arm.
 :data:`PCC` is the piecewise-constant-curvature arm of paper §2.1; a model that bends the arm
 otherwise (:class:`~softplan_jax.rod._arm.LoadedArm`) provides the same methods, and ``at(q)``,
 the model posed at q, whose methods the planner's step calls with that q."""
@@ -9,6 +9,8 @@ the model posed at q, whose methods the planner's step calls with that q."""
 from __future__ import annotations
 
 from typing import NamedTuple
+
+import jax
 
 from ._kinematics import motion_bound, points_jacobian, tip_position
 
@@ -48,6 +50,10 @@ class PCCArm(NamedTuple):
         """``dP/dq`` (m, 3, 3n) of the shape's points at ``segments`` (m,), fractions ``s`` (m,)
         (paper §2.2)."""
         return points_jacobian(q, segments, s)
+
+    def tip_jacobian(self, q):
+        """``d tip / dq`` (3, 3n) by forward mode (paper §2.2)."""
+        return jax.jacfwd(tip_position)(q).reshape(3, 3 * q.shape[0])
 
     def motion_bound(self, q_a, q_b):
         """A bound () on how far any arm point moves along ``q_a + t (q_b - q_a)``, t in [0, 1]

@@ -18,8 +18,9 @@ import jax.numpy as jnp
 
 from ..base._compilation_cache import package_jit
 from ..base._numerics import contact_floor, evaluate_where, get_epsilon, safe_norm, solve_small
+from ._arm import PCC
 from ._closest import ClosestPoint
-from ._kinematics import backbone_points, motion_bound, segment_point
+from ._kinematics import backbone_points, segment_point
 from ._obstacles import map_obstacle_groups, map_obstacles, radius_and_mask, true_closest
 from ._point_sets import FixedPoint
 
@@ -188,7 +189,7 @@ def between_steps(q_a, q_b, truth_a: ClosestPoint, truth_b: ClosestPoint, scenar
     return D_min - radius_sum
 
 
-def swept_clear(q_a, q_b, truth_a: ClosestPoint, clearance_a, contact):
+def swept_clear(q_a, q_b, truth_a: ClosestPoint, clearance_a, contact, arm=PCC):
     """(m,) bool: the motion q_a -> q_b provably keeps every obstacle slot's
     clearance above ``contact``, so the between-step search cannot find a collision there.
 
@@ -207,10 +208,12 @@ def swept_clear(q_a, q_b, truth_a: ClosestPoint, clearance_a, contact):
       truth_a: ClosestPoint (leading axis m) at q_a.
       clearance_a: (m,) its clearance (distance minus radii; +inf: padding).
       contact: the contact tolerance (:func:`contact_tolerance`).
+      arm: the arm model whose motion bound B is (default the PCC arm; ``clearance_a`` then
+        the model's clearance, e.g. a loaded arm's widened by its pieces' gap).
     """
-    bound = motion_bound(q_a, q_b)[-1]
-    arm = jnp.sum(jnp.maximum(q_a[:, 0], q_b[:, 0]))
-    margin = PROOF_TOLERANCE * jnp.finfo(q_a.dtype).eps * (1.0 + arm + jnp.abs(truth_a.distance))
+    bound = arm.motion_bound(q_a, q_b)
+    length = jnp.sum(jnp.maximum(q_a[:, 0], q_b[:, 0]))
+    margin = PROOF_TOLERANCE * jnp.finfo(q_a.dtype).eps * (1.0 + length + jnp.abs(truth_a.distance))
     return truth_a.converged & (clearance_a - bound > contact + margin)
 
 

@@ -76,6 +76,10 @@ class LoadedArm:
         """``dP/dq`` of the loaded points (:meth:`_PosedArm.jacobians`; one solve)."""
         return self.at(q).jacobians(q, segments, s)
 
+    def tip_jacobian(self, q):
+        """``d tip / dq`` (3, 3n) of the loaded tip (:meth:`_PosedArm.tip_jacobian`; one solve)."""
+        return self.at(q).tip_jacobian(q)
+
     def motion_bound(self, q_a, q_b):
         """A bound () on how far any point of the loaded arm moves along the straight motion
         (:func:`~softplan_jax.rod._motion.loaded_motion_bound`; +inf where it does not close,
@@ -119,6 +123,12 @@ class _PosedArm:
         segment, fraction = piece_location(pieces, s, arm.pieces)
         J = _implicit_jacobian(q, arm.model, self.solved.base_moment, segment, fraction, arm.steps)
         return jnp.where(self.solved.converged, J, jnp.nan)
+
+    def tip_jacobian(self, q):
+        """``d tip / dq`` (3, 3n) through the equilibrium: :meth:`jacobians` at the end of the
+        last piece."""
+        last = self.arm.rows(q.shape[0]) - 1
+        return self.jacobians(q, jnp.array([last]), jnp.ones((1,), q.dtype))[0]
 
     def motion_bound(self, q_a, q_b):
         return self.arm.motion_bound(q_a, q_b)

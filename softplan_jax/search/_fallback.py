@@ -20,12 +20,12 @@ import numpy as np
 
 from ..base._compilation_cache import package_jit
 from ..base._status import Status, status_name
+from ..geometry._arm import PCC
 from ..geometry._clearance import contact_tolerance
 from ..geometry._closest import DEFAULT_OPTIONS
-from ..geometry._kinematics import tip_position
 from ..planning._batching import pad_batch
 from ..planning._options import make_options
-from ..planning._planner import PlanResult, plan, plan_batch
+from ..planning._planner import PlanResult, arm_model, plan, plan_batch
 from ..scenarios import Scenario, stack_scenarios
 from ._reach import ReachOptions, check_reach_options, scene_of, unreachable_proof
 from ._tree import reach_and_search_batch
@@ -38,15 +38,16 @@ RESCUED = (Status.STALLED, Status.MAX_STEPS)
 
 @functools.cache
 def _fallback_jit(options: ReachOptions, solver, contact: float):
-    """The fallback's one program: the IK, the search and its check (tree.reach_and_search_batch)."""
-    def fallback(scenarios, q_extra, ik_keys, proof, q_starts, n_starts, keys):
+    """The fallback's one program: the IK, the search and its check (tree.reach_and_search_batch),
+    the arm model an argument (the PCC arm has no leaves; a loaded arm's material is traced)."""
+    def fallback(arm, scenarios, q_extra, ik_keys, proof, q_starts, n_starts, keys):
         return reach_and_search_batch(scenarios, q_extra, ik_keys, proof, q_starts, n_starts, keys, options, solver,
-                                      contact)
+                                      contact, arm)
 
     return package_jit(fallback)
 
 
-_tips_jit = package_jit(jax.vmap(tip_position), None)
+_tips_jit = package_jit(lambda arm, q: jax.vmap(arm.tip)(q), None)
 
 
 def _start_roots(q_local: np.ndarray, count: int):
@@ -66,7 +67,7 @@ def _search_starts(q_local: np.ndarray, count: int):
 
 def plan_fallback(scenarios: Scenario, method: str = "curve", n_points: int = 10, gains=None, max_steps: int = 600,
                   seed=0, *, reach: ReachOptions = ReachOptions(), chunk: int = 1, progress: bool = False,
-                  **options):
+                  model=None, **options):
     """Plan with the local planner, and where it stalls or runs out of steps decide
     reachability and search globally (module docstring).
 
@@ -78,6 +79,10 @@ def plan_fallback(scenarios: Scenario, method: str = "curve", n_points: int = 10
       chunk: scenes per compiled search call (vmapped; the last chunk is padded).
         Default 1: one scene at a time, the fastest on the CPU (docs: Reaching every goal).
       progress: one line per finished stage/chunk on stderr.
+      model: None (the PCC arm) or a :class:`~softplan_jax.RodModel`: the loaded arm, for the
+        local planner (as :func:`~softplan_jax.plan`) and the fallback alike (its IK, its
+        certified motions and the check use the loaded tip, Jacobians, clearance and motion
+        bound).
 
     Returns:
       A :class:`~softplan_jax.PlanResult` (one scene) or a list of them (a batch),
@@ -96,25 +101,29 @@ def plan_fallback(scenarios: Scenario, method: str = "curve", n_points: int = 10
     t0 = time.perf_counter()
     B = batch.q0.shape[0]
     if single:  # exactly plan's rollout (plan_batch's vmapped program rounds differently)
-        results = [plan(scenarios, method, n_points, gains, max_steps, seed, **options)]
+        results = [plan(scenarios, method, n_points, gains, max_steps, seed, model=model, **options)]
     else:
-        r = jax.device_get(plan_batch(batch, method, n_points, gains, max_steps, seed, **options))
+        r = jax.device_get(plan_batch(batch, method, n_points, gains, max_steps, seed, model=model, **options))
         results = [_local_result(r, b, batch) for b in range(B)]
     if progress:
         _say(f"plan_fallback: local planner on {B} scenes, {time.perf_counter() - t0:.1f} s")
-    results = rescue(batch, results, opts, reach=reach, seed=seed, chunk=chunk, progress=progress)
+    results = rescue(batch, results, opts, reach=reach, seed=seed, chunk=chunk, progress=progress, model=model)
     return results[0] if single else results
 
 
 def rescue(scenarios: Scenario, results: list, options, *, reach: ReachOptions = ReachOptions(), seed=0,
-           chunk: int = 1, progress: bool = False) -> list:
+           chunk: int = 1, progress: bool = False, model=None) -> list:
     """The fallback after the local planner: for the results (PlanResult, one per scene of
     the batch ``scenarios``) that ended "stalled" or "max_steps", reachability and the
     global search; the others are returned unchanged. ``options``: the local planner's
-    PlanOptions (its contact tolerance, solver and goal tolerance are the search's)."""
+    PlanOptions (its contact tolerance, solver and goal tolerance are the search's).
+    ``model``: None (the PCC arm) or the :class:`~softplan_jax.RodModel` the local planner
+    used (ValueError for anything else)."""
     reach = check_reach_options(reach)
     seed = _int_seed(seed)
     batch = stack_scenarios([scenarios]) if scenarios.q0.ndim == 2 else scenarios
+    arm = arm_model(model, batch.q0.shape[-2])
+    arm = PCC if arm is None else arm
     results = list(results)
     dtype = batch.q0.dtype
     contact = contact_tolerance(options, dtype)
@@ -122,14 +131,16 @@ def rescue(scenarios: Scenario, results: list, options, *, reach: ReachOptions =
     todo = [b for b in range(len(results)) if Status.from_label(results[b].status) in RESCUED]
     if not todo:
         return results
-    _reach_and_search(batch, results, todo, reach, solver, contact, options.goal_tolerance, seed, chunk, progress)
+    _reach_and_search(batch, results, todo, reach, solver, contact, options.goal_tolerance, seed, chunk, progress,
+                      arm)
     return results
 
 
 def rescue_batch(scenarios: Scenario, rollout, options, *, reach: ReachOptions = ReachOptions(), seed=0,
-                 chunk: int = 1, progress: bool = False):
+                 chunk: int = 1, progress: bool = False, model=None):
     """:func:`rescue` after :func:`~softplan_jax.plan_batch`: the scenes of the batch
-    ``scenarios`` whose batched ``rollout`` ended stalled or at max_steps, as one sub-batch.
+    ``scenarios`` whose batched ``rollout`` ended stalled or at max_steps, as one sub-batch
+    (``model``: as :func:`rescue`).
 
     Returns:
       ``(idx, results)``: those scenes' indices in the batch (int array) and their
@@ -142,7 +153,7 @@ def rescue_batch(scenarios: Scenario, rollout, options, *, reach: ReachOptions =
     r = jax.tree_util.tree_map(lambda x: np.asarray(x)[idx], rollout)
     sub = jax.tree_util.tree_map(lambda x: x[idx], scenarios)
     local = [_local_result(r, k, sub) for k in range(idx.size)]
-    return idx, rescue(sub, local, options, reach=reach, seed=seed, chunk=chunk, progress=progress)
+    return idx, rescue(sub, local, options, reach=reach, seed=seed, chunk=chunk, progress=progress, model=model)
 
 
 def _int_seed(seed) -> int:
@@ -171,12 +182,14 @@ def _local_result(r, b: int, batch: Scenario) -> PlanResult:
     return result_from_rollout(one, scene_of(batch, b))
 
 
-def _reach_and_search(batch, results, todo, reach: ReachOptions, solver, contact, tolerance, seed, chunk, progress):
+def _reach_and_search(batch, results, todo, reach: ReachOptions, solver, contact, tolerance, seed, chunk, progress,
+                      arm=PCC):
     """Reachability and the global search of the scenes ``todo`` (their results replaced in
     place), in chunks of ``chunk`` scenes padded to one shape: one program whatever the number
     of scenes. The IK of a chunk's scene k has the key ``split(PRNGKey(seed), chunk)[k]`` and
     the extra start where the local planner stopped (as :func:`~softplan_jax.search._reach.reachability`
-    of the chunk); the search of scene b the key ``split(PRNGKey(seed + 1), B)[b]``."""
+    of the chunk); the search of scene b the key ``split(PRNGKey(seed + 1), B)[b]``. ``arm``: the
+    arm model."""
     host = jax.device_get(batch)
     fn = _fallback_jit(reach, solver, float(contact))
     R = int(reach.start_roots)
@@ -193,7 +206,7 @@ def _reach_and_search(batch, results, todo, reach: ReachOptions, solver, contact
         q_end = np.stack([results[b].q[-1] for b in part])
         args = (sub, q_end, np.array([bool(p) for p in proofs]), q_starts, n_starts, keys[part])
         sub, q_end, proof, q_starts, n_starts, part_keys = pad_batch(args, size)
-        ik, out = jax.device_get(fn(sub, q_end, ik_keys, proof, q_starts, n_starts, part_keys))
+        ik, out = jax.device_get(fn(arm, sub, q_end, ik_keys, proof, q_starts, n_starts, part_keys))
         _, certified, _, _, best = ik  # goal_configurations: (q, certified, clearance, tip_error, best_error)
         for k, b in enumerate(part):
             results[b] = results[b]._replace(best_error=float(best[k]))
@@ -208,17 +221,18 @@ def _reach_and_search(batch, results, todo, reach: ReachOptions, solver, contact
                 steps = int(out.steps[k])
                 q = np.concatenate([results[b].q[: k_root + 1], out.q[k][1 : steps + 1]])
                 check = out.clearance[k][: steps + 1], bool(out.proven[k])
-                results[b] = _with_path(results[b], q, k_root, scene_of(host, b), check, tolerance, out.q.shape[1])
+                results[b] = _with_path(results[b], q, k_root, scene_of(host, b), check, tolerance, out.q.shape[1],
+                                        arm)
         if progress:
             _say(f"plan_fallback: reachability and global search {min(a + size, len(todo))}/{len(todo)} scenes, "
                  f"{unreachable} unreachable, {time.perf_counter() - t0:.1f} s")
 
 
 def _with_path(local: PlanResult, q: np.ndarray, k_root: int, scenario: Scenario, check, tolerance,
-               size: int) -> PlanResult:
+               size: int, arm=PCC) -> PlanResult:
     """The result for the path q (the local path to step k_root, then the search's).
     ``check``: the search's check of its part ``q[k_root:]`` (SearchResult.clearance at
-    its steps, SearchResult.proven)."""
+    its steps, SearchResult.proven); ``arm``: the arm model (its tips)."""
     from ..geometry._obstacles import radius_and_mask
 
     c, proven = check
@@ -230,7 +244,7 @@ def _with_path(local: PlanResult, q: np.ndarray, k_root: int, scenario: Scenario
         return local._replace(reason="uncertified_step")  # cannot happen by construction; never reported as reached
     # The search's part padded with its last configuration to one shape (one program for every length).
     padded = np.concatenate([part, np.repeat(part[-1:], size - part.shape[0], axis=0)])
-    tips = np.concatenate([local.tip[:k_root], np.asarray(_tips_jit(jnp.asarray(padded)))[: part.shape[0]]])
+    tips = np.concatenate([local.tip[:k_root], np.asarray(_tips_jit(arm, jnp.asarray(padded)))[: part.shape[0]]])
     err = float(np.linalg.norm(np.asarray(scenario.goal) - tips[-1]))
     clearance = np.concatenate([local.clearance[:k_root], c[:, mask]])
     clear = float(np.min(c[:, mask])) if mask.any() else float("inf")

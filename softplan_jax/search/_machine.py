@@ -16,19 +16,20 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ..geometry._arm import PCC
 from ..geometry._clearance import swept_clear
 from ..geometry._obstacles import radius_and_mask
 from ..planning._batching import lanes_map
 from . import _motions as mo
 from ._reach import (
     ReachOptions,
-    clearances,
     ik_assess,
     ik_more,
     ik_result,
     ik_round_configurations,
     ik_round_end,
     ik_start,
+    posed_clearances,
     random_configurations,
 )
 
@@ -97,7 +98,7 @@ def _add(trees, T: int, tree, q, par, allowed):
 
 
 def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: ReachOptions, solver,
-               contact: float, ik=None):
+               contact: float, ik=None, arm=PCC):
     """The search of :func:`~softplan_jax.search._tree.global_search` for a batch of B scenes
     (module docstring; every argument with a leading axis B): ``(trees, length, start, out,
     steps, complete, clearance, proven)``, batched: ``clearance`` (B, S + 1, m) the check's
@@ -111,6 +112,9 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
     ``proof`` (the goal proven unreachable) is False. The tuple then ends with the IK's
     final :class:`~softplan_jax.search._reach.IKState` (batched).
 
+    ``arm``: the arm model (:mod:`~softplan_jax.geometry._arm`; one for the batch) whose tip,
+    Jacobians, clearances and motion bound the IK, every certified motion and the check use.
+
     The loop runs over the whole batch: in an iteration, a phase's handler runs (on the
     lanes whose motion ended in that phase; skipped when there is none), then one
     substep of every lane, kept where its motion is under way. So a lane costs one
@@ -123,7 +127,7 @@ def run_search(scenarios, q_starts, n_starts, q_goals, n_goals, keys, options: R
     n, dtype = q_starts.shape[-2], q_starts.dtype
 
     def lane(sc):
-        return _lane(sc, options, solver, contact, n, dtype, with_ik)
+        return _lane(sc, options, solver, contact, n, dtype, with_ik, arm)
 
     if with_ik:
         state = lanes_map(lambda sc, *a: lane(sc)[0](*a), scenarios, q_starts, n_starts, keys, *ik)
@@ -201,8 +205,9 @@ class _Lane:
     the search), the phases' handlers (:meth:`handlers`, list index = phase) and the substep
     of the current motion (:meth:`substep`, the one exact solve)."""
 
-    def __init__(self, scenario, options: ReachOptions, solver, contact: float, n: int, dtype, with_ik: bool):
-        self.scenario, self.options, self.solver, self.contact = scenario, options, solver, contact
+    def __init__(self, scenario, options: ReachOptions, solver, contact: float, n: int, dtype, with_ik: bool,
+                 arm=PCC):
+        self.scenario, self.options, self.solver, self.contact, self.arm = scenario, options, solver, contact, arm
         self.n, self.dtype, self.with_ik = n, dtype, with_ik
         self.T, self.S = int(options.tree_size), int(options.path_steps)
         self.G, self.S_ik = int(options.goal_roots), int(options.ik_starts)
@@ -353,7 +358,7 @@ class _Lane:
 
     # --- The IK (with_ik): a round's configurations, their exact solves (substeps), its end.
     def ik_round(self, s):
-        q = ik_round_configurations(s.ik, self.scenario, s.ik_starts, self.options)
+        q = ik_round_configurations(s.ik, self.scenario, s.ik_starts, self.options, self.arm)
         return s._replace(phase=jnp.asarray(_P_IK_SOLVE, jnp.int32), ik=s.ik._replace(q=q), ik_i=self.i0,
                           active=jnp.ones((), bool))
 
@@ -383,13 +388,13 @@ class _Lane:
         if self.with_ik:  # the IK: the round's start ik_i
             assess, i = s.phase == _P_IK_SOLVE, jnp.minimum(s.ik_i, self.S_ik - 1)
             q = jnp.where(assess, s.ik.q[i], q)
-        c, truth, ok = clearances(q, self.scenario, self.solver)
-        swept = swept_clear(q_j, out[jnp.minimum(j + 1, self.S)], truth, c, self.contact)
+        c, truth, ok, posed = posed_clearances(q, self.scenario, self.solver, self.arm)
+        swept = swept_clear(q_j, out[jnp.minimum(j + 1, self.S)], truth, c, self.contact, self.arm)
         proof = jnp.all(swept | ~self.mask) | (j >= s.steps)
         checking = s._replace(check_k=j + 1, proven=s.proven & proof, c_now=c, c_write=s.active,
                               active=j + 1 <= s.steps, write=self.f0)
         cap = jnp.where(walk, self.options.step_motion, jnp.inf).astype(self.dtype)  # min(allowed, inf) = allowed
-        t_new, good = mo.advance_fraction(q, s.q_e, s.t, c, ok, self.options, self.contact, cap=cap)
+        t_new, good = mo.advance_fraction(q, s.q_e, s.t, c, ok, self.options, self.contact, cap=cap, arm=self.arm)
         # A motion of the search (motions.advance).
         k = s.k + 1
         moving = s._replace(t=t_new, k=k, active=(k < s.limit) & (t_new < 1.0) & good, write=self.f0, c_write=self.f0)
@@ -406,7 +411,8 @@ class _Lane:
         new = _when(check, checking, _when(walk, walking, moving))
         if not self.with_ik:
             return new
-        solved, c_min, err, certified, free = ik_assess(q, c, truth, ok, self.scenario, self.options, self.contact)
+        solved, c_min, err, certified, free = ik_assess(q, c, truth, ok, posed, self.scenario, self.options,
+                                                        self.contact)
         ik = s.ik
         ik = ik._replace(solved=jax.tree_util.tree_map(lambda a, x: a.at[i].set(x), ik.solved, solved),
                          c=ik.c.at[i].set(c_min), err=ik.err.at[i].set(err), certified=ik.certified.at[i].set(certified),
@@ -415,7 +421,7 @@ class _Lane:
         return _when(assess, assessing, new)
 
 
-def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype, with_ik: bool = False):
+def _lane(scenario, options: ReachOptions, solver, contact: float, n: int, dtype, with_ik: bool = False, arm=PCC):
     """One lane's ``(init, handlers, substep)`` (:class:`_Lane`)."""
-    lane = _Lane(scenario, options, solver, contact, n, dtype, with_ik)
+    lane = _Lane(scenario, options, solver, contact, n, dtype, with_ik, arm)
     return lane.init, lane.handlers(), lane.substep

@@ -17,6 +17,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ..geometry._arm import PCC
 from ..geometry._clearance import safety_floor
 from ..geometry._closest import SolverOptions
 from ..geometry._kinematics import motion_bound
@@ -37,40 +38,43 @@ def wrap_delta(q_a, q_b):
 
 
 def line_bound(q_a, dq):
-    """Motion bound of the whole arm for the line q_a -> q_a + dq."""
+    """Motion bound of the whole PCC arm for the line q_a -> q_a + dq (the search's measure of
+    how far apart two configurations are, whatever the arm model: the nearest node, the length
+    of an extension; the certified motions use the model's own bound)."""
     return motion_bound(q_a, q_a + dq)[-1]
 
 
 def substep(q_a, dq, q_e, t, scenario: Scenario, options: ReachOptions, solver: SolverOptions, contact: float,
-            cap=None):
+            cap=None, arm=PCC):
     """One conservative-advancement substep of the motion q_a -> q_e (= q_a + dq) from its
     fraction t: the exact clearances at ``q = q_a + t dq``, the safe step
     ``alpha = safe_scale(q, q_e, c, 2 contact, f[, cap])`` and
     ``t_new = 1 if alpha >= 1 else t + alpha (1 - t)``. Returns ``(t_new, good)``; not
-    good (a solve did not converge, or alpha is not > 0): t_new = t, the motion stops."""
+    good (a solve did not converge, or alpha is not > 0): t_new = t, the motion stops.
+    ``arm``: the arm model whose clearances and motion bound these are."""
     q = q_a + t * dq
-    c, _, ok = clearances(q, scenario, solver)
-    return advance_fraction(q, q_e, t, c, ok, options, contact, cap)
+    c, _, ok = clearances(q, scenario, solver, arm)
+    return advance_fraction(q, q_e, t, c, ok, options, contact, cap, arm)
 
 
-def advance_fraction(q, q_e, t, c, ok, options: ReachOptions, contact: float, cap=None):
+def advance_fraction(q, q_e, t, c, ok, options: ReachOptions, contact: float, cap=None, arm=PCC):
     """The rest of :func:`substep` once the exact clearances ``c`` at ``q`` (``ok``: every
     solve converged) are known: ``(t_new, good)`` (for a caller that solves at q itself)."""
-    alpha = safe_scale(q, q_e, c, safety_floor(contact), options.safe_fraction, cap=cap)[0]
+    alpha = safe_scale(q, q_e, c, safety_floor(contact), options.safe_fraction, cap=cap, arm=arm)[0]
     good = ok & jnp.isfinite(alpha) & (alpha > 0)
     alpha = jnp.where(good, alpha, 0.0)
     return jnp.where(alpha >= 1.0, 1.0, t + alpha * (1.0 - t)).astype(q.dtype), good
 
 
 def advance(q_a, q_b, scenario: Scenario, substeps: int, options: ReachOptions, solver: SolverOptions,
-            contact: float):
+            contact: float, arm=PCC):
     """Walk the straight line q_a -> q_a + wrap_delta(q_a, q_b) by conservative advancement.
 
     Returns ``(q, t, reached)``: the configuration reached, its fraction t of
     the line, and ``t == 1``. Every configuration on the line up to t is
     collision-free (module docstring). It stops early after ``substeps``
     substeps (near an obstacle the substeps shrink with the clearance), or
-    where a solve does not converge (t = 0 when that is at q_a).
+    where a solve does not converge (t = 0 when that is at q_a). ``arm``: the arm model.
     """
     dq = wrap_delta(q_a, q_b)
     q_e = q_a + dq
@@ -82,7 +86,7 @@ def advance(q_a, q_b, scenario: Scenario, substeps: int, options: ReachOptions, 
 
     def body(state):
         k, t, _ = state
-        t_new, good = substep(q_a, dq, q_e, t, scenario, options, solver, contact)
+        t_new, good = substep(q_a, dq, q_e, t, scenario, options, solver, contact, arm=arm)
         return k + 1, t_new, ~good
 
     _, t, _ = jax.lax.while_loop(cond, body, (jnp.zeros((), jnp.int32), jnp.zeros((), dtype), jnp.zeros((), bool)))

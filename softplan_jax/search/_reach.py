@@ -7,7 +7,10 @@ jitted and vmapped over the starts, tip IK (Levenberg-Marquardt on ``goal - tip(
 c_j`` with ``w_j = max(0, 2 ik_clearance - c_j)`` and ``grad c_j = n_j^T J_sj`` (the envelope theorem
 at the exact closest pair of paper §2.3). A start is a certified goal configuration when its exact
 solves converged, its clearance is at least ``ik_clearance`` and ``|goal - tip| <= ik_tolerance``;
-without one the reason is a proof or ``no_ik_solution`` (a multi-start decision, not a proof)."""
+without one the reason is a proof or ``no_ik_solution`` (a multi-start decision, not a proof).
+The fallback's IK takes an arm model (``arm``, :mod:`~softplan_jax.geometry._arm`): the tip, its
+Jacobian, the points' Jacobians and the clearance are then the model's (a loaded arm's through
+its equilibrium, its clearance widened by its pieces' gap); both proofs hold for it too."""
 
 from __future__ import annotations
 
@@ -21,8 +24,8 @@ import numpy as np
 
 from ..base._compilation_cache import package_jit
 from ..base._numerics import damped_pinv, safe_norm, solve_small
+from ..geometry._arm import PCC
 from ..geometry._closest import DEFAULT_OPTIONS, SolverOptions
-from ..geometry._kinematics import points_jacobian, tip_position
 from ..geometry._obstacles import clearance_of, placeholder_closest, radius_and_mask, true_closest
 from ..planning._batching import lanes_map
 from ..scenarios import Scenario
@@ -179,31 +182,46 @@ def random_configurations(key, scenario: Scenario, options: ReachOptions, count:
     return jnp.stack([L, theta, phi], axis=-1)
 
 
-def clearances(q, scenario: Scenario, solver: SolverOptions = DEFAULT_OPTIONS):
+def clearances(q, scenario: Scenario, solver: SolverOptions = DEFAULT_OPTIONS, arm=PCC):
     """Exact clearance of every obstacle slot (+inf: padding), the closest pairs, and
-    whether every real slot's solve converged."""
-    truth = true_closest(q, scenario, solver)
+    whether every real slot's solve converged (:func:`posed_clearances` without the posed arm)."""
+    return posed_clearances(q, scenario, solver, arm)[:3]
+
+
+def posed_clearances(q, scenario: Scenario, solver: SolverOptions, arm=PCC):
+    """The exact clearances of the arm model ``arm`` at q (the planner's arm-model seam,
+    :mod:`~softplan_jax.geometry._arm`): ``(c (m,), truth, ok, posed)``. ``posed = arm.at(q)``;
+    ``truth`` the exact closest pairs of its shape (for a loaded arm: its pieces, rows of
+    ``posed.shape(q)``); ``c`` their distance less the radii of the scene as the shape must see
+    it (``posed.widened``: the pieces' proven gap added), so a lower bound of the model's
+    clearance; ``ok`` every real slot's solve converged and no clearance is NaN (a loaded arm
+    whose equilibrium did not converge gives NaN)."""
+    posed = arm.at(q)
+    sc = posed.widened(scenario)
+    truth = true_closest(posed.shape(q), sc, solver)
     _, mask = radius_and_mask(scenario)
-    c = clearance_of(truth, scenario)
+    c = clearance_of(truth, sc)
     ok = jnp.all(truth.converged | ~mask) & jnp.all(~jnp.isnan(c))
-    return c, truth, ok
+    return c, truth, ok, posed
 
 
-def _tip_lm(q, scenario: Scenario, iterations):
+def _tip_lm(q, scenario: Scenario, iterations, arm=PCC):
     """Levenberg-Marquardt on goal - tip(q), lengths in the box; a step that does not
     lower the error is refused (and the damping raised), so the error never grows.
-    ``iterations``: an int, or a traced int (the IK's rounds choose it)."""
+    ``iterations``: an int, or a traced int (the IK's rounds choose it). ``arm``: the arm
+    model whose tip and tip Jacobian these are."""
     n = q.shape[0]
     dtype = q.dtype
     eye = jnp.eye(3, dtype=dtype)
 
     def err(q):
-        return scenario.goal - tip_position(q)
+        return scenario.goal - arm.tip(q)
 
     def body(_, carry):
         q, lam = carry
-        e = err(q)
-        J = jax.jacfwd(tip_position)(q).reshape(3, 3 * n)
+        posed = arm.at(q)
+        e = scenario.goal - posed.tip(q)
+        J = posed.tip_jacobian(q)
         dq = J.T @ solve_small(J @ J.T + lam * eye, e)
         q_new = clip_lengths(q + dq.reshape(n, 3), scenario)
         better = jnp.sum(err(q_new) ** 2) < jnp.sum(e**2)
@@ -216,20 +234,21 @@ def _tip_lm(q, scenario: Scenario, iterations):
     return q
 
 
-def _push_step(q, c, truth, scenario: Scenario, options: ReachOptions):
+def _push_step(q, c, truth, scenario: Scenario, options: ReachOptions, arm=PCC):
     """One null-space step: the tip kept on the goal, the arm moved up the exact
     clearance gradient of every obstacle within 2 ik_clearance (see the module docstring).
-    ``c, truth``: :func:`clearances` at q."""
+    ``c, truth``: :func:`clearances` at q (of the arm model ``arm``)."""
     n = q.shape[0]
     dtype = q.dtype
+    posed = arm.at(q)
     away = truth.arm_point - truth.obstacle_point
     normal = away / jnp.maximum(safe_norm(away), jnp.finfo(dtype).tiny)[:, None]
-    J_s = points_jacobian(q, truth.segment, truth.s)  # (m, 3, 3n)
+    J_s = posed.jacobians(q, truth.segment, truth.s)  # (m, 3, 3n)
     grad_c = jnp.einsum("ka,kaj->kj", normal, J_s)  # (m, 3n): d c_j / d q (envelope theorem)
     w = jnp.where(jnp.isfinite(c), jnp.maximum(2.0 * options.ik_clearance - c, 0.0), 0.0)
     push = w @ grad_c
-    e = scenario.goal - tip_position(q)
-    J = jax.jacfwd(tip_position)(q).reshape(3, 3 * n)
+    e = scenario.goal - posed.tip(q)
+    J = posed.tip_jacobian(q)
     Jp = damped_pinv(J, jnp.asarray(1e-3, dtype))
     dq = Jp @ e + (jnp.eye(3 * n, dtype=dtype) - Jp @ J) @ push
     dq = jnp.clip(dq, -0.2, 0.2)  # at most 0.2 per coordinate: the push is a local linearisation
@@ -284,21 +303,21 @@ def ik_more(state: IKState, options: ReachOptions):
     return (state.r < 2) | ((state.r - 2 < options.ik_clear_iterations) & ~jnp.any(state.certified))
 
 
-def ik_round_configurations(state: IKState, scenario: Scenario, starts, options: ReachOptions):
+def ik_round_configurations(state: IKState, scenario: Scenario, starts, options: ReachOptions, arm=PCC):
     """The configurations (S, n, 3) that the IK's round ``state.r`` assesses (no exact solve):
     round 0 the starts; round 1 ik_iterations tip steps from them; later rounds a null-space push
     from the last round's clearances and 3 tip steps (one copy of the tip IK in the program, its
     number of steps chosen by the round)."""
     r = state.r
-    pushed = jax.vmap(lambda q, s: _push_step(q, *s, scenario, options))(state.q, state.solved)
+    pushed = jax.vmap(lambda q, s: _push_step(q, *s, scenario, options, arm))(state.q, state.solved)
     steps = jnp.where(r == 0, 0, jnp.where(r == 1, options.ik_iterations, 3))
-    return jax.vmap(lambda q: _tip_lm(q, scenario, steps))(jnp.where(r <= 1, starts, pushed))
+    return jax.vmap(lambda q: _tip_lm(q, scenario, steps, arm))(jnp.where(r <= 1, starts, pushed))
 
 
-def ik_assess(q, c_all, truth, ok, scenario: Scenario, options: ReachOptions, contact):
-    """The IK's verdict on q from the exact solve at q (:func:`clearances`: ``c_all, truth, ok``):
-    ``(solved, c, err, certified, free)`` (kept: the next push starts from ``solved``)."""
-    err = safe_norm(scenario.goal - tip_position(q))
+def ik_assess(q, c_all, truth, ok, posed, scenario: Scenario, options: ReachOptions, contact):
+    """The IK's verdict on q from the exact solve at q (:func:`posed_clearances`: ``c_all, truth,
+    ok, posed``): ``(solved, c, err, certified, free)`` (kept: the next push starts from ``solved``)."""
+    err = safe_norm(scenario.goal - posed.tip(q))
     c = jnp.min(c_all, initial=jnp.inf)
     finite = jnp.all(jnp.isfinite(q)) & jnp.isfinite(err)
     certified = finite & ok & (c >= options.ik_clearance) & (err <= options.ik_tolerance)
@@ -312,11 +331,11 @@ def ik_round_end(state: IKState) -> IKState:
                           best=jnp.minimum(state.best, jnp.min(jnp.where(state.free, state.err, jnp.inf))))
 
 
-def _ik_round(state: IKState, scenario: Scenario, starts, options: ReachOptions, solver, contact):
+def _ik_round(state: IKState, scenario: Scenario, starts, options: ReachOptions, solver, contact, arm=PCC):
     """One round of the IK's loop, its one exact solve site (see goal_configurations)."""
-    q = ik_round_configurations(state, scenario, starts, options)
+    q = ik_round_configurations(state, scenario, starts, options, arm)
     solved, c, err, certified, free = jax.vmap(
-        lambda q: ik_assess(q, *clearances(q, scenario, solver), scenario, options, contact))(q)
+        lambda q: ik_assess(q, *posed_clearances(q, scenario, solver, arm), scenario, options, contact))(q)
     return ik_round_end(IKState(state.r, q, solved, c, err, certified, free, state.best))
 
 

@@ -47,7 +47,8 @@ def waypoint_path(tips, count: int, speed: float, attach, dtype) -> GoalPath:
 
 def track_fallback(moving: MovingScenario, method: str = "curve", n_points: int = 10, gains=None,
                    max_steps: int = 600, seed=0, *, reach: ReachOptions = ReachOptions(), waypoints: int = 32,
-                   waypoint_speed: float | None = None, retries: int = 1, progress: bool = False, **options):
+                   waypoint_speed: float | None = None, retries: int = 1, progress: bool = False, model=None,
+                   **options):
     """Track the goal of a moving scene, and where the tracker never reaches it, track again
     guided by the global search's path at rest (module docstring).
 
@@ -61,6 +62,9 @@ def track_fallback(moving: MovingScenario, method: str = "curve", n_points: int 
       retries: guided runs that do not reach the goal run again, up to this many times,
         each with other seeds of the escapes' random walks, >= 0.
       progress: a line per stage on stderr.
+      model: None (the PCC arm) or a :class:`~softplan_jax.RodModel`: the loaded arm, for the
+        tracker (as :func:`~softplan_jax.track`) and the search at rest
+        (:func:`~softplan_jax.plan_fallback`) alike.
 
     Returns:
       A :class:`~softplan_jax.planning._tracking.TrackResult` (one scene) or a list of
@@ -81,7 +85,7 @@ def track_fallback(moving: MovingScenario, method: str = "curve", n_points: int 
     given = gains if gains is not None else default_gains(dtype)
     v_max, dt = float(given.v_max), float(given.dt)
     speed = 0.5 * v_max if waypoint_speed is None else float(waypoint_speed)
-    kw = dict(method=method, n_points=n_points, gains=gains, max_steps=max_steps, seed=seed, **options)
+    kw = dict(method=method, n_points=n_points, gains=gains, max_steps=max_steps, seed=seed, model=model, **options)
     scenes = [moving] if single else [jax.tree_util.tree_map(lambda x, b=b: x[b], moving)
                                       for b in range(moving.scene.q0.shape[0])]
     results = [track(moving, **kw)] if single else _results(track_batch(moving, **kw), scenes, dt)
@@ -94,7 +98,7 @@ def track_fallback(moving: MovingScenario, method: str = "curve", n_points: int 
     t0 = time.perf_counter()
     rest = stack_scenarios([scenes[b].scene._replace(goal=scenes[b].goal_path.points[0]) for b in todo])
     plan_options = {k: v for k, v in options.items() if k in PlanOptions._fields}
-    planned = plan_fallback(rest, method, n_points, gains, max_steps, seed, reach=reach, **plan_options)
+    planned = plan_fallback(rest, method, n_points, gains, max_steps, seed, reach=reach, model=model, **plan_options)
     if progress:
         _say(f"track_fallback: {len(todo)} never reached; at rest {sum(p.status == 'reached' for p in planned)} "
              f"planned, {time.perf_counter() - t0:.1f} s")

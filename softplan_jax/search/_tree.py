@@ -15,6 +15,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ..geometry._arm import PCC
 from ..geometry._closest import SolverOptions
 from ..geometry._kinematics import tip_position
 from ..planning._batching import lanes_map
@@ -87,18 +88,19 @@ def global_search_batch(scenarios: Scenario, q_starts, n_starts, q_goals, n_goal
 
 
 def reach_and_search_batch(scenarios: Scenario, q_extra, ik_keys, proof, q_starts, n_starts, keys,
-                           options: ReachOptions, solver: SolverOptions, contact: float):
+                           options: ReachOptions, solver: SolverOptions, contact: float, arm=PCC):
     """The global fallback's program for B scenes (every argument with a leading axis B): the IK
     of :func:`~softplan_jax.search._reach.goal_configurations` (``ik_keys``, extra starts
     ``q_extra``), then :func:`global_search_batch` from its first ``goal_roots`` results where
     the first is certified and ``proof`` (the goal proven unreachable) is False, in one loop
-    with one exact solve site (:func:`~softplan_jax.search._machine.run_search`).
+    with one exact solve site (:func:`~softplan_jax.search._machine.run_search`). ``arm``: the arm
+    model (:mod:`~softplan_jax.geometry._arm`) the IK and the search certify.
 
     Returns ``(ik, search)``: ``ik`` as :func:`~softplan_jax.search._reach.goal_configurations`
     returns it (batched), ``search`` a :class:`SearchResult` (not found where the IK certified
     nothing or a proof holds)."""
     *found, ik = run_search(scenarios, q_starts, n_starts, None, None, keys, options, solver, contact,
-                            ik=(ik_keys, q_extra, proof))
+                            ik=(ik_keys, q_extra, proof), arm=arm)
     return lanes_map(ik_result, ik), _result(*found)
 
 
