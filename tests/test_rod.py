@@ -99,12 +99,14 @@ def test_jacobian_matches_finite_differences_and_reverse_mode():
     np.testing.assert_array_equal(np.stack(piece_location(pieces, s, arm.pieces)), np.stack([seg, fr]))
     def posed_jacobians(q_):
         posed = arm.at(q_)
-        return posed.jacobians(q_, pieces, s), posed.tip_jacobian(q_)
+        return posed.jacobians_with_tip(q_, pieces, s), posed.tip_jacobian(q_)
 
-    posed, tip = jax.jit(jax.vmap(posed_jacobians))(jnp.asarray(np.stack([q0, q])))
+    (posed, with_tip), tip = jax.jit(jax.vmap(posed_jacobians))(jnp.asarray(np.stack([q0, q])))
     np.testing.assert_allclose(np.asarray(posed), np.stack(Js), rtol=0, atol=1e-10)
-    # the tip's Jacobian (the fallback's IK) is the last point's: segment 2 at fraction 1
+    # the tip's Jacobian (the fallback's IK), alone and beside the points (its push), is the last
+    # point's: segment 2 at fraction 1
     np.testing.assert_allclose(np.asarray(tip), np.stack(Js)[:, 3], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(np.asarray(with_tip), np.stack(Js)[:, 3], rtol=0, atol=1e-10)
     # Reverse mode through the implicit solve, in q and in the material (one program):
     # against forward mode in q, and central differences in EI.
     def objective(x, EI):

@@ -225,9 +225,8 @@ def _cmd_plan(args, dtype) -> int:
     from ..search._fallback import RESCUED, rescue
 
     if not args.no_fallback and Status.from_label(result.status) in RESCUED:
-        compiles = "about a minute" if model is None else "about a minute and a half for the loaded arm"
         print(f"softplan: the local planner ended {result.status}; deciding reachability and searching globally "
-              f"(its programs compile once, {compiles}; later runs load them from the cache) ...",
+              "(its programs compile once, about a minute; later runs load them from the cache) ...",
               file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         result = rescue(scenario, [result], options, seed=args.seed, model=model)[0]

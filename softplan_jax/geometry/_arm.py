@@ -55,6 +55,10 @@ class PCCArm(NamedTuple):
         """``d tip / dq`` (3, 3n) by forward mode (paper §2.2)."""
         return jax.jacfwd(tip_position)(q).reshape(3, 3 * q.shape[0])
 
+    def jacobians_with_tip(self, q, segments, s):
+        """``(`` :meth:`jacobians` ``,`` :meth:`tip_jacobian` ``)``."""
+        return self.jacobians(q, segments, s), self.tip_jacobian(q)
+
     def motion_bound(self, q_a, q_b):
         """A bound () on how far any arm point moves along ``q_a + t (q_b - q_a)``, t in [0, 1]
         (:func:`~softplan_jax.geometry._kinematics.motion_bound`)."""

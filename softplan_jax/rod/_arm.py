@@ -80,6 +80,10 @@ class LoadedArm:
         """``d tip / dq`` (3, 3n) of the loaded tip (:meth:`_PosedArm.tip_jacobian`; one solve)."""
         return self.at(q).tip_jacobian(q)
 
+    def jacobians_with_tip(self, q, pieces, s):
+        """:meth:`_PosedArm.jacobians_with_tip` (one solve)."""
+        return self.at(q).jacobians_with_tip(q, pieces, s)
+
     def motion_bound(self, q_a, q_b):
         """A bound () on how far any point of the loaded arm moves along the straight motion
         (:func:`~softplan_jax.rod._motion.loaded_motion_bound`; +inf where it does not close,
@@ -129,6 +133,13 @@ class _PosedArm:
         last piece."""
         last = self.arm.rows(q.shape[0]) - 1
         return self.jacobians(q, jnp.array([last]), jnp.ones((1,), q.dtype))[0]
+
+    def jacobians_with_tip(self, q, pieces, s):
+        """``(`` :meth:`jacobians` ``,`` :meth:`tip_jacobian` ``)`` from one pass through the
+        equilibrium (the tip as one more point)."""
+        last = jnp.full((1,), self.arm.rows(q.shape[0]) - 1, jnp.asarray(pieces).dtype)
+        J = self.jacobians(q, jnp.concatenate([pieces, last]), jnp.concatenate([s, jnp.ones((1,), s.dtype)]))
+        return J[:-1], J[-1]
 
     def motion_bound(self, q_a, q_b):
         return self.arm.motion_bound(q_a, q_b)

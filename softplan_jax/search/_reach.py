@@ -209,29 +209,26 @@ def _tip_lm(q, scenario: Scenario, iterations, arm=PCC):
     """Levenberg-Marquardt on goal - tip(q), lengths in the box; a step that does not
     lower the error is refused (and the damping raised), so the error never grows.
     ``iterations``: an int, or a traced int (the IK's rounds choose it). ``arm``: the arm
-    model whose tip and tip Jacobian these are."""
+    model whose tip and tip Jacobian these are. Each trip of the loop poses the arm once
+    (one equilibrium solve for a loaded arm): at the start, then at each step's candidate,
+    whose tip error and Jacobian are kept where it is accepted."""
     n = q.shape[0]
     dtype = q.dtype
     eye = jnp.eye(3, dtype=dtype)
 
-    def err(q):
-        return scenario.goal - arm.tip(q)
-
-    def body(_, carry):
-        q, lam = carry
-        posed = arm.at(q)
-        e = scenario.goal - posed.tip(q)
-        J = posed.tip_jacobian(q)
+    def body(k, carry):
+        q, e, J, lam, q_c = carry
+        posed = arm.at(q_c)
+        e_c, J_c = scenario.goal - posed.tip(q_c), posed.tip_jacobian(q_c)
+        better = (jnp.sum(e_c**2) < jnp.sum(e**2)) & jnp.all(jnp.isfinite(q_c))
+        lam = jnp.where(k == 0, lam, jnp.clip(jnp.where(better, lam * 0.3, lam * 10.0), 1e-9, 1e6))
+        better = better | (k == 0)  # trip 0 poses the start itself
+        q, e, J = jnp.where(better, q_c, q), jnp.where(better, e_c, e), jnp.where(better, J_c, J)
         dq = J.T @ solve_small(J @ J.T + lam * eye, e)
-        q_new = clip_lengths(q + dq.reshape(n, 3), scenario)
-        better = jnp.sum(err(q_new) ** 2) < jnp.sum(e**2)
-        better = better & jnp.all(jnp.isfinite(q_new))
-        q = jnp.where(better, q_new, q)
-        lam = jnp.clip(jnp.where(better, lam * 0.3, lam * 10.0), 1e-9, 1e6)
-        return q, lam
+        return q, e, J, lam, clip_lengths(q + dq.reshape(n, 3), scenario)
 
-    q, _ = jax.lax.fori_loop(0, iterations, body, (q, jnp.asarray(1e-2, dtype)))
-    return q
+    start = (q, jnp.zeros(3, dtype), jnp.zeros((3, 3 * n), dtype), jnp.asarray(1e-2, dtype), q)
+    return jax.lax.fori_loop(0, iterations + 1, body, start)[0]
 
 
 def _push_step(q, c, truth, scenario: Scenario, options: ReachOptions, arm=PCC):
@@ -243,12 +240,11 @@ def _push_step(q, c, truth, scenario: Scenario, options: ReachOptions, arm=PCC):
     posed = arm.at(q)
     away = truth.arm_point - truth.obstacle_point
     normal = away / jnp.maximum(safe_norm(away), jnp.finfo(dtype).tiny)[:, None]
-    J_s = posed.jacobians(q, truth.segment, truth.s)  # (m, 3, 3n)
+    J_s, J = posed.jacobians_with_tip(q, truth.segment, truth.s)  # (m, 3, 3n), (3, 3n)
     grad_c = jnp.einsum("ka,kaj->kj", normal, J_s)  # (m, 3n): d c_j / d q (envelope theorem)
     w = jnp.where(jnp.isfinite(c), jnp.maximum(2.0 * options.ik_clearance - c, 0.0), 0.0)
     push = w @ grad_c
     e = scenario.goal - posed.tip(q)
-    J = posed.tip_jacobian(q)
     Jp = damped_pinv(J, jnp.asarray(1e-3, dtype))
     dq = Jp @ e + (jnp.eye(3 * n, dtype=dtype) - Jp @ J) @ push
     dq = jnp.clip(dq, -0.2, 0.2)  # at most 0.2 per coordinate: the push is a local linearisation
