@@ -58,6 +58,12 @@ OBSTACLE_SAMPLES = 401
 GOAL_TOLERANCE = 0.01  # the planner's default (PlanOptions.goal_tolerance)
 
 
+def command(args, levels, mode: str = "") -> str:
+    """The report's command line (``mode``: "", "--moving" or "--fallback"), in backticks."""
+    return (f"`python benchmarks/loaded.py {mode + ' ' if mode else ''}--seed {args.seed} --n {args.n} --levels "
+            f"{','.join(levels)} --max-steps {args.max_steps} --chunk {args.chunk} --between {args.between}`")
+
+
 def model_of(gamma: float):
     import softplan_jax as sp
 
@@ -321,8 +327,7 @@ def moving_report(args, levels) -> int:
     stopped = [int(s) for s in (sp.Status.COLLIDED, sp.Status.NONFINITE, sp.Status.TOO_FAST, sp.Status.START_COLLIDED)]
     ran_out = lambda r: ~np.isin(np.asarray(r.status), stopped)  # ran to its horizon
     lines = [f"# Tracking with the loaded arm: {args.n} random moving scenes (seed {args.seed})", "",
-             f"`python benchmarks/loaded.py --moving --seed {args.seed} --n {args.n} --levels {','.join(levels)} "
-             f"--max-steps {args.max_steps} --chunk {args.chunk} --between {args.between}` (audit: the equilibria at "
+             f"{command(args, levels, '--moving')} (audit: the equilibria at "
              f"every step and {args.between} instants between, the curves moved to each instant, {POINTS} points per "
              f"segment, curves at {OBSTACLE_SAMPLES} points). Load as the static report: w = {WEIGHT} N/m, "
              f"EI = w L^3 / gamma, GJ = 2 EI / 3.", "",
@@ -388,8 +393,7 @@ def fallback_report(args, levels) -> int:
     scenes = sp.random_scenarios(args.seed, args.n)
     tables = _obstacle_table(scenes, scenes.curves.coeffs.shape[1])
     lines = [f"# The loaded arm with the global fallback: {args.n} random scenes (seed {args.seed})", "",
-             f"`python benchmarks/loaded.py --fallback --seed {args.seed} --n {args.n} --levels {','.join(levels)} "
-             f"--max-steps {args.max_steps} --chunk {args.chunk} --between {args.between}` (audit: the equilibria at "
+             f"{command(args, levels, '--fallback')} (audit: the equilibria at "
              f"every step and {args.between} instants between, {POINTS} points per segment, obstacles at "
              f"{OBSTACLE_SAMPLES} points). Load as the static report: w = {WEIGHT} N/m, EI = w L^3 / gamma, "
              "GJ = 2 EI / 3.", "",
@@ -507,8 +511,7 @@ def main(argv=None) -> int:
                            compile_s=pcc["compile_s"]), levels={})
     lines = [
         f"# PCC plans on the loaded arm, and the load-aware planner: {args.n} random scenes (seed {args.seed})", "",
-        f"`python benchmarks/loaded.py --seed {args.seed} --n {args.n} --levels {','.join(levels)} "
-        f"--max-steps {args.max_steps} --chunk {args.chunk} --between {args.between}` (max_steps {args.max_steps}, chunk "
+        f"{command(args, levels)} (max_steps {args.max_steps}, chunk "
         f"{args.chunk}; audit: the equilibria at every step and {args.between} instants between, {POINTS} points "
         f"per segment, obstacles at {OBSTACLE_SAMPLES} points). Load: w = {WEIGHT} N/m, EI = w L^3 / gamma "
         f"(L = {ARM_LENGTH} m), GJ = 2 EI / 3.", "",

@@ -190,11 +190,10 @@ def _checked_model(args, path, q0):
     arm), checked against the arm and to carry its load at the start pose q0 (InputError)."""
     model = resolve_model(args, path)
     if model is not None:
-        from ..planning._planner import arm_model, check_start_carried
+        from ..planning._planner import start_arm
 
         try:
-            arm_model(model, q0.shape[0])
-            check_start_carried(q0, model)
+            start_arm(model, q0)
         except ValueError as err:
             raise InputError(str(err)) from None
     return model

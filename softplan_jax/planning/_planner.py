@@ -220,12 +220,15 @@ def arm_model(model, n_segments: int):
     return LoadedArm(model)
 
 
-def check_start_carried(q0, model) -> None:
-    """ValueError where the loaded arm has no stable equilibrium at the start pose q0 (the rod
-    cannot carry the load there: nothing to plan from)."""
-    shape = solve_equilibrium(q0, model)
-    if not bool(shape.converged):
-        raise unconverged_error(shape.residual, shape.iterations, model)
+def start_arm(model, q0):
+    """:func:`arm_model` for an arm starting at q0 (n, 3), and a ValueError where the loaded arm
+    has no stable equilibrium at q0 (the rod cannot carry the load there: nothing to plan from)."""
+    arm = arm_model(model, q0.shape[0])
+    if arm is not None:
+        shape = solve_equilibrium(q0, model)
+        if not bool(shape.converged):
+            raise unconverged_error(shape.residual, shape.iterations, model)
+    return arm
 
 
 def _plan_here(scenario, method, n_points, gains, max_steps, seed, options, model=None) -> PlanResult:
@@ -234,9 +237,7 @@ def _plan_here(scenario, method, n_points, gains, max_steps, seed, options, mode
     opts = make_options(method, n_points, **options)
     g = check_gains(gains, scenario.q0.dtype, scenario.q0.shape[0], scenario.q0)
     prng_key(seed)  # a bad seed is a ValueError before anything compiles
-    arm = arm_model(model, scenario.q0.shape[0])
-    if arm is not None:
-        check_start_carried(scenario.q0, model)
+    arm = start_arm(model, scenario.q0)
     reason = unreachable_reason(scenario)  # its proofs hold for the loaded arm too (inextensible)
     if reason:
         return unreachable_result(scenario, opts, reason, arm)

@@ -20,7 +20,7 @@ from ..base._status import status_name
 from ..geometry._obstacles import radius_and_mask
 from ..scenarios._motion import MovingScenario, goal_at
 from ._options import make_track_options
-from ._planner import arm_model, check_gains, check_start_carried
+from ._planner import arm_model, check_gains, start_arm
 from ._programs import rollout_batch, rollout_jit, strong_gains
 from ._records import Rollout
 from ._step import Gains
@@ -122,7 +122,7 @@ def track(moving: MovingScenario, method: str = "curve", n_points: int = 10, gai
     opts = make_track_options(method, n_points, **options)
     dtype = moving.scene.q0.dtype
     g = strong_gains(check_gains(gains, dtype, moving.n_segments), dtype)
-    arm = _loaded_arm(model, moving.scene.q0)
+    arm = start_arm(model, moving.scene.q0)
     r = rollout_jit(moving, g, opts, max_steps, seed, arm=arm)
     return result_from_track(r, moving, float(g.dt))
 
@@ -177,15 +177,6 @@ def track_batch(movings: MovingScenario, method: str = "curve", n_points: int = 
     r = rollout_batch.in_chunks(movings, g, opts, max_steps, seed, chunk=chunk, progress=progress, lanes=lanes,
                                 devices=1, label="track_batch", arm=arm)
     return jax.device_get(r)
-
-
-def _loaded_arm(model, q0):
-    """The arm model of one tracked scene (:func:`~softplan_jax.planning._planner.arm_model`),
-    its start pose checked to carry the load."""
-    arm = arm_model(model, q0.shape[0])
-    if arm is not None:
-        check_start_carried(q0, model)
-    return arm
 
 
 def goal_trajectory(moving: MovingScenario, times):
