@@ -176,6 +176,7 @@ def test_run_all_rejects_unknown_scripts(capsys):
 QUICK_ONLY = [("ab", "ab", []), ("baselines", "baselines", []), ("closest", "closest", []),
               ("evasion", "evasion", []), ("gpu", "gpu", []), ("paper_presets", "paper_tables", ["--presets"]),
               ("speed_targets", "speed_targets", []), ("speed_targets_segments", "speed_targets", ["--segments"]),
+              ("speed_targets_cold", "speed_targets", ["--cold"]),
               ("sweep_scale", "sweep_scale", []),
               ("throughput", "throughput", []), ("timing", "timing", []), ("tuners", "tuning", ["--tuners"]),
               ("viewer_latency", "viewer_latency", []), ("loaded", "loaded", [])]
