@@ -87,6 +87,9 @@ SHARED = {
 # Units in this order (largest first, so that the other worker's smaller units fill
 # the time the largest takes); units not listed follow in collection order.
 FIRST = ["planner", "cli", "reach", "test_benchmarks", "test_closest", "test_batch", "test_fitting", "test_kinematics"]
+# The slow tier's order (``-m slow``): the loaded arm's files first, the largest of that tier
+# (compiling the loaded rollouts and the loaded fallback); started last, they ran alone at its end.
+SLOW_FIRST = ["test_rod_planning", "planner", "test_rod", "test_batch", "test_rod_elastica", "cli", "reach"]
 
 
 def _unit(module: str) -> str:
@@ -99,10 +102,12 @@ def _module(nodeid: str) -> str:
 
 @pytest.hookimpl(trylast=True)  # after pytest's own reordering by fixtures: files stay contiguous
 def pytest_collection_modifyitems(config, items):
+    order = SLOW_FIRST if (config.getoption("markexpr", "") or "").strip() == "slow" else FIRST
+
     def rank(item):
         module = _module(item.nodeid)
         unit = _unit(module)
-        first = FIRST.index(unit) if unit in FIRST else len(FIRST)
+        first = order.index(unit) if unit in order else len(order)
         return first, SHARED[unit].index(module) if unit in SHARED else 0
 
     items.sort(key=rank)  # stable: pytest's order within a file
