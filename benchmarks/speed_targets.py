@@ -278,21 +278,14 @@ def count_recompiles(steps):
 
 def cli_runs(runs=2):
     """Wall seconds of ``softplan run tree`` in ``runs`` fresh processes sharing one empty
-    cache directory (XDG_CACHE_HOME), as a new user runs it twice."""
-    import subprocess
+    cache directory (:func:`cold_run`), as a new user runs it twice."""
     import tempfile
 
-    walls = []
     with tempfile.TemporaryDirectory() as cache:
-        env = dict(os.environ, XDG_CACHE_HOME=cache)
-        env.pop("SOFTPLAN_CACHE_DIR", None)
-        env.pop("SOFTPLAN_COMPILATION_CACHE", None)
-        for _ in range(runs):
-            t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "softplan_jax.cli", "run", "tree"], env=env, check=True,
-                           stdout=subprocess.DEVNULL)
-            walls.append(time.perf_counter() - t0)
-    return walls
+        runs = [cold_run("tree", cache) for _ in range(runs)]
+    if any(r["rc"] for r in runs):
+        raise RuntimeError(f"softplan run tree failed: exit codes {[r['rc'] for r in runs]}")
+    return [r["wall_s"] for r in runs]
 
 
 COLD_TARGET_S = 10.0
