@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 __all__ = [
+    "batch_folded",
     "get_epsilon",
     "shared_constant",
     "series_threshold",
@@ -243,6 +244,30 @@ def evaluate_where(todo, fn, chunk: int, fill):
         return out, left.at[idx].set(False, mode="drop")
 
     return jax.lax.while_loop(lambda state: jnp.any(state[1]), body, (tie(fill, todo), todo))[0]
+
+
+def batch_folded(fn):
+    """``fn`` with a batching rule (``jax.custom_batching.custom_vmap``) that calls ``fn``
+    itself on the batched arguments, every argument given the batch axis: for a ``fn`` that
+    takes any leading axes and folds them into one array of work (a loop over the work to do,
+    :func:`evaluate_where`), so that a batch pays for its members' work together instead of
+    running the loop as long as its busiest member. Nested ``vmap`` folds one axis per level.
+    custom_vmap has no reverse-mode rule: the arguments must be ``stop_gradient``-ed."""
+
+    @jax.custom_batching.custom_vmap
+    def folded(*args):
+        return fn(*args)
+
+    @folded.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        def lift(x, batched):
+            return x if batched else jnp.broadcast_to(x, (axis_size, *jnp.shape(x)))
+
+        args = [jax.tree_util.tree_map(lift, a, b) for a, b in zip(args, in_batched, strict=True)]
+        out = folded(*args)
+        return out, jax.tree_util.tree_map(lambda _: True, out)
+
+    return folded
 
 
 def when_any(pred, fn, skip, operands, chunk: int | str | None = None):

@@ -1,7 +1,9 @@
 """Closest-point providers: how a rollout gets the exact closest pair between the arm and every
 obstacle slot at each step. Each provider prepares per-scene data once, starts a state, and
 answers a query at q with the pairs, its next state and the number of (segment, curve) pairs
-that took the full solve of paper §2.3."""
+that took the full solve of paper §2.3. ``d0`` and ``travel`` of a query (the repulsion's reach,
+a clearance, :func:`~softplan_jax.planning._gains.repulsion_reach`; each obstacle's travel since
+the previous step) are for :class:`NearPairs`; the other providers ignore them."""
 
 from __future__ import annotations
 
@@ -10,9 +12,18 @@ from typing import NamedTuple
 import jax.numpy as jnp
 
 from ._closest import SolverOptions
-from ._obstacles import placeholder_closest, true_closest, warm_cells, warm_closest, warm_state
+from ._obstacles import (
+    near_closest,
+    near_state,
+    placeholder_closest,
+    radius_and_mask,
+    true_closest,
+    warm_cells,
+    warm_closest,
+    warm_state,
+)
 
-__all__ = ["WarmPairs", "ExactPairs", "NoPairs"]
+__all__ = ["WarmPairs", "NearPairs", "ExactPairs", "NoPairs"]
 
 
 def _curve_pairs(q, scene):
@@ -35,9 +46,34 @@ class WarmPairs(NamedTuple):
         """The state before the first step, for a shape of ``rows`` segments (None: the scene's arm)."""
         return warm_state(scene, rows)
 
-    def query(self, q, scene, cells, state, fresh):
+    def query(self, q, scene, cells, state, fresh, d0=None, travel=None):
         """``(pairs with a leading axis m, next state, full solves () int32)`` at q."""
         return warm_closest(q, scene, self.solver, cells, state, fresh)
+
+
+class NearPairs(NamedTuple):
+    """:class:`WarmPairs` for the pairs that can act on the step, a certified lower bound on the
+    distance for the others (:mod:`softplan_jax.geometry._near_pairs`): a pair is solved where its
+    bound is below the reach, the arm's and the largest obstacle's radius plus ``d0 + margin``
+    (a clearance of ``d0 + margin``). In a moving scene the obstacles' travel is subtracted
+    from the bounds, and ``d0`` includes the field's look-ahead."""
+
+    solver: SolverOptions
+    margin: float
+
+    def prepare(self, scene):
+        return warm_cells(scene, self.solver)
+
+    def init(self, scene, rows=None):
+        return near_state(scene, rows)
+
+    def query(self, q, scene, cells, state, fresh, d0=None, travel=None):
+        """As :meth:`WarmPairs.query`; ``d0`` the repulsion's reach (a clearance); ``travel``
+        (m,) each obstacle's travel since the previous step (None: static)."""
+        radius, mask = radius_and_mask(scene)
+        widest = jnp.max(jnp.where(mask, radius, 0.0), initial=0.0)
+        reach = jnp.max(scene.arm_radius) + widest + d0 + self.margin
+        return near_closest(q, scene, self.solver, cells, state, fresh, reach, travel)
 
 
 class ExactPairs(NamedTuple):
@@ -51,7 +87,7 @@ class ExactPairs(NamedTuple):
     def init(self, scene, rows=None):
         return ()
 
-    def query(self, q, scene, cells, state, fresh):
+    def query(self, q, scene, cells, state, fresh, d0=None, travel=None):
         return true_closest(q, scene, self.solver), state, _curve_pairs(q, scene)
 
 
@@ -64,5 +100,5 @@ class NoPairs(NamedTuple):
     def init(self, scene, rows=None):
         return ()
 
-    def query(self, q, scene, cells, state, fresh):
+    def query(self, q, scene, cells, state, fresh, d0=None, travel=None):
         return placeholder_closest(q, scene), state, jnp.zeros((), jnp.int32)

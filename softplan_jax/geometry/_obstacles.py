@@ -15,6 +15,8 @@ import numpy as np
 
 from ._closest import ClosestPoint, SolverOptions, curve_closest
 from ._curves import curve_points
+from ._kinematics import motion_bound
+from ._near_pairs import near_curves
 from ._point_curve import point_curve_distance, point_curve_lower_bounds
 from ._point_sets import point_set_closest, points_closest
 from ._warm_start import curve_data, warm_curves
@@ -31,6 +33,8 @@ __all__ = [
     "model_closest",
     "warm_cells",
     "warm_state",
+    "near_state",
+    "near_closest",
     "warm_closest",
     "obstacle_samples",
     "point_obstacle_distances",
@@ -248,14 +252,63 @@ def warm_closest(q, scenario, solver: SolverOptions, cells, state, fresh):
         warm_curves(q, curves, c, u, fresh, active, solver)
         for (curves, active), c, u in zip(_curve_groups(scenario), cells, state, strict=True)
     ]
+    closest, fallbacks = _with_point_sets(q, scenario, outs)
+    return closest, tuple(o[1] for o in outs), fallbacks
+
+
+def near_state(scenario, rows=None):
+    """The state of :func:`near_closest` before the first step: ``(groups, q_prev)``, per curve
+    stack every pair's u* and distance bound, zeros (m_g, n), and the previous configuration,
+    zeros (n, 3); n the arm's segments or ``rows`` (unused: the first step solves every pair)."""
+    n = scenario.q0.shape[0] if rows is None else rows
+    dtype = scenario.q0.dtype
+    groups = tuple((jnp.zeros((c.u_range.shape[0], n), dtype),) * 2 for c, _ in _curve_groups(scenario))
+    return groups, jnp.zeros((n, 3), dtype)
+
+
+def near_closest(q, scenario, solver: SolverOptions, cells, state, fresh, reach, travel=None):
+    """:func:`warm_closest` solving only the curve pairs whose distance bound is below ``reach``
+    (:func:`~softplan_jax.geometry._near_pairs.near_curves`; the others report their bound).
+
+    Args:
+      q, scenario, solver, cells, fresh: as :func:`warm_closest`.
+      state: the previous step's state (:func:`near_state` before the first step).
+      reach: () a distance, centre line to centre line.
+      travel: (m,) how far each obstacle slot can have moved since the previous step (None:
+        a static scene).
+
+    Returns:
+      ``(ClosestPoint with a leading axis m, the next state, fallbacks () int32)``.
+    """
+    groups, q_prev = state
+    bound = motion_bound(q_prev, q)
+    travels = [None] * len(groups) if travel is None else _group_slices(scenario, travel)
+    outs = [
+        near_curves(q, curves, c, g, bound, fresh, active, reach, solver, tr)
+        for (curves, active), c, g, tr in zip(_curve_groups(scenario), cells, groups, travels, strict=True)
+    ]
+    closest, fallbacks = _with_point_sets(q, scenario, outs)
+    return closest, (tuple(o[1] for o in outs), jax.lax.stop_gradient(q)), fallbacks
+
+
+def _group_slices(scenario, x):
+    """A per-slot array (m, ...) cut into :func:`_curve_groups`' stacks: the polynomial stack's
+    slots, then each parametric curve's slot (the point sets' slots between them left out)."""
+    m_c, m_p = scenario.curves.coeffs.shape[0], scenario.points.shape[0]
+    parts = [x[:m_c]] if m_c else []
+    return parts + [x[m_c + m_p + k : m_c + m_p + k + 1] for k in range(len(scenario.parametric))]
+
+
+def _with_point_sets(q, scenario, outs):
+    """``(ClosestPoint of every slot, fallbacks)`` from the curve stacks' ``(closest, state,
+    fallbacks)``: the point sets' exact closest points inserted in their slots."""
     parts = [o[0] for o in outs]
     m_c, m_p = scenario.curves.coeffs.shape[0], scenario.points.shape[0]
     if m_p:
         pts = jax.vmap(lambda p, m: point_set_closest(q, p, m))(scenario.points, scenario.point_mask)
         parts.insert(1 if m_c else 0, pts)
     fallbacks = sum((o[2] for o in outs), jnp.zeros((), jnp.int32))
-    new_state = tuple(o[1] for o in outs)
-    return _concatenate(parts, empty_closest(q.dtype)), new_state, fallbacks
+    return _concatenate(parts, empty_closest(q.dtype)), fallbacks
 
 
 def model_closest(q, scenario, truth: ClosestPoint, method: str, n_points: int,

@@ -20,7 +20,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ..base._numerics import evaluate_where
+from ..base._numerics import batch_folded, evaluate_where
 from ._closest import SolverOptions, closest_from_pairs
 from ._closest_newton import (
     Segment,
@@ -138,7 +138,7 @@ def _piece_bounds(seg: Segment, curve, data: CurveData, u_i, half):
     return jnp.sqrt(jnp.maximum(q, 0.0)) - 0.125 * kappa * (b - a) ** 2, outside, t
 
 
-class _Pairs(NamedTuple):
+class Pairs(NamedTuple):
     """Every (curve, segment) pair's solution: arrays (m, n) (or (n,) for one curve)."""
 
     s: jax.Array
@@ -153,7 +153,7 @@ def _per_pair(fn):
     return jax.vmap(jax.vmap(fn, in_axes=(None, 0, 0)), in_axes=(0, None, 0))
 
 
-def _polish_and_certify(segs: Segment, curves, data: CurveData, u_prev, solver: SolverOptions):
+def polish_and_certify(segs: Segment, curves, data: CurveData, u_prev, solver: SolverOptions):
     """Polish every (curve, segment) pair from u_prev and certify it.
 
     Args:
@@ -163,7 +163,7 @@ def _polish_and_certify(segs: Segment, curves, data: CurveData, u_prev, solver: 
       solver: SolverOptions (static): its grid_u sets the window.
 
     Returns:
-      (_Pairs with arrays (m, n), certified (m, n) bool).
+      (Pairs with arrays (m, n), certified (m, n) bool).
     """
     dtype = u_prev.dtype
     u_prev = jnp.clip(u_prev, curves.u_range[:, :1], curves.u_range[:, 1:])
@@ -190,10 +190,10 @@ def _polish_and_certify(segs: Segment, curves, data: CurveData, u_prev, solver: 
         return jax.vmap(one)(segs, u)
 
     certified = jax.vmap(certify)(curves, data, d2_w, u_w) & conv
-    return _Pairs(s_w, u_w, d2_w, conv), certified
+    return Pairs(s_w, u_w, d2_w, conv), certified
 
 
-def _fallback(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, solver: SolverOptions) -> _Pairs:
+def fallback(segs: Segment, curves, data: CurveData, pairs: Pairs, fail, solver: SolverOptions) -> Pairs:
     """The full solve of every failed pair (fail (m, n)); each failed pair keeps the
     smaller of its full and polished D^2. Under ``vmap`` the failures of the whole
     batch are solved together (see :func:`_fallback_fn`)."""
@@ -209,25 +209,11 @@ def _fallback_fn(solver: SolverOptions):
     iteration solving a pair for EVERY member: a batch of B would pay B full pair
     solves per failure of its worst member. The rule instead folds the batch axis into
     the array and solves only the failed pairs of all members, a chunk at a time
-    (:func:`_solve_failed`; docs: "How the planner works inside"). Nested ``vmap`` folds one
-    axis per level. custom_vmap has no reverse-mode rule; none is needed, as every input is stop_gradient-ed
-    (the JVP of a rollout sees only symbolic-zero tangents here).
+    (:func:`_solve_failed`, :func:`~softplan_jax.base._numerics.batch_folded`; docs: "How the
+    planner works inside"). custom_vmap has no reverse-mode rule; none is needed, as every input
+    is stop_gradient-ed (the JVP of a rollout sees only symbolic-zero tangents here).
     """
-
-    @jax.custom_batching.custom_vmap
-    def fallback(segs, curves, data, pairs, fail):
-        return _solve_failed(segs, curves, data, pairs, fail, solver)
-
-    @fallback.def_vmap
-    def _rule(axis_size, in_batched, *args):
-        def lift(x, batched):
-            return x if batched else jnp.broadcast_to(x, (axis_size, *jnp.shape(x)))
-
-        args = [jax.tree_util.tree_map(lift, a, b) for a, b in zip(args, in_batched, strict=True)]
-        out = fallback(*args)
-        return out, jax.tree_util.tree_map(lambda _: True, out)
-
-    return fallback
+    return batch_folded(lambda segs, curves, data, pairs, fail: _solve_failed(segs, curves, data, pairs, fail, solver))
 
 
 def fallback_trips(platform: str | None = None) -> int:
@@ -247,8 +233,8 @@ def fallback_chunk(pairs: int, trips: int | None = None) -> int:
     return min(max(FALLBACK_CHUNK, -(-pairs // trips)), pairs)
 
 
-def _solve_failed(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, solver: SolverOptions) -> _Pairs:
-    """The loop of :func:`_fallback` over any leading axes ``lead`` (``fail``:
+def _solve_failed(segs: Segment, curves, data: CurveData, pairs: Pairs, fail, solver: SolverOptions) -> Pairs:
+    """The loop of :func:`fallback` over any leading axes ``lead`` (``fail``:
     lead + (m, n); segs: lead + (n,); curves, data: lead + (m,)): the failed
     pairs go through :func:`~softplan_jax.base._numerics.evaluate_where`, ``chunk``
     at a time (1 without leading axes, else :func:`fallback_chunk`), and each keeps the
@@ -263,7 +249,7 @@ def _solve_failed(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, s
         return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) :])), tree)
 
     segs_f, curves_f, data_f = flat(segs), flat(curves), flat(data)
-    pairs_f = _Pairs(*(x.reshape(total) for x in pairs))
+    pairs_f = Pairs(*(x.reshape(total) for x in pairs))
     todo = fail.reshape(total)
 
     def solve(idx):
@@ -271,11 +257,11 @@ def _solve_failed(segs: Segment, curves, data: CurveData, pairs: _Pairs, fail, s
         curve = jax.tree_util.tree_map(lambda x: x[b, k], curves_f)
         c = jax.tree_util.tree_map(lambda x: x[b, k], data_f)
         seg = jax.tree_util.tree_map(lambda x: x[b, i], segs_f)
-        return _Pairs(*solve_pair_reduced(seg, curve, c.u_grid, c.C_grid, solver))
+        return Pairs(*solve_pair_reduced(seg, curve, c.u_grid, c.C_grid, solver))
 
     new = evaluate_where(todo, solve, chunk, pairs_f)
     keep = todo & (new.d2 <= pairs_f.d2)
-    return _Pairs(*(jnp.where(keep, a, b).reshape(fail.shape) for a, b in zip(new, pairs_f, strict=True)))
+    return Pairs(*(jnp.where(keep, a, b).reshape(fail.shape) for a, b in zip(new, pairs_f, strict=True)))
 
 
 def warm_curves(q, curves, data: CurveData, u_prev, fresh, active, solver: SolverOptions):
@@ -303,9 +289,9 @@ def warm_curves(q, curves, data: CurveData, u_prev, fresh, active, solver: Solve
     curves_ng = jax.tree_util.tree_map(jax.lax.stop_gradient, curves)
     data = jax.tree_util.tree_map(jax.lax.stop_gradient, data)
     u_prev = jax.lax.stop_gradient(u_prev)
-    pairs, certified = _polish_and_certify(segs_ng, curves_ng, data, u_prev, solver)
+    pairs, certified = polish_and_certify(segs_ng, curves_ng, data, u_prev, solver)
     fail = (fresh | ~certified) & active[:, None]
-    pairs = _fallback(segs_ng, curves_ng, data, pairs, fail, solver)
+    pairs = fallback(segs_ng, curves_ng, data, pairs, fail, solver)
     cps = jax.vmap(lambda c, s, u, d2, conv: closest_from_pairs(segs, c, s, u, d2, conv))(
         curves, pairs.s, pairs.u, pairs.d2, pairs.converged
     )

@@ -24,7 +24,7 @@ from ..base._status import Status
 from ..base._validation import check_int
 from ..geometry._arm import PCC
 from ..geometry._closest import ClosestPoint, SolverOptions
-from ..geometry._closest_pairs import ExactPairs, NoPairs, WarmPairs
+from ..geometry._closest_pairs import ExactPairs, NearPairs, NoPairs, WarmPairs
 from ..geometry._obstacles import clearance_of, placeholder_closest, radius_and_mask
 from ._records import Record, Rollout, finish, record_zeros, setup
 from ._world import make_world, world_data
@@ -93,10 +93,13 @@ def check_engine_sizes(max_steps, step_chunk=DEFAULT_STEP_CHUNK, lanes=None) -> 
 
 def closest_pairs(plan):
     """The closest-point provider of a rollout's PlanOptions: the certified warm start
-    (``warm_start``, the default solver), else the full solve where exact pairs are needed (the
+    (``warm_start``, the default solver), solving only the pairs within reach of the Khatib
+    repulsion (``far_margin`` not None); else the full solve where exact pairs are needed (the
     curve method, or the collision checks), else none (the N-point model alone)."""
     exact = plan.check_collisions or plan.method == "curve"
     if exact and plan.warm_start and isinstance(plan.solver, SolverOptions):
+        if plan.far_margin is not None and plan.repulsion == "khatib":
+            return NearPairs(plan.solver, plan.far_margin)
         return WarmPairs(plan.solver)
     return ExactPairs(plan.solver) if exact else NoPairs()
 
@@ -200,6 +203,7 @@ def make_step(world, gains, options, max_steps: int, prepared=None, arm=PCC):
     plan, dtype = su.plan, su.scene.q0.dtype
     pairs = closest_pairs(plan)
     w = make_world(world, su, gains, world_data(world, su, pairs) if prepared is None else prepared, arm)
+    d0, travel = w.reach() if isinstance(pairs, NearPairs) else (None, None)
 
     def step(carry: Carry, k):
         q = carry.q
@@ -207,7 +211,7 @@ def make_step(world, gains, options, max_steps: int, prepared=None, arm=PCC):
         posed = arm.at(q)  # the arm model at q (one equilibrium solve for a loaded arm)
         sc, cells = w.at(t)
         sc = posed.widened(sc)
-        truth, warm_next, fallbacks = pairs.query(posed.shape(q), sc, cells, carry.warm, carry.first)
+        truth, warm_next, fallbacks = pairs.query(posed.shape(q), sc, cells, carry.warm, carry.first, d0, travel)
         running = carry.status == Status.RUNNING
         c, cb, searched, nan, hit = _clearances(w, carry, q, truth, running, t, sc)
         V_e = sc.goal - posed.tip(q)

@@ -18,7 +18,8 @@ import numpy as np
 
 from ..base._numerics import safe_norm, shared_constant
 
-__all__ = ["Gains", "GainFunction", "GOAL_GAINS", "default_gains", "repulsion_scale", "goal_scaled"]
+__all__ = ["Gains", "GainFunction", "GOAL_GAINS", "default_gains", "repulsion_scale", "repulsion_reach",
+           "goal_scaled"]
 
 
 class Gains(NamedTuple):
@@ -125,6 +126,15 @@ def repulsion_scale(gains, clearance, segment):
     if not isinstance(gains, GainFunction):
         return jnp.ones_like(clearance)
     return jnp.exp(_knot_interp(gains.rep_profile, clearance / gains.d0) + gains.seg_weights[segment])
+
+
+def repulsion_reach(gains):
+    """() the largest clearance at which the Khatib repulsion acts (beyond it the force is 0,
+    paper eq. 9 with Khatib's potential): ``d0``, times the largest multiplier of d0 a
+    :class:`GainFunction`'s ``goal_profile`` can apply (:func:`goal_scaled`)."""
+    if not isinstance(gains, GainFunction) or gains.goal_profile is None:
+        return gains.d0
+    return gains.d0 * jnp.exp(jnp.max(gains.goal_profile[GOAL_GAINS.index("d0")]))
 
 
 def goal_scaled(gains, V_e):

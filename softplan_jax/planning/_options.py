@@ -63,6 +63,14 @@ class PlanOptions(NamedTuple):
         search is skipped where it cannot find a collision (see
         ``Rollout.between``). False: search every motion (for
         comparison).
+      far_margin: with the warm start and the Khatib repulsion, in a static scene, solve only
+        the (segment, curve) pairs whose certified lower bound on the clearance is below
+        ``d0 + far_margin`` (:mod:`softplan_jax.geometry._near_pairs`): the others exert no
+        force and keep their bound (the exact clearance less the arm's motion since it was
+        solved). The clearances a rollout records above ``d0 + far_margin`` are then such
+        lower bounds, and a safe step bounded by one is shorter than with the exact value.
+        None: every pair exact at every step (the results of the full solver). The default's
+        measurement: docs, "How the planner works inside".
       step_chunk: steps between two checks of "done" by the rollout engine
         (:mod:`softplan_jax.planning._engine`): a rollout stops computing within this many
         steps after it finished. Changes the cost, never the results.
@@ -85,6 +93,7 @@ class PlanOptions(NamedTuple):
     warm_start: bool = True
     swept_proof: bool = True
     step_chunk: int = 8
+    far_margin: float | None = 0.2
 
 
 # The paper's step (eq. 9, unscaled, no escapes) with the stall test of the paper's tables:
@@ -112,6 +121,8 @@ def check_options(options: PlanOptions) -> PlanOptions:
     check_number(options.contact_tolerance, "contact_tolerance", 0.0)
     if not 0 < check_number(options.safe_fraction, "safe_fraction") <= 1:
         raise ValueError(f"safe_fraction must be in (0, 1], got {options.safe_fraction}")
+    if options.far_margin is not None:
+        check_number(options.far_margin, "far_margin", 0.0)
     if not isinstance(options.solver, (SolverOptions, GridSolverOptions)):
         raise ValueError(f"solver must be a SolverOptions or a GridSolverOptions, got {options.solver!r}")
     return options

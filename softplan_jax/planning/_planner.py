@@ -44,14 +44,16 @@ class PlanResult(NamedTuple):
       reached: bool, the tip reached the goal without collision.
       iterations: int, planner steps taken (paper: "iterations to reach goal").
       collided: bool, the true clearance fell to <= 0 at a step or between steps.
-      min_clearance: float, minimum true clearance over the motion.
+      min_clearance: float, minimum true clearance over the motion (exact where below
+        ``d0 + far_margin``, see PlanOptions.far_margin; else a lower bound above it).
       q: (iterations + 1, n, 3) configurations, start first.
       tip: (iterations + 1, 3) tip positions.
       status: "reached", "collided", "start_in_collision" (the start pose is
         in collision: nothing planned), "stalled", "max_steps", "non_finite" or
         "unreachable" (proven before planning: the goal beyond the arm's reach
         or inside an obstacle, with ``reason``; or decided by the fallback).
-      clearance: (iterations + 1, m) true clearance per step and real obstacle.
+      clearance: (iterations + 1, m) true clearance per step and real obstacle
+        (above ``d0 + far_margin``: a certified lower bound, PlanOptions.far_margin).
       final_error: float, |goal - tip| at the end.
       planner: "local" (the path is the potential-field planner's) or "global"
         (:func:`~softplan_jax.plan_fallback`: the local path up to step

@@ -35,7 +35,8 @@ class Rollout(NamedTuple):
       tip: (T+1, 3).
       clearance: (T+1, m) true clearance (surface to surface) to every obstacle
         slot (padding slots: +inf); for a moving scene, to the obstacles at
-        the step's time.
+        the step's time. In a static scene with ``far_margin`` set (PlanOptions), a
+        clearance above ``d0 + far_margin`` may be a certified lower bound instead.
       between: (T+1, m) smallest clearance found during the motion from the
         previous step (entry 0: the start's clearance); an ACHIEVED clearance,
         so an upper bound on the true minimum over the motion. Where the
@@ -45,7 +46,8 @@ class Rollout(NamedTuple):
         of the two ends' clearances, and the true minimum lies between
         ``clearance[k-1] - motion_bound(q[k-1], q[k])[-1]`` (less the
         obstacle's travel, for a moving scene; above the contact tolerance: no
-        collision) and this value.
+        collision) and this value (above ``d0 + far_margin`` the ends' clearances may be
+        lower bounds, see ``clearance``).
       status: () int, a :class:`~softplan_jax.base._status.Status` code.
       iterations: () int, planner steps taken.
       reached, collided: () bool (tracking: reached = within the goal

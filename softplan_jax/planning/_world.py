@@ -14,6 +14,7 @@ from ..geometry._clearance import between_steps, contact_tolerance, swept_clear
 from ..geometry._obstacles import radius_and_mask
 from ..scenarios._motion import goal_velocity, moved_cells, scenario_at, speed_bounds
 from ._evasion import evasive_target, slot_clearance
+from ._gains import repulsion_reach
 from ._step import attraction, goal_scaled, scaled_step, step_target, tracking_attraction
 
 __all__ = ["StaticWorld", "MovingWorld", "make_world", "world_data"]
@@ -40,6 +41,12 @@ class StaticWorld:
     def at(self, t):
         """``(scene, provider data)`` at time t."""
         return self.scene, self.cells
+
+    def reach(self):
+        """``(d0, travel)`` for a closest-point provider that solves only the pairs within reach
+        (:class:`~softplan_jax.geometry._closest_pairs.NearPairs`): the clearance beyond which
+        the field exerts no force (:func:`repulsion_reach`), and None: no obstacle moves."""
+        return repulsion_reach(self.gains), None
 
     def attraction(self, V_e, t):
         """Paper eq. (9)'s F_e towards the goal, ``V_e = goal - tip``."""
@@ -92,6 +99,11 @@ class MovingWorld(StaticWorld):
         if cells and self.m_c:
             cells = (moved_cells(cells[0], self.world.motion, t), *cells[1:])
         return sc, cells
+
+    def reach(self):
+        """As :meth:`StaticWorld.reach`, with the field's look-ahead added to the reach (the field
+        sees each obstacle inflated by it) and each obstacle's travel in one step."""
+        return repulsion_reach(self.gains) + jnp.max(self.lead, initial=0.0), self.travel
 
     def attraction(self, V_e, t):
         """The attraction with the goal's velocity fed forward (:func:`tracking_attraction`)."""
