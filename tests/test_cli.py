@@ -509,3 +509,19 @@ def test_run_warns_about_a_goal_inside_an_obstacle(capsys, tmp_path):
     assert code == 0, err
     assert "warning: the goal" in err and "inside obstacle" in err
     assert "unreachable (goal_in_obstacle)" in out  # the fallback's proof
+
+
+def test_run_exact_clearances(capsys, tmp_path):
+    """--exact-clearances solves every pair at every step: the tree planned as by default (53
+    steps, the same smallest clearance), every recorded clearance at least the default's (which
+    may be a lower bound beyond d0 + far_margin) and some larger."""
+    runs = {}
+    for flag in ((), ("--exact-clearances",)):
+        out_path = tmp_path / f"tree{len(flag)}.json"
+        code, out, err = run_main(capsys, "run", "tree", *flag, "--json", "--out", str(out_path))
+        assert code == 0, err
+        runs[flag] = (json.loads(out), np.asarray(json.loads(out_path.read_text())["clearance"], float))
+    (default, c_default), (exact, c_exact) = runs[()], runs[("--exact-clearances",)]
+    assert default["iterations"] == exact["iterations"] == 53
+    assert abs(default["min_clearance"] - exact["min_clearance"]) < 1e-12
+    assert np.all(c_exact >= c_default - 1e-9) and np.any(c_exact > c_default + 1e-6)

@@ -72,6 +72,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="reached when |goal - tip| < TOL (default: the planner's, 0.01)")
     run.add_argument("--repulsion", choices=("khatib", "exponential"), default="khatib",
                      help="repulsion gain function (default: khatib)")
+    run.add_argument("--exact-clearances", action="store_true",
+                     help="solve every closest pair at every step, so that every recorded clearance is exact "
+                          "(default: a pair whose certified lower bound is beyond d0 + 0.2 keeps that bound; "
+                          "PlanOptions.far_margin)")
     run.add_argument("--no-fallback", action="store_true",
                      help="the local planner only: no reachability test and no global search where it stalls or "
                           "runs out of steps (default: both; see plan_fallback; a moving scene: track_fallback)")

@@ -76,6 +76,8 @@ def _plan_extra(args, extra: dict) -> dict:
     """The planner options given on the command line (``softplan run``, static or moving), added
     to ``extra`` (the gains' own options)."""
     extra["repulsion"] = args.repulsion
+    if args.exact_clearances:
+        extra["far_margin"] = None
     for key in ("step", "escapes", "goal_tolerance"):
         if getattr(args, key) is not None:
             extra[key] = getattr(args, key)

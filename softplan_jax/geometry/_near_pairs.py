@@ -56,7 +56,8 @@ def near_curves(q, curves, data: CurveData, state, bound, fresh, active, reach, 
     Returns:
       ``(ClosestPoint with leading axis m, the next state (u, D_lo), fallbacks () int32: pairs
       that took the full solve)``. A curve whose nearest pair was not solved has as its distance
-      that pair's bound, with a zero derivative; its points are placeholders.
+      that pair's bound, with a zero derivative; its points are placeholders (the arm's tip, the
+      curve at the pair's last u*).
     """
     curves = curves.astype(q.dtype)
     segs = Segment.from_frame(q, *segment_frames(q))
@@ -70,15 +71,30 @@ def near_curves(q, curves, data: CurveData, state, bound, fresh, active, reach, 
     pairs, certified = _polish_fn(solver)(segs_ng, curves_ng, data, u_prev, lower, need)
     fail = (fresh | ~certified) & need
     pairs = fallback(segs_ng, curves_ng, data, pairs, fail, solver)
-    cps = jax.vmap(lambda c, s, u, d2, conv: closest_from_pairs(segs, c, s, u, d2, conv))(
-        curves, pairs.s, pairs.u, pairs.d2, pairs.converged
-    )
     nearest = jnp.argmin(pairs.d2, axis=1)[:, None]
     kept = ~jnp.take_along_axis(need, nearest, axis=1)[:, 0]
     kept_bound = jnp.take_along_axis(lower, nearest, axis=1)[:, 0]
+    cps = jax.vmap(lambda c, s, u, d2, conv: closest_from_pairs(segs, c, s, u, d2, conv))(
+        curves, *_tip_where_kept(pairs, kept)
+    )
     cps = cps._replace(distance=jnp.where(kept, jax.lax.stop_gradient(kept_bound), cps.distance))
     lower_next = jnp.where(need, jnp.sqrt(jnp.maximum(pairs.d2, 0.0)), lower)
     return cps, (pairs.u, lower_next), jnp.sum(fail).astype(jnp.int32)
+
+
+def _tip_where_kept(pairs: Pairs, kept):
+    """``(s, u, d2, converged)`` for :func:`~._closest.closest_from_pairs`, each (m, n): the
+    pairs', except that a curve whose nearest pair kept its bound gets the arm's tip (the last
+    segment, s = 1) as its placeholder point. The field's Jacobian of that point is the tip's,
+    defined wherever the attraction's is: a segment's base (s = 0) of the first segment does not
+    move with q, and with no damping the pseudo-inverse of its zero Jacobian is NaN (NaN * 0 =
+    NaN, though the force there is 0)."""
+    n = pairs.s.shape[1]
+    last = (jnp.arange(n) == n - 1)[None, :]
+    row = kept[:, None]
+    s = jnp.where(row & last, 1.0, pairs.s).astype(pairs.s.dtype)
+    d2 = jnp.where(row, jnp.where(last, 0.0, 1.0), pairs.d2).astype(pairs.d2.dtype)  # argmin: the tip
+    return s, pairs.u, d2, pairs.converged | row
 
 
 @functools.cache
