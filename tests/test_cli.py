@@ -512,16 +512,21 @@ def test_run_warns_about_a_goal_inside_an_obstacle(capsys, tmp_path):
 
 
 def test_run_exact_clearances(capsys, tmp_path):
-    """--exact-clearances solves every pair at every step: the tree planned as by default (53
-    steps, the same smallest clearance), every recorded clearance at least the default's (which
-    may be a lower bound beyond d0 + far_margin) and some larger."""
+    """--exact-clearances solves every pair at every step (PlanOptions.far_margin None): the tree
+    (paper Table 1's scene) planned as by default, with its bounds beyond reach: the same 53
+    steps and path to rounding, the same clearances below d0 + far_margin, the default's never
+    above the exact ones and some below."""
     runs = {}
     for flag in ((), ("--exact-clearances",)):
         out_path = tmp_path / f"tree{len(flag)}.json"
         code, out, err = run_main(capsys, "run", "tree", *flag, "--json", "--out", str(out_path))
         assert code == 0, err
-        runs[flag] = (json.loads(out), np.asarray(json.loads(out_path.read_text())["clearance"], float))
-    (default, c_default), (exact, c_exact) = runs[()], runs[("--exact-clearances",)]
+        record = json.loads(out_path.read_text())
+        runs[flag] = (json.loads(out), np.asarray(record["q"], float), np.asarray(record["clearance"], float))
+    (default, q_default, c_default), (exact, q_exact, c_exact) = runs[()], runs[("--exact-clearances",)]
     assert default["iterations"] == exact["iterations"] == 53
+    np.testing.assert_allclose(q_default, q_exact, rtol=0, atol=1e-9)
     assert abs(default["min_clearance"] - exact["min_clearance"]) < 1e-12
-    assert np.all(c_exact >= c_default - 1e-9) and np.any(c_exact > c_default + 1e-6)
+    within = c_exact < float(sp.default_gains().d0) + sp.PlanOptions().far_margin
+    np.testing.assert_allclose(c_default[within], c_exact[within], rtol=0, atol=1e-9)
+    assert np.all(c_default <= c_exact + 1e-9) and np.any(c_default < c_exact - 1e-6)

@@ -1,10 +1,11 @@
 """Exact closest pairs only within reach (softplan_jax.geometry._near_pairs).
 
 References: the full solver for every solved pair, the carried bound (the last exact distance
-less the motion bounds) for every kept pair, one member at a time for the batch's folded polish,
-and the full solve of every pair at every step (``far_margin=None``) for a plan of the tree.
-The rollout check (records exact within reach, lower bounds beyond) is in
-tests/test_warm_start.py, on the compilation of test_plan_batch_matches_single.
+less the motion bounds) for every kept pair, and one member at a time for the batch's folded
+polish. The rollout checks (records exact within reach, lower bounds beyond) are in
+tests/test_warm_start.py, on the compilation of test_plan_batch_matches_single, and
+tests/test_moving.py; the tree planned with every pair solved (``--exact-clearances``) in
+tests/test_cli.py.
 """
 
 import jax
@@ -107,20 +108,3 @@ def test_provider_by_options():
 def test_far_margin_must_be_a_finite_non_negative_number(bad):
     with pytest.raises(ValueError, match="far_margin"):
         sp.make_options(far_margin=bad)
-
-
-def test_tree_plans_as_with_every_pair_exact():
-    """The tree (paper Table 1's scene) with the default far_margin and with every pair solved at
-    every step: the same status and iterations, the same path to rounding, and the same
-    clearances where they are below d0 + far_margin (lower bounds above)."""
-    tree = sp.paper_scenario("tree")
-    near_r = sp.plan(tree)
-    exact_r = sp.plan(tree, far_margin=None)
-    assert near_r.status == exact_r.status == "reached"
-    assert near_r.iterations == exact_r.iterations
-    np.testing.assert_allclose(np.asarray(near_r.q), np.asarray(exact_r.q), rtol=0, atol=1e-9)
-    c_near, c_exact = np.asarray(near_r.clearance), np.asarray(exact_r.clearance)
-    reach = float(sp.default_gains().d0) + sp.PlanOptions().far_margin
-    within = c_exact < reach
-    np.testing.assert_allclose(c_near[within], c_exact[within], rtol=0, atol=1e-9)
-    assert np.all(c_near <= c_exact + 1e-9)

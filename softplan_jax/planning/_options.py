@@ -63,10 +63,11 @@ class PlanOptions(NamedTuple):
         search is skipped where it cannot find a collision (see
         ``Rollout.between``). False: search every motion (for
         comparison).
-      far_margin: with the warm start and the Khatib repulsion, in a static scene, solve only
-        the (segment, curve) pairs whose certified lower bound on the clearance is below
-        ``d0 + far_margin`` (:mod:`softplan_jax.geometry._near_pairs`): the others exert no
-        force and keep their bound (the exact clearance less the arm's motion since it was
+      far_margin: with the warm start and the Khatib repulsion, solve only the (segment,
+        curve) pairs whose certified lower bound on the clearance is below ``d0 +
+        far_margin`` (:mod:`softplan_jax.geometry._near_pairs`; a moving scene adds the
+        field's look-ahead to d0): the others exert no force and keep their bound (the exact
+        clearance less the arm's motion, and a moving obstacle's travel, since it was
         solved). The clearances a rollout records above ``d0 + far_margin`` are then such
         lower bounds, and a safe step bounded by one is shorter than with the exact value.
         None: every pair exact at every step (the results of the full solver). The default's

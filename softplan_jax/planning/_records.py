@@ -35,8 +35,8 @@ class Rollout(NamedTuple):
       tip: (T+1, 3).
       clearance: (T+1, m) true clearance (surface to surface) to every obstacle
         slot (padding slots: +inf); for a moving scene, to the obstacles at
-        the step's time. In a static scene with ``far_margin`` set (PlanOptions), a
-        clearance above ``d0 + far_margin`` may be a certified lower bound instead.
+        the step's time. With ``far_margin`` set (PlanOptions), a clearance above
+        ``d0 + far_margin`` may be a certified lower bound instead.
       between: (T+1, m) smallest clearance found during the motion from the
         previous step (entry 0: the start's clearance); an ACHIEVED clearance,
         so an upper bound on the true minimum over the motion. Where the
