@@ -17,7 +17,6 @@ docs, "How the planner works inside"."""
 from __future__ import annotations
 
 import functools
-import math
 
 import jax
 import jax.numpy as jnp
@@ -26,7 +25,7 @@ from ..base._numerics import batch_folded, evaluate_where
 from ._closest import SolverOptions, closest_from_pairs
 from ._closest_newton import Segment
 from ._kinematics import segment_frames
-from ._warm_start import CurveData, Pairs, fallback, polish_and_certify
+from ._warm_start import CurveData, Pairs, fallback, pair_picker, polish_and_certify
 
 __all__ = ["near_curves"]
 
@@ -112,22 +111,13 @@ def _polish_needed(segs: Segment, curves, data: CurveData, u_prev, lower, need, 
 
     Returns ``(Pairs, certified)`` shaped like ``need``; a pair not needed keeps u_prev, s = 0,
     ``d2 = lower^2`` and counts as converged and certified."""
-    m, n = need.shape[-2:]
-    lead = need.shape[:-2]
-    batch = math.prod(lead)
-    total = batch * m * n
+    total = need.size
     chunk = max(1, total // NEAR_TRIPS)
-
-    def flat(tree):  # lead axes -> one axis of size batch
-        return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) :])), tree)
-
-    segs_f, curves_f, data_f = flat(segs), flat(curves), flat(data)
+    pick = pair_picker(segs, curves, data, need.shape)
     u_f = u_prev.reshape(total)
 
     def one(idx):
-        b, k, i = idx // (m * n), (idx // n) % m, idx % n
-        curve, c = jax.tree_util.tree_map(lambda x: x[b, k][None], (curves_f, data_f))
-        seg = jax.tree_util.tree_map(lambda x: x[b, i][None], segs_f)
+        seg, curve, c = (jax.tree_util.tree_map(lambda x: x[None], part) for part in pick(idx))
         pair, cert = polish_and_certify(seg, curve, c, u_f[idx][None, None], solver)
         return Pairs(*(x[0, 0] for x in pair)), cert[0, 0]
 

@@ -233,30 +233,43 @@ def fallback_chunk(pairs: int, trips: int | None = None) -> int:
     return min(max(FALLBACK_CHUNK, -(-pairs // trips)), pairs)
 
 
+def pair_picker(segs: Segment, curves, data: CurveData, shape):
+    """The (curve, segment) pairs of ``shape`` = lead + (m, n) (any leading axes ``lead``; segs:
+    lead + (n,); curves, data: lead + (m,)) by one flat index, lead axes first, then the curve,
+    then the segment: ``pick(idx) -> (seg, curve, data)`` of that pair (no leading axes)."""
+    m, n = shape[-2:]
+    lead = shape[:-2]
+    batch = math.prod(lead)
+
+    def flat(tree):  # lead axes -> one axis of size batch
+        return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) :])), tree)
+
+    segs_f, curves_f, data_f = flat(segs), flat(curves), flat(data)
+
+    def pick(idx):
+        b, k, i = idx // (m * n), (idx // n) % m, idx % n
+        curve = jax.tree_util.tree_map(lambda x: x[b, k], curves_f)
+        c = jax.tree_util.tree_map(lambda x: x[b, k], data_f)
+        seg = jax.tree_util.tree_map(lambda x: x[b, i], segs_f)
+        return seg, curve, c
+
+    return pick
+
+
 def _solve_failed(segs: Segment, curves, data: CurveData, pairs: Pairs, fail, solver: SolverOptions) -> Pairs:
     """The loop of :func:`fallback` over any leading axes ``lead`` (``fail``:
     lead + (m, n); segs: lead + (n,); curves, data: lead + (m,)): the failed
     pairs go through :func:`~softplan_jax.base._numerics.evaluate_where`, ``chunk``
     at a time (1 without leading axes, else :func:`fallback_chunk`), and each keeps the
     better of its full and polished answers."""
-    m, n = fail.shape[-2:]
-    lead = fail.shape[:-2]
-    batch = math.prod(lead)
-    total = batch * m * n
-    chunk = fallback_chunk(total) if lead else min(1, total)
-
-    def flat(tree):  # lead axes -> one axis of size batch
-        return jax.tree_util.tree_map(lambda x: x.reshape((batch, *x.shape[len(lead) :])), tree)
-
-    segs_f, curves_f, data_f = flat(segs), flat(curves), flat(data)
+    total = fail.size
+    chunk = fallback_chunk(total) if fail.ndim > 2 else min(1, total)
+    pick = pair_picker(segs, curves, data, fail.shape)
     pairs_f = Pairs(*(x.reshape(total) for x in pairs))
     todo = fail.reshape(total)
 
     def solve(idx):
-        b, k, i = idx // (m * n), (idx // n) % m, idx % n
-        curve = jax.tree_util.tree_map(lambda x: x[b, k], curves_f)
-        c = jax.tree_util.tree_map(lambda x: x[b, k], data_f)
-        seg = jax.tree_util.tree_map(lambda x: x[b, i], segs_f)
+        seg, curve, c = pick(idx)
         return Pairs(*solve_pair_reduced(seg, curve, c.u_grid, c.C_grid, solver))
 
     new = evaluate_where(todo, solve, chunk, pairs_f)
