@@ -6,25 +6,27 @@ load falls on both alike; without ``--base`` the package runs alone (a smoke run
 (``--only``, default all):
 
 * ``plan``: ``plan(tree)`` at ``max_steps`` = its iterations + 5, 600 and 2,000;
-* ``plan_batch``: ``plan_batch(random_scenarios(1, --batch), max_steps=600)`` (``--chunk C``: in
+* ``plan_batch``: ``plan_batch(random_scenarios(--seed, --batch), max_steps=600)`` (``--chunk C``: in
   chunks of C scenes; ``--steps T``: max_steps T);
-* ``track_batch``: ``track_batch(random_moving_scenarios(1, --track-batch), max_steps=600)``;
-* ``plan_loop``: ``plan`` over the scenes of ``random_scenarios(1, --loop)`` one at a time
+* ``track_batch``: ``track_batch(random_moving_scenarios(--seed, --track-batch), max_steps=600)``;
+* ``plan_loop``: ``plan`` over the scenes of ``random_scenarios(--seed, --loop)`` one at a time
   (a compiled rollout serves them all; what a new step count costs);
-* ``suite``: ``random_scenarios(1, --batch)`` drawn;
+* ``suite``: ``random_scenarios(--seed, --batch)`` drawn;
 * ``fallback``: ``plan_fallback`` on the first ``--fallback`` scenes of the batch that the
   local planner leaves stalled or at max_steps (two calls: the first compiles).
 
 Each case: one first call per version (tracing and compilation included), then ``--rounds``
 rounds alternating the versions; min and median of the warm calls, compile = first call -
-fastest warm call. Results compared between the versions: statuses, iterations, and q within
-the steps taken (batches), iterations (the loop), every array bit for bit (the suite),
+fastest warm call. Results compared between the versions: statuses, iterations, q within
+the steps taken and paired success (reached by both, by one only, McNemar's exact p) for the
+batches, iterations (the loop), every array bit for bit (the suite),
 statuses (the fallback). ``--fresh``: each version's first ``plan(tree)`` also in a fresh
 process with the compilation cache off (a real compilation, no warm jit cache).
 
     git worktree add /tmp/previous <commit>
     python benchmarks/ab.py --base /tmp/previous/softplan_jax            # ~15 min on 2 CPUs
     python benchmarks/ab.py --base /tmp/previous/softplan_jax --only plan,plan_batch --rounds 5
+    python benchmarks/ab.py --base /tmp/previous/softplan_jax --only plan_batch --seed 2 --rounds 1  # held out
     python benchmarks/ab.py --quick                                       # the package alone, small
 
 Writes ``results/ab.{md,json}`` and ``results/figures/ab.png`` (``--out PREFIX`` elsewhere).
@@ -55,6 +57,7 @@ from _common import (  # noqa: E402
     run_fresh,
     write_results,
 )
+from _stats import mcnemar_exact  # noqa: E402
 
 import softplan_jax  # noqa: E402
 
@@ -103,8 +106,14 @@ def measure(cases: dict, rounds: int) -> dict:
 
 
 def compare_batches(new, old) -> dict:
-    """Per-scene agreement of two batched rollouts (status, iterations, q within the steps taken)."""
+    """Per-scene agreement of two batched rollouts (status, iterations, q within the steps taken),
+    and their paired success: scenes reached by both, by one only, McNemar's exact p."""
     new, old = jax.device_get(new), jax.device_get(old)
+    reached_new, reached_old = np.asarray(new.reached, bool), np.asarray(old.reached, bool)
+    only_new, only_old = int(np.sum(reached_new & ~reached_old)), int(np.sum(reached_old & ~reached_new))
+    paired = dict(reached_new=int(reached_new.sum()), reached_old=int(reached_old.sum()),
+                  reached_both=int(np.sum(reached_new & reached_old)), only_new=only_new, only_old=only_old,
+                  mcnemar_p=mcnemar_exact(only_new, only_old))
     same_status = np.asarray(new.status) == np.asarray(old.status)
     same_it = np.asarray(new.iterations) == np.asarray(old.iterations)
     dq = []
@@ -113,7 +122,8 @@ def compare_batches(new, old) -> dict:
         dq.append(float(np.max(np.abs(np.asarray(new.q[b, :k]) - np.asarray(old.q[b, :k])))))
     dq = np.asarray(dq)
     return dict(scenes=int(len(dq)), status_differs=int(np.sum(~same_status)), iterations_differ=int(np.sum(~same_it)),
-                q_max_diff=float(dq.max()), q_over_1e9=int(np.sum(dq > 1e-9)), steps_taken=int(np.sum(new.iterations)))
+                q_max_diff=float(dq.max()), q_over_1e9=int(np.sum(dq > 1e-9)), steps_taken=int(np.sum(new.iterations)),
+                **paired)
 
 
 def _leaves_equal(a, b) -> bool:
@@ -137,26 +147,26 @@ def build_cases(pkgs: dict, args) -> tuple[dict, dict]:
         for T in (steps + 5, 600, 2000):
             cases[f"plan(tree), max_steps {T}"] = {v: (lambda p=p, v=v, T=T: p.plan(tree[v], max_steps=T).q)
                                                    for v, p in pkgs.items()}
-    batch = {v: p.random_scenarios(1, args.batch) for v, p in pkgs.items()}
+    batch = {v: p.random_scenarios(args.seed, args.batch) for v, p in pkgs.items()}
     if "plan_batch" in args.only or "fallback" in args.only:
         chunked = f", chunk {args.chunk}" if args.chunk else ""
         names["plan_batch"] = f"plan_batch({args.batch} scenes, max_steps {args.steps}{chunked})"
         cases[names["plan_batch"]] = {v: (lambda p=p, v=v: p.plan_batch(batch[v], max_steps=args.steps, chunk=args.chunk))
                                       for v, p in pkgs.items()}
     if "track_batch" in args.only:
-        moving = {v: _random_moving(p)(1, args.track_batch) for v, p in pkgs.items()}
+        moving = {v: _random_moving(p)(args.seed, args.track_batch) for v, p in pkgs.items()}
         names["track_batch"] = f"track_batch({args.track_batch} moving scenes, max_steps 600)"
         cases[names["track_batch"]] = {v: (lambda p=p, v=v: p.track_batch(moving[v], max_steps=600))
                                        for v, p in pkgs.items()}
     if "plan_loop" in args.only:
-        loop = {v: p.random_scenarios(1, args.loop) for v, p in pkgs.items()}
+        loop = {v: p.random_scenarios(args.seed, args.loop) for v, p in pkgs.items()}
         scenes = {v: [jax.tree_util.tree_map(lambda x, b=b: x[b], s) for b in range(args.loop)] for v, s in loop.items()}
         names["plan_loop"] = f"plan loop ({args.loop} scenes one at a time)"
         cases[names["plan_loop"]] = {v: (lambda p=p, v=v: [int(p.plan(s).iterations) for s in scenes[v]])
                                      for v, p in pkgs.items()}
     if "suite" in args.only:
-        names["suite"] = f"random_scenarios(1, {args.batch})"
-        cases[names["suite"]] = {v: (lambda p=p: p.random_scenarios(1, args.batch)) for v, p in pkgs.items()}
+        names["suite"] = f"random_scenarios({args.seed}, {args.batch})"
+        cases[names["suite"]] = {v: (lambda p=p: p.random_scenarios(args.seed, args.batch)) for v, p in pkgs.items()}
     return cases, names
 
 
@@ -186,7 +196,7 @@ def fallback_case(pkgs: dict, batch_result, args) -> dict:
         return {}
     fb = {}
     for v, p in pkgs.items():
-        sub = jax.tree_util.tree_map(lambda x: np.asarray(x)[left], p.random_scenarios(1, args.batch))
+        sub = jax.tree_util.tree_map(lambda x: np.asarray(x)[left], p.random_scenarios(args.seed, args.batch))
         t0 = time.perf_counter()
         p.plan_fallback(sub, max_steps=600)
         first = time.perf_counter() - t0
@@ -208,6 +218,8 @@ def parse_args(argv=None):
     ap.add_argument("--only", default=",".join(CASES), help=f"comma list of cases (default all: {', '.join(CASES)})")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--batch", type=int, default=1024)
+    ap.add_argument("--seed", type=int, default=1,
+                    help="seed of the random scenes of every case but plan (default 1; a held-out check: 2)")
     ap.add_argument("--chunk", type=int, default=None, help="plan_batch in chunks of this many scenes")
     ap.add_argument("--steps", type=int, default=600, help="plan_batch's max_steps")
     ap.add_argument("--track-batch", type=int, default=256)

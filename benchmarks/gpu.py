@@ -13,8 +13,8 @@ Parts (each one timed with compile apart; warm calls interleaved in rounds):
 2. The batched rollout that :func:`softplan_jax.plan_batch` runs
    (:func:`~softplan_jax.planning._engine.run_lanes`) on ``random_scenarios(0, B)``
    with at most ``--steps`` steps, for each B of ``--sizes`` with every scene in
-   its own lane (``lanes = B``), float64; at the first size also 64 lanes (the
-   engine's default) and the fallback loop's former fixed chunk of 8 ("before");
+   its own lane (``lanes = B``), float64; at the first size also 64 lanes (a CPU
+   batch's width) and the fallback loop's former fixed chunk of 8 ("before");
    float32 at the last size. Reported: taken scenario-steps per
    second (the sum of iterations + 1 over the scenes, over the wall time).
 3. A ``jax.profiler`` trace of one warm call at the first and the last size:

@@ -140,10 +140,10 @@ def test_lanes_refill_matches_single_rollouts(five):
 
 
 def test_default_lanes_by_platform():
-    """A batch's lanes when none are given: on a CPU 64 when planning and up to 1,024 when
+    """A batch's lanes when none are given: on a CPU 128 when planning and up to 1,024 when
     tracking (a tracked scene holds its lane to the horizon), the whole share (up to 16,384)
     on an accelerator, where a wide vmapped step costs little more than a narrow one."""
-    assert default_lanes("cpu") == DEFAULT_LANES == 64
+    assert default_lanes("cpu") == DEFAULT_LANES == 128
     assert default_lanes("cpu", tracking=True) == TRACK_LANES == 1024
     for tracking in (False, True):
         assert default_lanes("gpu", tracking) == default_lanes("cuda", tracking) == ACCELERATOR_LANES == 16384
@@ -154,7 +154,7 @@ def test_default_lanes_by_platform():
 @pytest.mark.parametrize("entry", ["plan_batch", "track_batch"])
 def test_batch_entry_points_default_lanes(entry, monkeypatch):
     """plan_batch and track_batch without ``lanes`` hand the engine the CPU's width for their
-    mode: 64 lanes when planning, the whole batch (up to 1,024) when tracking. Caught at the
+    mode: at most 128 lanes when planning, the whole batch (up to 1,024) when tracking. Caught at the
     engine's door (run_lanes replaced), so nothing compiles."""
     from softplan_jax.planning import _programs as programs
 
@@ -176,7 +176,7 @@ def test_batch_entry_points_default_lanes(entry, monkeypatch):
         call = lambda: sp.track_batch(batch, max_steps=13)  # noqa: E731
     with pytest.raises(Caught):
         call()
-    want = 64 if entry == "plan_batch" else TRACK_LANES
+    want = DEFAULT_LANES if entry == "plan_batch" else TRACK_LANES
     assert seen["batch"] == 70 and seen["lanes"] == (want if jax.default_backend() == "cpu" else ACCELERATOR_LANES)
 
 
@@ -288,7 +288,8 @@ def test_default_lanes_follow_the_batch_and_its_horizon():
     )
 
     assert default_lanes("cpu") == DEFAULT_LANES
-    assert default_lanes("cpu", scenes=1024, max_steps=600) == DEFAULT_LANES
+    assert default_lanes("cpu", scenes=1024, max_steps=600) == -(-1024 * LANE_STEPS // 600) == DEFAULT_LANES
+    assert default_lanes("cpu", scenes=2048, max_steps=600) == DEFAULT_LANES
     assert default_lanes("cpu", scenes=256, max_steps=600) == -(-256 * LANE_STEPS // 600) == 32
     assert default_lanes("cpu", scenes=64, max_steps=600) == MIN_LANES
     assert default_lanes("cpu", scenes=64, max_steps=150) == 32

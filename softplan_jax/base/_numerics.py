@@ -283,8 +283,8 @@ def when_any(pred, fn, skip, operands, chunk: int | str | None = None):
     ``fn`` and ``skip`` return pytrees of the same structure; not differentiable
     (``jax.custom_batching.custom_vmap``). ``chunk``: None, ``fn`` vmapped over the whole
     batch; an int, over the elements that need it only, ``chunk`` at a time
-    (:func:`evaluate_where`); ``"auto"``: a 64th of the batch, at least 1 (one at a
-    time for the 64 lanes of a CPU batch, 256 at a time for an accelerator's 16,384).
+    (:func:`evaluate_where`); ``"auto"``: a 64th of the batch, at least 1 (16 at a
+    time for the 1,024 lanes of a tracked batch on a CPU, 256 for an accelerator's 16,384).
     """
 
     @jax.custom_batching.custom_vmap

@@ -33,7 +33,7 @@ __all__ = ["Carry", "DEFAULT_STEP_CHUNK", "DEFAULT_LANES", "TRACK_LANES", "DEFAU
            "default_lanes", "closest_pairs", "run", "run_lanes", "check_engine_sizes"]
 
 DEFAULT_STEP_CHUNK = 8  # steps between two checks of "done": at most 7 steps computed past the end
-DEFAULT_LANES = 64  # scenes planned side by side in a batch on a CPU (docs: Performance)
+DEFAULT_LANES = 128  # the most scenes planned side by side in a batch on a CPU (docs: Performance)
 LANE_STEPS = 75  # a CPU batch's lanes: ceil(scenes * LANE_STEPS / max_steps), at most DEFAULT_LANES
 MIN_LANES = 8  # ... and at least this many (default_lanes)
 TRACK_LANES = 1024  # ... tracked on a CPU: a tracked scene holds its lane to the horizon

@@ -356,7 +356,7 @@ def plan_batch(scenarios: Scenario, method: str = "curve", n_points: int = 10, g
       progress: write one line per finished chunk to stderr (chunks done,
         scenarios, elapsed time, estimated time left, compile time).
       lanes: scenes stepped side by side on each device (None:
-        :func:`~softplan_jax.planning._engine.default_lanes`: on a CPU 8 to 64, fewer
+        :func:`~softplan_jax.planning._engine.default_lanes`: on a CPU 8 to 128, fewer
         for a small chunk at a large max_steps; the device's whole share up to 16,384
         on a GPU); a lane whose scene finished takes the next scene of its chunk
         (:func:`softplan_jax.planning._engine.run_lanes`), so a chunk's cost follows
