@@ -75,7 +75,8 @@ def test_gradient_matches_central_differences_of_the_objective(suite, setting, s
     np.testing.assert_allclose(grad, formula, rtol=1e-9, atol=1e-12)
     est = estimate_objective(sample)
     assert est.value == pytest.approx(L.mean(), rel=1e-12)
-    np.testing.assert_allclose(est.grad, grad, rtol=1e-12)
+    # The same mean summed in another order: a component that cancels keeps fewer digits.
+    np.testing.assert_allclose(est.grad, grad, rtol=1e-9, atol=1e-12)
     assert est.rollouts == 2 * PAIRS and np.all(est.grad_se > 0)
 
 

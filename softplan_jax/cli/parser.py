@@ -74,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="repulsion gain function (default: khatib)")
     run.add_argument("--exact-clearances", action="store_true",
                      help="solve every closest pair at every step, so that every recorded clearance is exact "
-                          "(default: a pair whose certified lower bound is beyond d0 + 0.1 keeps that bound; "
+                          "(default: a pair whose certified lower bound is beyond d0 + 0.2 keeps that bound; "
                           "PlanOptions.far_margin)")
     run.add_argument("--no-fallback", action="store_true",
                      help="the local planner only: no reachability test and no global search where it stalls or "

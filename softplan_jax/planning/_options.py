@@ -94,7 +94,7 @@ class PlanOptions(NamedTuple):
     warm_start: bool = True
     swept_proof: bool = True
     step_chunk: int = 8
-    far_margin: float | None = 0.1
+    far_margin: float | None = 0.2
 
 
 # The paper's step (eq. 9, unscaled, no escapes) with the stall test of the paper's tables:
