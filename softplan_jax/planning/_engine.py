@@ -203,7 +203,7 @@ def make_step(world, gains, options, max_steps: int, prepared=None, arm=PCC):
     plan, dtype = su.plan, su.scene.q0.dtype
     pairs = closest_pairs(plan)
     w = make_world(world, su, gains, world_data(world, su, pairs) if prepared is None else prepared, arm)
-    d0, travel = w.reach() if isinstance(pairs, NearPairs) else (None, None)
+    d0, travel = w.reach()  # for a provider that solves only the pairs within reach (the others ignore them)
 
     def step(carry: Carry, k):
         q = carry.q
