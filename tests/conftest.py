@@ -89,7 +89,7 @@ SHARED = {
 FIRST = ["planner", "cli", "reach", "test_benchmarks", "test_closest", "test_batch", "test_fitting", "test_kinematics"]
 # The slow tier's order (``-m slow``): the loaded arm's files first, the largest of that tier
 # (compiling the loaded rollouts and the loaded fallback); started last, they ran alone at its end.
-SLOW_FIRST = ["test_rod_planning", "planner", "test_rod", "test_batch", "test_rod_elastica", "cli", "reach"]
+SLOW_FIRST = ["test_rod_planning", "planner", "test_rod", "test_batch", "cli", "reach"]
 
 
 def _unit(module: str) -> str:

@@ -9,14 +9,58 @@ squared), so the rod is nearly Kirchhoff's (inextensible, unshearable). Gravity 
 nodes' masses, the tip load on the last node; the base node and the first element's directors
 are clamped. The dynamics is integrated (position Verlet) with linear damping until the nodes
 stop moving. The answer is the nodes' positions at rest.
+
+The 21 cases of ``tests/test_rod_elastica.py`` (:func:`cases`) take about 3 CPU-minutes, so their
+answers are kept in ``tests/data/elastica_reference.npz``, written by::
+
+    python tests/elastica_reference.py
+
+and the slow tier relaxes a few of them again to check that the file is PyElastica's answer.
 """
 
 from __future__ import annotations
+
+import contextlib
+import io
+import multiprocessing
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
 STIFF = 1e4  # shear and stretch stiffness / (EI / L^2)
 GRAVITY = 9.81
+COARSE, FINE = 6, 12  # PyElastica elements per segment of the two resolutions extrapolated
+REFERENCE_FILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "elastica_reference.npz")
+
+
+def cases():
+    """(q, EI, GJ, w, tip_load) of the 21 cases: 3 segments, EI from the load number
+    gamma = w L^3 / EI of 0.05 to 2.8 (slight to heavy sag), per-segment stiffness in every
+    third case, a tip load in two of three."""
+    rng = np.random.default_rng(62)
+    out = []
+    for k, gamma in enumerate(np.repeat([0.05, 0.2, 0.5, 1.0, 1.6, 2.2, 2.8], 3)):
+        q = np.column_stack([rng.uniform(0.8, 1.2, 3), rng.uniform(-1.8, 1.8, 3), rng.uniform(-3.1, 3.1, 3)])
+        L = q[:, 0].sum()
+        w = 0.3
+        EI = w * L**3 / gamma
+        per_segment = k % 3 == 1
+        EI_arg = EI * np.array([1.2, 1.0, 0.8]) if per_segment else EI
+        tip = np.array([0.0, 0.0, 0.0]) if k % 3 == 0 else np.array([0.02, -0.01, -0.15]) * w * L
+        out.append((q, EI_arg, 0.7 * np.asarray(EI_arg), w, tip))
+    return out
+
+
+def extrapolated(case):
+    """A case's rest shape (n, COARSE + 1, 3): PyElastica at COARSE and FINE elements per segment,
+    extrapolated (Richardson, its error being first order in the element length: 2 fine - coarse)."""
+    q, EI, GJ, w, tip = case
+    with contextlib.redirect_stdout(io.StringIO()):
+        coarse = relax(q, EI, GJ, w, tip, elements_per_segment=COARSE, tol=1e-6)
+        fine = relax(q, EI, GJ, w, tip, elements_per_segment=FINE, tol=1e-6)
+    return 2.0 * fine[:, ::2] - coarse
 
 
 def _rot(axis, angle):
@@ -138,3 +182,36 @@ def relax(q, EI, GJ, w, tip_load, elements_per_segment=20, tol=1e-7, max_time=20
         raise RuntimeError(f"PyElastica did not come to rest (last chunk moved {moved:.3g})")
     pos = rod.position_collection.T
     return np.stack([pos[i * k: i * k + k + 1] for i in range(n)])
+
+
+def relax_in_processes(chosen, workers: int = 2):
+    """:func:`extrapolated` of ``chosen`` cases in spawned processes (not forked: a caller running
+    jax's threads would have them copied mid-flight)."""
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return list(pool.map(extrapolated, chosen))
+
+
+def stacked_inputs(chosen) -> dict:
+    """The cases' inputs as arrays: q (k, 3, 3), EI and GJ (k, 3) per segment, w (k,), tip_load (k, 3)."""
+    q, EI, GJ, w, tip = zip(*chosen, strict=True)
+    per_segment = lambda xs: np.stack([np.broadcast_to(np.asarray(x, np.float64), (3,)) for x in xs])  # noqa: E731
+    return dict(q=np.stack(q), EI=per_segment(EI), GJ=per_segment(GJ), w=np.asarray(w, np.float64),
+                tip_load=np.stack(tip))
+
+
+def main() -> int:
+    """Relax every case and write :data:`REFERENCE_FILE` (with the inputs and PyElastica's version)."""
+    from importlib.metadata import version
+
+    all_cases = cases()
+    refs = relax_in_processes(all_cases)
+    fields = stacked_inputs(all_cases)
+    np.savez(REFERENCE_FILE, positions=np.stack(refs), pyelastica=version("pyelastica"), **fields)
+    print(f"{len(refs)} cases written to {REFERENCE_FILE} (PyElastica {version('pyelastica')})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # the spawned workers import this module
+    sys.exit(main())
