@@ -4,7 +4,8 @@ A refactor that moves code must keep results bit-identical. This script saves
 the arrays of: the paper scenes (sim1, sim2, tree) x (curve, 10 points, 100
 points) x (default options, the paper's preset: step, gains and start pose), 600 steps; two random
 batches (``plan_batch``: seed 1 curve, seed 2 points, 64 scenes); the three
-moving presets (400 steps) and a tracked batch of 32 random moving scenes; and
+moving presets (400 steps) and a tracked batch of 32 random moving scenes; a
+loaded arm (the tests' rod) planning the tree and tracking tree_sway; and
 with ``--fallback`` the ``plan_fallback`` results of 48 random scenes. Run it
 with each version of the package first on ``PYTHONPATH``, then compare: the
 comparison says which arrays differ, and for per-step arrays whether they
@@ -93,6 +94,9 @@ def save(path: str, fallback: bool, quick: bool = False, suite: int = 0) -> int:
     if not quick:
         put("moving/batch", sp.track_batch(sp.moving.random_moving_scenarios(1, 32), max_steps=300))
     print(f"moving scenes: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
+    if not quick:
+        _put_loaded(put)
+        print(f"loaded arm: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
     if fallback:
         for i, p in enumerate(sp.plan_fallback(sp.random_scenarios(1, 8 if quick else 48), max_steps=300)):
             for f in ("q", "status", "planner", "min_clearance"):
@@ -108,6 +112,23 @@ def save(path: str, fallback: bool, quick: bool = False, suite: int = 0) -> int:
     print(f"{len(out)} arrays written to {path}")
     _report(path, out, finish_machine(machine), time.perf_counter() - t0, quick, fallback, suite)
     return 0
+
+
+def _put_loaded(put) -> None:
+    """The loaded arm (the tests' rod: EI 6, GJ 4, 0.3 N/m and a tip load of 0.05 N, under which
+    the straight tree arm's tip sags 0.3): the tree planned, and tree_sway tracked."""
+    import jax
+
+    import softplan_jax as sp
+    from softplan_jax.planning import make_options, make_track_options, rollout_jit
+    from softplan_jax.rod import LoadedArm
+
+    arm = LoadedArm(sp.RodModel(6.0, 4.0, 0.3, (0.0, 0.0, -0.05)))
+    r = rollout_jit(sp.paper_scenario("tree"), sp.default_gains(), make_options("curve", 10), 600, 0, arm=arm)
+    put("paper/tree/curve10/loaded", jax.device_get(r))
+    r = rollout_jit(sp.moving_scenario("tree_sway"), sp.default_gains(), make_track_options("curve"), 400,
+                    jax.random.PRNGKey(0), arm=arm)
+    put("moving/tree_sway/loaded", jax.device_get(r))
 
 
 def _report(path: str, out: dict, machine: dict, wall: float, quick: bool, fallback: bool, suite: int) -> None:
