@@ -11,6 +11,8 @@ q_k, the last configuration proven clear."""
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 
@@ -66,7 +68,13 @@ def barrier_velocity(v_field, a, b, sweeps: int = HILDRETH_SWEEPS):
 def slot_clearance(moving: MovingScenario, q, t, j, solver):
     """The exact clearance of obstacle slot j to the arm at (q, t): for a scene of
     polynomial curves only, the one curve of slot j moved to t and solved alone;
-    otherwise the whole scene at t (:func:`~softplan_jax.scenarios._motion.scenario_at`)."""
+    otherwise the whole scene at t (:func:`~softplan_jax.scenarios._motion.scenario_at`).
+    One nested jit: the between-step search and the evasive step's proof trace it once."""
+    return _slot_clearance(moving, q, t, jnp.asarray(j, jnp.int32), solver)
+
+
+@functools.partial(jax.jit, static_argnums=4)
+def _slot_clearance(moving: MovingScenario, q, t, j, solver):
     scene = moving.scene
     radius, mask = radius_and_mask(scene)
     if scene.points.shape[0] == 0 and not scene.parametric:
