@@ -238,3 +238,76 @@ def test_package_programs_do_not_depend_on_the_suites_xla_flags(tmp_path):
     assert sorted(a.files) == sorted(b.files) == ["curve/clearance", "curve/q", "points/clearance", "points/q"]
     for k in a.files:
         assert a[k].shape == b[k].shape and np.array_equal(a[k], b[k]), k
+
+
+def test_a_one_shot_rollout_compiles_at_level_0_and_agrees_to_rounding(monkeypatch, tmp_path):
+    """``rollout_jit.cached(..., one_shot=True)``, the program of ``softplan run``: the package's
+    XLA options with the lowest optimization level, the same traced artifact as the default
+    program, and the default program's results to rounding (the suite's cheapest program)."""
+    import jax
+    import numpy as np
+
+    import softplan_jax as sp
+    from softplan_jax.base._compilation_cache import (
+        CPU_COMPILER_OPTIONS,
+        ONE_SHOT_OPTIONS,
+        XLA_DEFAULT_OPTIONS,
+        one_shot_options,
+    )
+    from softplan_jax.planning._options import rollout_compiler_options
+    from softplan_jax.planning._planner import make_options
+    from softplan_jax.planning._programs import rollout_jit
+
+    assert ONE_SHOT_OPTIONS == {"xla_backend_optimization_level": 0}
+    assert rollout_compiler_options("points", one_shot=True) == {**XLA_DEFAULT_OPTIONS, **CPU_COMPILER_OPTIONS,
+                                                                 **ONE_SHOT_OPTIONS}
+    assert one_shot_options(None) == {**XLA_DEFAULT_OPTIONS, **ONE_SHOT_OPTIONS}
+    monkeypatch.delenv("SOFTPLAN_COMPILATION_CACHE", raising=False)
+    monkeypatch.setenv("SOFTPLAN_CACHE_DIR", str(tmp_path))
+    sc, g = sp.paper_scenario("sim1"), sp.default_gains()
+    opts = make_options("points", 10, check_collisions=False)
+    reference = jax.device_get(rollout_jit(sc, g, opts, 15, 2))
+    run, loaded = rollout_jit.cached(sc, g, opts, 15, one_shot=True)
+    r = jax.device_get(run(sc, g, 2))
+    assert not loaded and int(r.status) == int(reference.status) and int(r.iterations) == int(reference.iterations)
+    np.testing.assert_allclose(r.q, reference.q, rtol=0, atol=1e-9)
+    _, loaded = rollout_jit.cached(sc, g, opts, 15)  # the default program, from the same artifact
+    assert loaded and len(list((tmp_path / "exported").iterdir())) == 1
+
+
+def _backend_compiles(fn) -> int:
+    """How many XLA programs ``fn()`` compiles (jax's backend-compile events)."""
+    import jax
+
+    events = []
+
+    def listen(event, duration, **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration":
+            events.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        fn()
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    return len(events)
+
+
+def test_building_a_scene_compiles_nothing():
+    """make_scenario and make_moving_scenario work in NumPy and move each array once
+    (``host_array``): eager jnp operations would compile a small program for every new shape,
+    which a first plan's host path paid many times (a scene of a shape built nowhere else)."""
+    import numpy as np
+
+    import softplan_jax as sp
+
+    curves = [sp.PolynomialCurve(np.array([[0.3, 1.0], [0.2, 0.0], [0.5, 0.1]]), (0.0, 1.0), 0.05)] * 2
+    motion = sp.moving.curve_motion(pivot=(0.3, 0.2, 0.5), axis=(0.0, 1.0, 0.0), amplitude=0.2, omega=1.0)
+    q0 = np.array([[1.1, 0.2, 0.3]] * 3)
+
+    def build():
+        scene = sp.make_scenario([1.0, 0.4, 1.9], [*curves, np.ones((5, 3))], q0, arm_radius=0.02, L_min=[0.5] * 3,
+                                 L_max=2.0, curve_slots=11, max_points=7)
+        sp.moving.make_moving_scenario(scene, {1: motion})
+
+    assert _backend_compiles(build) == 0

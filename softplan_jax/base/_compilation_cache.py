@@ -27,6 +27,10 @@ CURVE_CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 # XLA's own defaults of two options, named under every program's options so that XLA_FLAGS
 # settings of them (the test suite lowers both) do not change the package's programs.
 XLA_DEFAULT_OPTIONS = {"xla_backend_optimization_level": 3, "xla_cpu_use_fusion_emitters": True}
+# A program compiled to run once (``softplan run``): XLA's lowest optimization level, which
+# compiles a rollout in about two thirds of the time and runs its steps about 2.5 times slower
+# (docs: Performance, "A first result from an empty cache").
+ONE_SHOT_OPTIONS = {"xla_backend_optimization_level": 0}
 
 
 _OFF = ("0", "false", "no", "off")
@@ -137,6 +141,26 @@ def _known_option(name: str, value) -> bool:
     return True
 
 
+def _known_options(options: dict) -> dict:
+    """The options of ``options`` this jaxlib's CPU compiler accepts: all of them where a trivial
+    program compiles with them together (one compile), else those that compile alone."""
+    if _known_together(tuple(options.items())):
+        return dict(options)
+    return {name: value for name, value in options.items() if _known_option(name, value)}
+
+
+@functools.cache
+def _known_together(items: tuple) -> bool:
+    import jax
+    import numpy as np
+
+    try:
+        jax.jit(lambda x: x + 1, compiler_options=dict(items)).lower(np.float32(0)).compile()
+    except Exception:
+        return False
+    return True
+
+
 PROGRAM_KINDS = ("exact", "samples", None)
 
 
@@ -156,8 +180,17 @@ def compiler_options(kind: str | None = "exact") -> dict | None:
         return None
     wanted = {**XLA_DEFAULT_OPTIONS, **(CPU_COMPILER_OPTIONS if kind else {}),
               **(CURVE_CPU_COMPILER_OPTIONS if kind == "exact" else {})}
-    known = {name: value for name, value in wanted.items() if _known_option(name, value)}
-    return known or None
+    return _known_options(wanted) or None
+
+
+def one_shot_options(kind: str | None = "exact") -> dict | None:
+    """:func:`compiler_options` ``(kind)`` for a program compiled to run once: with
+    :data:`ONE_SHOT_OPTIONS` where the CPU compiler knows them; on other backends, or with
+    ``SOFTPLAN_XLA_OPTIONS=0``, the same as :func:`compiler_options`."""
+    base = compiler_options(kind)
+    if base is None:
+        return None
+    return _known_options({**base, **ONE_SHOT_OPTIONS})
 
 
 class package_jit:

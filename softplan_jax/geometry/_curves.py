@@ -22,6 +22,7 @@ from ..base._validation import (
     check_radius,
     check_scale,
     check_u_range,
+    host_array,
     is_concrete,
     max_coordinate,
 )
@@ -344,9 +345,9 @@ def stack_curves(curves, size: int | None = None, degree: int | None = None):
         radius[k] = float(c.radius)
         mask[k] = True
     batch = PolynomialCurve.tree_unflatten(
-        None, [jnp.asarray(coeffs, dtype), jnp.asarray(u_range, dtype), jnp.asarray(radius, dtype)]
+        None, [host_array(coeffs, dtype), host_array(u_range, dtype), host_array(radius, dtype)]
     )
-    return batch, jnp.asarray(mask)
+    return batch, host_array(mask)
 
 
 def curve_points(curve, n_points: int):

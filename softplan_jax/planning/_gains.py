@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..base._numerics import safe_norm, shared_constant
+from ..base._validation import host_array
 
 __all__ = ["Gains", "GainFunction", "GOAL_GAINS", "default_gains", "repulsion_scale", "repulsion_reach",
            "goal_scaled"]
@@ -162,7 +163,7 @@ def default_gains(dtype=None) -> Gains:
     the tree 0.03 short of its goal).
     """
     dtype = np.dtype(dtype or jnp.result_type(float))
-    return shared_constant(("default gains", dtype), lambda: Gains(**{k: jnp.asarray(v, dtype) for k, v in
+    return shared_constant(("default gains", dtype), lambda: Gains(**{k: host_array(v, dtype) for k, v in
                                                                       _DEFAULT_GAINS.items()}))
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from ..base._compilation_cache import compiler_options
+from ..base._compilation_cache import compiler_options, one_shot_options
 from ..base._validation import check_bool, check_int, check_number
 from ..geometry._closest import DEFAULT_OPTIONS, SolverOptions
 from ..geometry._closest_grid import GridSolverOptions
@@ -217,10 +217,12 @@ def plan_options(options) -> PlanOptions:
 PROGRAM_KIND = {"curve": "exact", "points": "samples"}
 
 
-def rollout_compiler_options(method: str = "curve") -> dict | None:
+def rollout_compiler_options(method: str = "curve", one_shot: bool = False) -> dict | None:
     """The XLA options the rollouts of the planner's ``method`` ("curve" or "points") compile
     with (:func:`~softplan_jax.base._compilation_cache.compiler_options` of its
-    :data:`PROGRAM_KIND`). ValueError for another method."""
+    :data:`PROGRAM_KIND`; ``one_shot``: a rollout compiled to run once,
+    :func:`~softplan_jax.base._compilation_cache.one_shot_options`). ValueError for another
+    method."""
     if method not in PROGRAM_KIND:
         raise ValueError(f"method must be 'curve' or 'points'; got {method!r}")
-    return compiler_options(PROGRAM_KIND[method])
+    return (one_shot_options if one_shot else compiler_options)(PROGRAM_KIND[method])

@@ -216,9 +216,12 @@ class RolloutProgram:
         """Number of compilations so far (one per padded shape, dtype, options, max_steps)."""
         return sum(p._cache_size() for p in self._programs.values())
 
-    def cached(self, world, gains, options, max_steps: int):
+    def cached(self, world, gains, options, max_steps: int, one_shot: bool = False):
         """Compile one scene's rollout ahead of time, keeping the TRACED program on disk for the
-        next process (:func:`softplan_jax.base._compilation_cache.load_or_export`).
+        next process (:func:`softplan_jax.base._compilation_cache.load_or_export`). ``one_shot``:
+        compiled to run once, for the time to its first result
+        (:func:`~softplan_jax.planning._options.rollout_compiler_options`; the results agree with
+        the default program's to rounding).
 
         Returns:
           ``(run, loaded)``: ``run(world, gains, seed=0) -> Rollout`` for arguments of these
@@ -238,11 +241,11 @@ class RolloutProgram:
             return tuple(jax.tree_util.tree_leaves(self._fn(s, g, options, T, k)))
 
         compiled, loaded = (None, False)
+        xla = rollout_compiler_options(plan_options(options).method, one_shot)
         if not scene.parametric:
-            compiled, loaded = load_or_export(flat, leaves, (repr(options), str(T), str(treedef)),
-                                              rollout_compiler_options(plan_options(options).method))
+            compiled, loaded = load_or_export(flat, leaves, (repr(options), str(T), str(treedef)), xla)
         if compiled is None:
-            plain = self.lower(world, gains, options, T).compile()
+            plain = self.lower(world, gains, options, T).compile(xla if one_shot else None)
 
             def run_plain(world, gains, seed=0):
                 s, g, _, _, k = self.args(world, gains, options, T, seed)

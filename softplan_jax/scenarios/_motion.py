@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base._validation import as_float_array, is_concrete
+from ..base._validation import as_float_array, host_array, is_concrete
 from ..geometry._curves import PolynomialCurve
 from ._scenario import Scenario
 
@@ -156,9 +156,12 @@ def curve_motion(*, pivot=(0.0, 0.0, 0.0), axis=(0.0, 0.0, 0.0), amplitude=0.0, 
 
 def static_motion(slots: int, dtype=None) -> CurveMotion:
     """No motion for ``slots`` curve slots (all zeros)."""
-    dtype = dtype or jnp.result_type(float)
-    z3, z = jnp.zeros((slots, 3), dtype), jnp.zeros((slots,), dtype)
-    return CurveMotion(z3, z3, z, z, z, z3, z3)
+    return CurveMotion(*(host_array(r) for r in _zero_rows(slots, dtype or jnp.result_type(float))))
+
+
+def _zero_rows(slots: int, dtype) -> list:
+    """:func:`static_motion`'s fields as NumPy arrays (zeros), in CurveMotion's order."""
+    return [np.zeros((slots, *shape), dtype) for shape in ((3,), (3,), (), (), (), (3,), (3,))]
 
 
 def goal_path(times, points, attach: int = -1, dtype=None) -> GoalPath:
@@ -185,7 +188,7 @@ def goal_path(times, points, attach: int = -1, dtype=None) -> GoalPath:
         raise ValueError(f"goal points must have shape ({times.shape[0]}, 3) (one per time); got {points.shape}")
     if not bool(np.all(np.isfinite(np.asarray(points)))):
         raise ValueError("goal points contain non-finite values (NaN or inf)")
-    return GoalPath(times.astype(dtype), points.astype(dtype), jnp.asarray(int(attach), jnp.int32))
+    return GoalPath(host_array(times, dtype), host_array(points, dtype), host_array(int(attach), np.int32))
 
 
 def _rotation(axis, angle):
@@ -352,7 +355,7 @@ def make_moving_scenario(scenario: Scenario, motions=None, goal=None) -> MovingS
         motions = {k: m for k, m in enumerate(motions) if m is not None}
     if not isinstance(motions, dict):
         raise ValueError(f"motions must be None, a list or a dict; got {type(motions).__name__}")
-    rows = static_motion(m_c, dtype)
+    rows = _zero_rows(m_c, dtype)  # NumPy, then one transfer per field (host_array)
     real = np.flatnonzero(np.asarray(scenario.curve_mask))
     for k, m in motions.items():
         if not isinstance(k, (int, np.integer)) or not 0 <= int(k) < n_real:
@@ -361,20 +364,22 @@ def make_moving_scenario(scenario: Scenario, motions=None, goal=None) -> MovingS
             raise ValueError(f"motion for curve {k} must be a CurveMotion (softplan_jax.curve_motion); "
                              f"got {type(m).__name__}")
         slot = int(real[int(k)])
-        rows = CurveMotion(*(r.at[slot].set(jnp.asarray(v, dtype)) for r, v in zip(rows, m, strict=True)))
+        for r, v in zip(rows, m, strict=True):
+            r[slot] = np.asarray(v, dtype)
+    rows = CurveMotion(*(host_array(r) for r in rows))
     if goal is None:
-        path = goal_path([0.0], scenario.goal[None], dtype=dtype)
+        path = goal_path([0.0], np.asarray(scenario.goal)[None], dtype=dtype)
     elif isinstance(goal, GoalPath):
-        path = GoalPath(goal.times.astype(dtype), goal.points.astype(dtype), jnp.asarray(goal.attach, jnp.int32))
+        path = GoalPath(host_array(goal.times, dtype), host_array(goal.points, dtype), host_array(goal.attach, np.int32))
     else:
-        path = goal_path([0.0], jnp.asarray(goal, dtype).reshape(1, -1), dtype=dtype)
+        path = goal_path([0.0], np.asarray(goal, dtype).reshape(1, -1), dtype=dtype)
     attach = int(path.attach)
     if attach != -1:
         if not 0 <= attach < n_real:
             raise ValueError(f"the goal is attached to curve {attach}; the scene has {n_real} polynomial curves")
-        path = path._replace(attach=jnp.asarray(int(real[attach]), jnp.int32))
+        path = path._replace(attach=host_array(int(real[attach]), np.int32))
     # The scene's own goal: the goal path's first sample (where the goal is at rest).
-    return MovingScenario(scenario._replace(goal=path.points[0]), rows, path)
+    return MovingScenario(scenario._replace(goal=host_array(np.asarray(path.points)[0])), rows, path)
 
 
 def stack_moving_scenarios(movings) -> MovingScenario:

@@ -7,9 +7,9 @@ Y = 1, Z = u, u in [0, 3]`` (DESIGN.md)."""
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 import numpy as np
 
+from ..base._validation import host_array
 from ..geometry._curves import PolynomialCurve
 from ._scenario import Scenario, default_start, make_scenario
 
@@ -70,5 +70,5 @@ def paper_scenario(name: str, *, dtype=None, **kwargs) -> Scenario:
     curves = [_poly(x, y, z, ur) for x, y, z, ur in spec["curves"]]
     q0 = kwargs.pop("q0", None)
     q0 = default_start(dtype=dtype) if q0 is None else q0
-    return make_scenario(jnp.asarray(spec["goal"], q0.dtype), curves, q0, **kwargs)
+    return make_scenario(host_array(spec["goal"], q0.dtype), curves, q0, **kwargs)
 

@@ -16,7 +16,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..base._validation import as_float_array, check_configuration, check_finite, check_points, check_scale, is_concrete
+from ..base._validation import (
+    as_float_array,
+    check_configuration,
+    check_finite,
+    check_points,
+    check_scale,
+    host_array,
+    is_concrete,
+)
 from ..geometry._curves import ParametricCurve, PolynomialCurve, check_curve_scale, stack_curves
 from ..geometry._obstacles import (  # obstacle_count re-exported: the layout belongs to obstacles
     obstacle_count,
@@ -86,6 +94,20 @@ def default_start(n_segments: int = 3, length: float = 1.0, dtype=None):
     phi[0] = 0.0
     q = np.stack([np.full(n, float(length)), np.zeros(n), phi], axis=1)
     return jnp.asarray(q, dtype=dtype or jnp.result_type(float))
+
+
+def _length_limits(q0, L_min, L_max) -> tuple:
+    """``(L_min, L_max)`` (n,) NumPy arrays of q0's dtype (None: 1e-3 and inf), checked: 0 < L_min
+    < L_max, and q0's lengths within them. ValueError otherwise."""
+    n, dtype = q0.shape[0], q0.dtype
+    L_min = np.broadcast_to(np.asarray(1e-3 if L_min is None else L_min, dtype), (n,))
+    L_max = np.broadcast_to(np.asarray(np.inf if L_max is None else L_max, dtype), (n,))
+    if np.any(L_min <= 0) or np.any(L_max <= L_min) or np.any(np.isnan(L_max)):
+        raise ValueError(f"need 0 < L_min < L_max; got L_min = {L_min.tolist()}, L_max = {L_max.tolist()}")
+    lengths = np.asarray(q0)[:, 0]
+    if np.any(lengths < L_min) or np.any(lengths > L_max):
+        raise ValueError(f"start lengths {lengths.tolist()} lie outside [L_min, L_max]")
+    return L_min, L_max
 
 
 def make_scenario(
@@ -159,30 +181,25 @@ def make_scenario(
     for k, p in enumerate(point_sets):
         points[k, : p.shape[0]] = p
         point_mask[k, : p.shape[0]] = True
-    n = q0.shape[0]
-    L_min = jnp.broadcast_to(jnp.asarray(1e-3 if L_min is None else L_min, dtype), (n,))
-    L_max = jnp.broadcast_to(jnp.asarray(jnp.inf if L_max is None else L_max, dtype), (n,))
-    if bool(jnp.any(L_min <= 0)) or bool(jnp.any(L_max <= L_min)) or bool(jnp.any(jnp.isnan(L_max))):
-        raise ValueError(f"need 0 < L_min < L_max; got L_min = {L_min.tolist()}, L_max = {L_max.tolist()}")
-    if bool(jnp.any(q0[:, 0] < L_min)) or bool(jnp.any(q0[:, 0] > L_max)):
-        raise ValueError(f"start lengths {q0[:, 0].tolist()} lie outside [L_min, L_max]")
+    L_min, L_max = _length_limits(q0, L_min, L_max)
     arm_radius = as_float_array(arm_radius, "arm_radius")
-    if arm_radius.shape != () or not bool(jnp.isfinite(arm_radius)) or float(arm_radius) < 0:
+    if arm_radius.shape != () or not bool(np.isfinite(np.asarray(arm_radius))) or float(arm_radius) < 0:
         raise ValueError(f"arm_radius must be a finite scalar >= 0; got {arm_radius}")
     check_scale(arm_radius, "arm_radius", dtype, "values")
-    check_scale(np.where(np.isinf(np.asarray(L_max)), 0.0, np.asarray(L_max)), "L_max", dtype, "lengths")
+    check_scale(np.where(np.isinf(L_max), 0.0, L_max), "L_max", dtype, "lengths")
+    # NumPy, then one transfer per array (host_array): eager jnp operations would each compile.
     scenario = Scenario(
         q0=q0,
-        goal=goal.astype(dtype),
+        goal=host_array(goal, dtype),
         curves=curves.astype(dtype),
         curve_mask=curve_mask,
-        points=jnp.asarray(points, dtype),
-        point_mask=jnp.asarray(point_mask),
-        point_radius=jnp.asarray(np.pad(point_radii, (0, n_p - len(point_radii))), dtype),
+        points=host_array(points, dtype),
+        point_mask=host_array(point_mask),
+        point_radius=host_array(np.pad(point_radii, (0, n_p - len(point_radii))), dtype),
         parametric=tuple(params),
-        arm_radius=arm_radius.astype(dtype),
-        L_min=L_min,
-        L_max=L_max,
+        arm_radius=host_array(arm_radius, dtype),
+        L_min=host_array(L_min),
+        L_max=host_array(L_max),
     )
     for msg in scenario_warnings(scenario):
         warnings.warn(msg, UserWarning, stacklevel=2)
