@@ -22,7 +22,6 @@ from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
 from importlib.metadata import version as _version
 
 from . import actuators as actuators
-from . import clouds as clouds
 from . import geometry as geometry
 from . import moving as moving
 from . import planning as planning
@@ -118,7 +117,7 @@ __all__ = [
     "__version__",
 ]
 
-_LAZY_MODULES = ("plotting", "cli")  # imported on first use: matplotlib, argparse
+_LAZY_MODULES = ("plotting", "cli", "clouds")  # imported on first use: matplotlib, argparse, scipy
 
 
 def __getattr__(name):

@@ -169,9 +169,11 @@ def test_the_checker_finds_private_imports():
 
 
 def test_import_is_light():
-    """`import softplan_jax` pulls in neither matplotlib, the notebook stack nor the viewer's viser."""
+    """`import softplan_jax` pulls in neither matplotlib, the notebook stack, the viewer's viser nor
+    SciPy (the point-cloud fitting's; ``sp.clouds`` imports on first use: about 0.2 s of every
+    process that plans)."""
     code = ("import sys, softplan_jax; print(sorted(m for m in ('matplotlib', 'IPython', 'nbformat', 'viser', "
-            "'playwright') if m in sys.modules))")
+            "'playwright', 'scipy') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=subprocess_env(),
                          cwd=REPO, timeout=120)
     assert out.returncode == 0, out.stderr
